@@ -1,0 +1,175 @@
+"""The problem protocol: everything the planner core needs to know about a task.
+
+A problem owns its state space (dimension, sampling bounds, distance), how to extend
+toward a target (straight line for geometric problems, integrated dynamics for
+kinodynamic ones), its validity checks and its goal test. Every state checked for
+validity increments ``collision_checks``, so planners and samplers can be compared by
+the work they cause, not only by wall time.
+
+The planners in :mod:`gnn_mp_envs.core.planners` never look inside a problem beyond
+this interface: adding a task means writing one subclass, not a new planner or env.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Edge:
+    """The outcome of one successful extension: the new state and how it was reached."""
+
+    state: np.ndarray
+    cost: float
+    control: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class InvalidProblemError(ValueError):
+    """A problem that cannot be planned: wrong dimension, start or goal invalid."""
+
+
+class Problem:
+    """Base class of planning problems.
+
+    Subclasses set ``state_dim``, ``low``, ``high``, ``start`` and ``goal`` and implement
+    :meth:`is_state_valid` (uncounted, may be vectorised) and :meth:`steer`. Geometric
+    problems can rely on the straight-line :meth:`steer` defined here.
+    """
+
+    #: Name of the task family, used in observations, renders and logs.
+    task: str = "problem"
+    #: True when edges are straight lines in state space (BiRRT connect needs this).
+    geometric: bool = True
+    #: Dimension of the stored control per edge (0 for geometric problems).
+    control_dim: int = 0
+
+    def __init__(self, start: np.ndarray, goal: np.ndarray, low: np.ndarray, high: np.ndarray,
+                 step_size: float, resolution: float, goal_tolerance: float = 1e-9) -> None:
+        self.low = np.asarray(low, dtype=np.float64)
+        self.high = np.asarray(high, dtype=np.float64)
+        self.state_dim = int(self.low.shape[0])
+        self.start = self._as_state(start, "start")
+        self.goal = self._as_state(goal, "goal")
+        self.step_size = float(step_size)
+        self.resolution = float(resolution)
+        self.goal_tolerance = float(goal_tolerance)
+        self.collision_checks = 0
+        self.edges_checked = 0
+
+    # ------------------------------------------------------------------ state space
+    def _as_state(self, x: Any, name: str) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.state_dim,):
+            raise InvalidProblemError(
+                f"{name} must have shape ({self.state_dim},), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise InvalidProblemError(f"{name} must be finite, got {x}")
+        return x
+
+    def sample_uniform(self, rng: np.random.Generator) -> np.ndarray:
+        """A state drawn uniformly from the sampling bounds."""
+        return rng.uniform(self.low, self.high)
+
+    def difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``a - b`` in the state space (vectorised over leading axes; wraps angles)."""
+        return a - b
+
+    def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Distance from each row of ``states`` to ``x`` (the planner's nearest-neighbour metric)."""
+        d = self.difference(states, x)
+        return np.sqrt(np.einsum("...i,...i->...", d, d))
+
+    def interpolate(self, a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+        """States a fraction ``t`` of the way from ``a`` to ``b`` (geometric problems)."""
+        t = np.asarray(t, dtype=np.float64)[..., None]
+        return a + t * self.difference(b, a)
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        """Map a state into its canonical range (e.g. wrap angles); identity by default."""
+        return x
+
+    # ------------------------------------------------------------------ validity
+    def is_state_valid(self, states: np.ndarray) -> np.ndarray:
+        """Uncounted validity of each row of ``states``; subclasses implement this."""
+        raise NotImplementedError
+
+    def check_state(self, x: np.ndarray) -> bool:
+        """Counted validity check of one state."""
+        self.collision_checks += 1
+        return bool(self.is_state_valid(x[None])[0])
+
+    def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Counted check of the straight segment ``a -> b`` (``a`` assumed valid).
+
+        States are checked at ``resolution`` spacing including ``b``; each one counts.
+        """
+        self.edges_checked += 1
+        n = max(1, int(np.ceil(float(self.distance(b[None], a)[0]) / self.resolution)))
+        states = self.interpolate(a, b, np.arange(1, n + 1) / n)
+        valid = self.is_state_valid(states)
+        # Count only what a sequential checker would have looked at.
+        bad = np.flatnonzero(~valid)
+        self.collision_checks += int(bad[0]) + 1 if bad.size else n
+        return not bad.size
+
+    # ------------------------------------------------------------------ extension
+    def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
+        """Extend from ``x_from`` toward ``x_to`` by at most ``step_size``; None if blocked."""
+        d = float(self.distance(x_to[None], x_from)[0])
+        if d < 1e-12:
+            return None
+        x_new = x_to if d <= self.step_size else self.interpolate(x_from, x_to, self.step_size / d)
+        x_new = self.normalize(np.asarray(x_new, dtype=np.float64))
+        if not self.check_motion(x_from, x_new):
+            return None
+        return Edge(x_new, min(d, self.step_size))
+
+    def edge_valid(self, x_from: np.ndarray, x_to: np.ndarray, control: np.ndarray) -> bool:
+        """Re-check a stored edge (used to validate returned paths; counted)."""
+        return self.check_motion(x_from, x_to)
+
+    # ------------------------------------------------------------------ goal
+    def in_goal(self, x: np.ndarray) -> bool:
+        """True when ``x`` satisfies the goal."""
+        return float(self.distance(x[None], self.goal)[0]) <= self.goal_tolerance
+
+    def goal_connection(self, x: np.ndarray) -> Edge | None:
+        """A checked edge from ``x`` straight to the goal when it is within one step.
+
+        Geometric problems try this after every new node; kinodynamic problems return None
+        and rely on :meth:`in_goal`.
+        """
+        if not self.geometric:
+            return None
+        d = float(self.distance(self.goal[None], x)[0])
+        if d > self.step_size or not self.check_motion(x, self.goal):
+            return None
+        return Edge(self.goal.copy(), d)
+
+    # ------------------------------------------------------------------ bookkeeping
+    def validate(self) -> None:
+        """Raise :class:`InvalidProblemError` when start or goal is out of bounds or invalid."""
+        for name, x in (("start", self.start), ("goal", self.goal)):
+            if np.any(x < self.low - 1e-9) or np.any(x > self.high + 1e-9):
+                raise InvalidProblemError(
+                    f"{name} {x} lies outside the bounds [{self.low}, {self.high}]")
+            if not bool(self.is_state_valid(x[None])[0]):
+                raise InvalidProblemError(f"{name} {x} is in collision / invalid")
+
+    def reset_counters(self) -> None:
+        self.collision_checks = 0
+        self.edges_checked = 0
+
+    def path_valid(self, states: np.ndarray, controls: np.ndarray | None = None) -> bool:
+        """Re-check a whole path: endpoints, and every edge at the checker's resolution."""
+        if len(states) < 1:
+            return False
+        if not np.allclose(states[0], self.start) or not self.in_goal(states[-1]):
+            return False
+        if controls is None:
+            controls = np.zeros((len(states), self.control_dim))
+        return all(self.edge_valid(states[i], states[i + 1], controls[i + 1])
+                   for i in range(len(states) - 1))

@@ -1,0 +1,117 @@
+"""The tree as a padded graph observation, updated in place as nodes are added.
+
+Layout (``N = max_nodes``, ``d`` = state dimension), all padded rows zero:
+
+=================  ==================  =========================================================
+key                shape / dtype       meaning
+=================  ==================  =========================================================
+``nodes``          (N, d) float32      node states
+``node_features``  (N, 2d+1) float32   ``[x_init - x_n, x_goal - x_n, tree_id]`` (the paper's
+                                       features; differences wrap angles; tree id is 0 for the
+                                       start tree, 1 for BiRRT's goal tree)
+``parent``         (N,) int64          parent index of each node (tree edges), -1 for roots
+                                       and padding
+``mask``           (N,) int8           1 for real nodes
+``num_nodes``      (1,) int64          number of real nodes (they are rows ``0..num_nodes-1``)
+``start``          (d,) float32        start state
+``goal``           (d,) float32        goal state
+``active_tree``    Discrete(2)         the tree the next action extends (always 0 for RRT)
+=================  ==================  =========================================================
+
+``spaces.Dict`` rather than ``spaces.Graph``: SB3 and TorchRL accept padded boxes, and
+``agents.graph.to_pyg`` turns this layout into a PyG ``Data``/``Batch``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from gnn_mp_envs.core.problem import Problem
+from gnn_mp_envs.core.tree import TreeStore
+
+OBSERVATION_KEYS = ("nodes", "node_features", "parent", "mask", "num_nodes", "start", "goal",
+                    "active_tree")
+
+
+def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int) -> spaces.Dict:
+    """The padded-graph observation space for a state box ``[low, high]``."""
+    low = np.asarray(low, dtype=np.float32)
+    high = np.asarray(high, dtype=np.float32)
+    d = low.shape[0]
+    span = high - low
+    feat_high = np.concatenate([span, span, [1.0]]).astype(np.float32)
+    feat_low = np.concatenate([-span, -span, [0.0]]).astype(np.float32)
+    state_low = np.minimum(low, 0.0)  # padding rows are zero
+    state_high = np.maximum(high, 0.0)
+    return spaces.Dict({
+        "nodes": spaces.Box(np.tile(state_low, (max_nodes, 1)), np.tile(state_high, (max_nodes, 1)),
+                            dtype=np.float32),
+        "node_features": spaces.Box(np.tile(feat_low, (max_nodes, 1)), np.tile(feat_high, (max_nodes, 1)),
+                                    dtype=np.float32),
+        "parent": spaces.Box(-1, max_nodes - 1, shape=(max_nodes,), dtype=np.int64),
+        "mask": spaces.MultiBinary(max_nodes),
+        "num_nodes": spaces.Box(0, max_nodes, shape=(1,), dtype=np.int64),
+        "start": spaces.Box(low, high, dtype=np.float32),
+        "goal": spaces.Box(low, high, dtype=np.float32),
+        "active_tree": spaces.Discrete(2),
+    })
+
+
+class GraphObservation:
+    """Preallocated observation arrays; :meth:`add` writes one row per new node."""
+
+    def __init__(self, state_dim: int, max_nodes: int) -> None:
+        self.max_nodes = int(max_nodes)
+        self.state_dim = int(state_dim)
+        self.nodes = np.zeros((max_nodes, state_dim), dtype=np.float32)
+        self.node_features = np.zeros((max_nodes, 2 * state_dim + 1), dtype=np.float32)
+        self.parent = np.full(max_nodes, -1, dtype=np.int64)
+        self.mask = np.zeros(max_nodes, dtype=np.int8)
+        self.num_nodes = np.zeros(1, dtype=np.int64)
+        self.start = np.zeros(state_dim, dtype=np.float32)
+        self.goal = np.zeros(state_dim, dtype=np.float32)
+        self.active_tree = 0
+        self._problem: Problem | None = None
+
+    def reset(self, problem: Problem, tree: TreeStore) -> None:
+        """Clear the rows used by the previous episode and write the roots of ``tree``."""
+        n = int(self.num_nodes[0])
+        self.nodes[:n] = 0.0
+        self.node_features[:n] = 0.0
+        self.parent[:n] = -1
+        self.mask[:n] = 0
+        self.num_nodes[0] = 0
+        self.start[:] = problem.start
+        self.goal[:] = problem.goal
+        self.active_tree = 0
+        self._problem = problem
+        for i in range(len(tree)):
+            self.add(tree, i)
+
+    def add(self, tree: TreeStore, i: int) -> None:
+        """Write node ``i`` of ``tree`` (nodes arrive in index order)."""
+        p = self._problem
+        x = tree.states[i]
+        d = self.state_dim
+        self.nodes[i] = x
+        self.node_features[i, :d] = p.difference(p.start, x)
+        self.node_features[i, d:2 * d] = p.difference(p.goal, x)
+        self.node_features[i, 2 * d] = tree.tree_id[i]
+        self.parent[i] = tree.parent[i]
+        self.mask[i] = 1
+        self.num_nodes[0] = i + 1
+
+    def as_dict(self, copy: bool = True) -> dict:
+        """The observation; ``copy=False`` returns live views that later steps overwrite."""
+        c = np.copy if copy else (lambda a: a)
+        return {
+            "nodes": c(self.nodes),
+            "node_features": c(self.node_features),
+            "parent": c(self.parent),
+            "mask": c(self.mask),
+            "num_nodes": c(self.num_nodes),
+            "start": c(self.start),
+            "goal": c(self.goal),
+            "active_tree": int(self.active_tree),
+        }

@@ -1,0 +1,59 @@
+"""Task families: seeded generators of planning problems with a fixed held-out split."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gnn_mp_envs.core.problem import Problem
+
+#: Seed-sequence roots of the problem splits. ``Task.problem("test", i)`` is the i-th
+#: held-out problem on every machine; training never draws from the test stream.
+SPLIT_SEEDS = {"train": 0, "val": 1, "test": 2}
+
+
+class Task:
+    """A family of problems; one instance per environment (it may own a simulator)."""
+
+    name = "task"
+    #: Which planners make sense for the task (kinodynamic tasks cannot run BiRRT).
+    planners: tuple[str, ...] = ("rrt", "birrt")
+    #: Environment defaults for this task (node budget etc.).
+    default_max_nodes = 5000
+
+    def sample_problem(self, rng: np.random.Generator) -> Problem:
+        """Draw a problem from the family's distribution."""
+        raise NotImplementedError
+
+    def problem(self, split: str, index: int) -> Problem:
+        """The ``index``-th problem of ``split`` (``train``, ``val`` or ``test``), reproducibly."""
+        if split not in SPLIT_SEEDS:
+            raise ValueError(f"unknown split {split!r}; known: {sorted(SPLIT_SEEDS)}")
+        if index < 0:
+            raise ValueError(f"problem index must be >= 0, got {index}")
+        return self.sample_problem(np.random.default_rng([SPLIT_SEEDS[split], int(index)]))
+
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sampling bounds shared by every problem of the family (default: from a probe problem)."""
+        probe = self.problem("test", 0)
+        return probe.low.copy(), probe.high.copy()
+
+    def test_problems(self, n: int) -> list[Problem]:
+        """The first ``n`` held-out test problems."""
+        return [self.problem("test", i) for i in range(n)]
+
+    def make_problem(self, spec: Any) -> Problem:
+        """Turn a user-supplied problem (a Problem or a dict of fields) into a validated Problem."""
+        if isinstance(spec, Problem):
+            spec.validate()
+            return spec
+        raise TypeError(f"options['problem'] must be a Problem for task {self.name!r}, "
+                        f"got {type(spec).__name__}")
+
+    def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
+        """An RGB image of the problem, tree and path."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release simulator resources."""

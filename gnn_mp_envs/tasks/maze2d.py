@@ -1,0 +1,207 @@
+"""Maze2D: the unit square with random walls that leave narrow passages.
+
+This is the map family of the paper's critical-sample section; :mod:`gnn_mp_envs.critical`
+reuses :class:`MazeMap` and :func:`random_maze` for its Halton-graph problems.
+
+A map is data: axis-aligned wall rectangles plus optional circular blobs (the
+robustness variant). Each wall spans the square and has one or two gaps (the narrow
+passages). Start and goal lie on opposite sides of all walls, so every path threads at
+least one gap. Collision checks are exact: a point test or a segment test each counts
+as one check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gnn_mp_envs.core.problem import InvalidProblemError, Problem
+from gnn_mp_envs.tasks.base import Task
+
+#: Extension length of RRT/BiRRT in the unit square.
+STEP_SIZE = 0.05
+#: Clearance of start and goal from any wall.
+ENDPOINT_MARGIN = 0.04
+
+
+@dataclass
+class MazeMap:
+    """Obstacles of the unit square: ``walls`` (M, 4) as ``[xmin, ymin, xmax, ymax]`` and
+    ``blobs`` (K, 3) as ``[cx, cy, r]``."""
+
+    walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    blobs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __post_init__(self) -> None:
+        self.walls = np.asarray(self.walls, dtype=np.float64).reshape(-1, 4)
+        self.blobs = np.asarray(self.blobs, dtype=np.float64).reshape(-1, 3)
+
+    def is_free(self, points: np.ndarray) -> np.ndarray:
+        """Free-space test of each row of ``points`` (N, 2); outside the square is not free."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        free = np.all((p >= 0.0) & (p <= 1.0), axis=1)
+        if len(self.walls):
+            w = self.walls
+            inside = ((p[:, None, 0] >= w[None, :, 0]) & (p[:, None, 0] <= w[None, :, 2])
+                      & (p[:, None, 1] >= w[None, :, 1]) & (p[:, None, 1] <= w[None, :, 3]))
+            free &= ~inside.any(axis=1)
+        if len(self.blobs):
+            b = self.blobs
+            d2 = ((p[:, None, :] - b[None, :, :2]) ** 2).sum(-1)
+            free &= ~(d2 <= b[None, :, 2] ** 2).any(axis=1)
+        return free
+
+    def segments_free(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Exact test of segments ``p[i] -> q[i]`` (N, 2) against every obstacle."""
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+        q = np.asarray(q, dtype=np.float64).reshape(-1, 2)
+        free = self.is_free(p) & self.is_free(q)
+        d = q - p
+        if len(self.walls):
+            free &= ~_segments_hit_boxes(p, d, self.walls).any(axis=1)
+        if len(self.blobs):
+            c = self.blobs[None, :, :2]
+            dd = np.maximum((d * d).sum(-1), 1e-300)[:, None]
+            t = np.clip(((c - p[:, None, :]) * d[:, None, :]).sum(-1) / dd, 0.0, 1.0)
+            closest = p[:, None, :] + t[..., None] * d[:, None, :]
+            free &= ~(((closest - c) ** 2).sum(-1) <= self.blobs[None, :, 2] ** 2).any(axis=1)
+        return free
+
+    def occupancy(self, size: int = 64) -> np.ndarray:
+        """A (size, size) occupancy image (1 = obstacle), row 0 at y = 0, sampled at cell centres."""
+        c = (np.arange(size) + 0.5) / size
+        xx, yy = np.meshgrid(c, c)
+        return (~self.is_free(np.stack([xx.ravel(), yy.ravel()], 1))).reshape(size, size).astype(np.float32)
+
+
+def _segments_hit_boxes(p: np.ndarray, d: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """(N, M) slab test: does segment i (p + t d, t in [0, 1]) touch box j."""
+    lo = boxes[None, :, :2]
+    hi = boxes[None, :, 2:]
+    p3 = p[:, None, :]
+    d3 = d[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (lo - p3) / d3
+        t2 = (hi - p3) / d3
+    parallel = d3 == 0.0
+    inside_slab = (p3 >= lo) & (p3 <= hi)
+    tmin = np.where(parallel, np.where(inside_slab, -np.inf, np.inf), np.minimum(t1, t2))
+    tmax = np.where(parallel, np.where(inside_slab, np.inf, -np.inf), np.maximum(t1, t2))
+    t_enter = tmin.max(axis=2)
+    t_exit = tmax.min(axis=2)
+    return (t_enter <= t_exit) & (t_exit >= 0.0) & (t_enter <= 1.0)
+
+
+def random_maze(rng: np.random.Generator, num_walls: tuple[int, int] = (1, 3),
+                num_blobs: int = 0) -> tuple[MazeMap, int]:
+    """Random walls with narrow gaps; returns the map and the wall axis (0: walls at fixed x).
+
+    Walls are 0.03-0.06 thick; each has one or two gaps 0.035-0.06 wide. With more than
+    one wall, each sits in its own slot of [0.1, 0.9] so the rooms between them stay open.
+    """
+    n = int(rng.integers(num_walls[0], num_walls[1] + 1))
+    axis = int(rng.integers(2))
+    # One wall per equal slot of [0.1, 0.9], jittered inside its slot: rooms stay open.
+    slot = 0.8 / n
+    positions = [0.1 + slot * (k + float(rng.uniform(0.35, 0.65))) for k in range(n)]
+    walls = []
+    for c in positions:
+        thick = float(rng.uniform(0.03, 0.06))
+        gaps = sorted((float(rng.uniform(0.1, 0.9)), float(rng.uniform(0.035, 0.06)))
+                      for _ in range(int(rng.integers(1, 3))))
+        edges = [0.0]
+        for centre, width in gaps:
+            edges += [centre - width / 2, centre + width / 2]
+        edges.append(1.0)
+        for a, b in zip(edges[0::2], edges[1::2]):
+            if b - a <= 1e-6:
+                continue
+            if axis == 0:  # wall at fixed x, spanning y
+                walls.append([c - thick / 2, a, c + thick / 2, b])
+            else:
+                walls.append([a, c - thick / 2, b, c + thick / 2])
+    blobs = np.zeros((0, 3))
+    if num_blobs:
+        blobs = np.column_stack([rng.uniform(0.05, 0.95, (num_blobs, 2)),
+                                 rng.uniform(0.03, 0.07, num_blobs)])
+    return MazeMap(np.array(walls), blobs), axis
+
+
+def sample_endpoints(rng: np.random.Generator, maze: MazeMap, axis: int,
+                     max_tries: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+    """Start before the first wall and goal beyond the last one, both in free space."""
+    along = 0 if axis == 0 else 1
+    if len(maze.walls):
+        first = maze.walls[:, along].min()
+        last = maze.walls[:, along + 2].max()
+    else:
+        first, last = 0.5, 0.5
+    out = []
+    for lo, hi in ((0.02, first - ENDPOINT_MARGIN), (last + ENDPOINT_MARGIN, 0.98)):
+        for _ in range(max_tries):
+            x = np.empty(2)
+            x[along] = rng.uniform(lo, hi)
+            x[1 - along] = rng.uniform(0.02, 0.98)
+            probe = x + ENDPOINT_MARGIN * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
+            if maze.is_free(probe).all():
+                out.append(x)
+                break
+        else:
+            raise RuntimeError("could not place a free start/goal; the map is too cluttered")
+    if rng.random() < 0.5:
+        out.reverse()
+    return out[0], out[1]
+
+
+class Maze2DProblem(Problem):
+    """A point robot in the unit square among the walls of a :class:`MazeMap`."""
+
+    task = "maze2d"
+
+    def __init__(self, maze: MazeMap, start: np.ndarray, goal: np.ndarray,
+                 step_size: float = STEP_SIZE) -> None:
+        super().__init__(start, goal, low=np.zeros(2), high=np.ones(2),
+                         step_size=step_size, resolution=step_size)
+        self.maze = maze
+
+    def is_state_valid(self, states: np.ndarray) -> np.ndarray:
+        return self.maze.is_free(states)
+
+    def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Exact segment test; counts as one collision check."""
+        self.edges_checked += 1
+        self.collision_checks += 1
+        return bool(self.maze.segments_free(a[None], b[None])[0])
+
+
+class Maze2DTask(Task):
+    """Seeded Maze2D problems: 1-3 walls with narrow gaps, start and goal across them."""
+
+    name = "maze2d"
+    default_max_nodes = 5000
+
+    def __init__(self, num_walls: tuple[int, int] = (1, 3), num_blobs: int = 0,
+                 step_size: float = STEP_SIZE) -> None:
+        self.num_walls = tuple(num_walls)
+        self.num_blobs = int(num_blobs)
+        self.step_size = float(step_size)
+
+    def sample_problem(self, rng: np.random.Generator) -> Maze2DProblem:
+        maze, axis = random_maze(rng, self.num_walls, self.num_blobs)
+        start, goal = sample_endpoints(rng, maze, axis)
+        return Maze2DProblem(maze, start, goal, self.step_size)
+
+    def make_problem(self, spec: Any) -> Problem:
+        if isinstance(spec, dict):
+            try:
+                maze = MazeMap(spec.get("walls", np.zeros((0, 4))), spec.get("blobs", np.zeros((0, 3))))
+                spec = Maze2DProblem(maze, spec["start"], spec["goal"], self.step_size)
+            except KeyError as e:
+                raise InvalidProblemError(f"a maze2d problem dict needs 'start' and 'goal' (missing {e})") from None
+        return super().make_problem(spec)
+
+    def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
+        from gnn_mp_envs.envs.render import render_maze2d
+        return render_maze2d(problem, tree, path)

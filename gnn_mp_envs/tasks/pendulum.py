@@ -1,0 +1,156 @@
+"""Pendulum: a torque-limited swing-up planned with kinodynamic RRT.
+
+State ``[theta, omega]``: ``theta`` is the angle from the downward vertical (0 hangs at
+rest, pi is upright), wrapped to [-pi, pi); ``omega`` the angular velocity in rad/s.
+
+Dynamics of a point mass on a massless rod::
+
+    theta'' = -(g / l) sin(theta) + u / (m l^2),    |u| <= MAX_TORQUE
+
+with the constants below. ``MAX_TORQUE`` is a fifth of ``m g l``: the pendulum cannot
+lift itself past ~11.5 degrees statically, so every plan has to pump energy over
+several swings. An edge applies one constant torque for ``EDGE_DURATION`` seconds,
+integrated with RK4; steering tries ``NUM_CONTROLS`` torques evenly spread over the
+limits and keeps the one whose end state is nearest the sample. A state is valid when
+``|omega| <= MAX_SPEED``; every integrated state on the kept edge counts as one
+collision (validity) check.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
+from gnn_mp_envs.tasks.base import Task
+
+GRAVITY = 9.81          # m/s^2
+MASS = 1.0              # kg
+LENGTH = 1.0            # m
+MAX_TORQUE = 0.2 * MASS * GRAVITY * LENGTH  # N m  (1.962)
+MAX_SPEED = 8.0         # rad/s, validity bound on |omega|
+EDGE_DURATION = 0.2     # s per tree edge
+INTEGRATION_STEPS = 10  # RK4 steps per edge (dt = 0.02 s)
+NUM_CONTROLS = 5        # torques tried per extension
+VELOCITY_WEIGHT = 0.4   # weight of omega in the nearest-neighbour metric (~ 2 pi / 16)
+GOAL_ANGLE_TOLERANCE = 0.15   # rad
+GOAL_SPEED_TOLERANCE = 0.5    # rad/s
+
+
+def wrap_angle(theta: np.ndarray | float) -> np.ndarray:
+    """Wrap to [-pi, pi)."""
+    return (np.asarray(theta) + np.pi) % (2 * np.pi) - np.pi
+
+
+def rollout(theta: np.ndarray, omega: np.ndarray, torque: np.ndarray,
+            duration: float = EDGE_DURATION, steps: int = INTEGRATION_STEPS) -> np.ndarray:
+    """RK4-integrate a batch of constant-torque edges; returns states (steps, batch, 2).
+
+    Angles in the returned states are not wrapped (callers wrap where needed).
+    """
+    h = duration / steps
+    a = GRAVITY / LENGTH
+    b = 1.0 / (MASS * LENGTH ** 2)
+    th = np.array(theta, dtype=np.float64, copy=True)
+    om = np.array(omega, dtype=np.float64, copy=True)
+    bu = b * np.asarray(torque, dtype=np.float64)
+    out = np.empty((steps,) + th.shape + (2,))
+    for k in range(steps):
+        k1t, k1w = om, bu - a * np.sin(th)
+        k2t, k2w = om + 0.5 * h * k1w, bu - a * np.sin(th + 0.5 * h * k1t)
+        k3t, k3w = om + 0.5 * h * k2w, bu - a * np.sin(th + 0.5 * h * k2t)
+        k4t, k4w = om + h * k3w, bu - a * np.sin(th + h * k3t)
+        th = th + h / 6.0 * (k1t + 2 * k2t + 2 * k3t + k4t)
+        om = om + h / 6.0 * (k1w + 2 * k2w + 2 * k3w + k4w)
+        out[k, ..., 0] = th
+        out[k, ..., 1] = om
+    return out
+
+
+class PendulumProblem(Problem):
+    """Swing the pendulum from ``start`` to within tolerance of ``goal``."""
+
+    task = "pendulum"
+    geometric = False
+    control_dim = 1
+
+    def __init__(self, start: np.ndarray, goal: np.ndarray) -> None:
+        super().__init__(start, goal, low=np.array([-np.pi, -MAX_SPEED]),
+                         high=np.array([np.pi, MAX_SPEED]), step_size=EDGE_DURATION,
+                         resolution=EDGE_DURATION / INTEGRATION_STEPS)
+        self.start = self.normalize(self.start)
+        self.goal = self.normalize(self.goal)
+        self._controls = np.linspace(-MAX_TORQUE, MAX_TORQUE, NUM_CONTROLS)
+        self._weights = np.array([1.0, VELOCITY_WEIGHT])
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        x = np.array(x, dtype=np.float64, copy=True)
+        x[..., 0] = wrap_angle(x[..., 0])
+        return x
+
+    def difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = np.asarray(a, dtype=np.float64) - b
+        d[..., 0] = wrap_angle(d[..., 0])
+        return d
+
+    def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
+        d = self.difference(states, x) * self._weights
+        return np.sqrt(np.einsum("...i,...i->...", d, d))
+
+    def is_state_valid(self, states: np.ndarray) -> np.ndarray:
+        s = np.asarray(states).reshape(-1, 2)
+        return np.isfinite(s).all(axis=1) & (np.abs(s[:, 1]) <= MAX_SPEED)
+
+    def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
+        n = len(self._controls)
+        traj = rollout(np.full(n, x_from[0]), np.full(n, x_from[1]), self._controls)
+        ends = traj[-1]
+        best = int(np.argmin(self.distance(ends, x_to)))
+        states = traj[:, best]
+        valid = self.is_state_valid(states)
+        bad = np.flatnonzero(~valid)
+        self.edges_checked += 1
+        self.collision_checks += int(bad[0]) + 1 if bad.size else len(states)
+        if bad.size:
+            return None
+        return Edge(self.normalize(states[-1]), EDGE_DURATION, np.array([self._controls[best]]))
+
+    def edge_valid(self, x_from: np.ndarray, x_to: np.ndarray, control: np.ndarray) -> bool:
+        """Re-integrate the stored torque and check every state and the arrival point."""
+        self.edges_checked += 1
+        states = rollout(np.array([x_from[0]]), np.array([x_from[1]]), np.asarray(control))[:, 0]
+        self.collision_checks += len(states)
+        arrived = np.allclose(self.difference(self.normalize(states[-1]), x_to), 0.0, atol=1e-6)
+        return bool(arrived and self.is_state_valid(states).all())
+
+    def in_goal(self, x: np.ndarray) -> bool:
+        d = self.difference(x, self.goal)
+        return bool(abs(d[0]) <= GOAL_ANGLE_TOLERANCE and abs(d[1]) <= GOAL_SPEED_TOLERANCE)
+
+
+class PendulumTask(Task):
+    """Start hanging at rest; goal near upright with a small velocity, drawn per seed.
+
+    Goal angle ``pi + U(-0.5, 0.5)`` (wrapped), goal velocity ``U(-1, 1)`` rad/s.
+    """
+
+    name = "pendulum"
+    planners = ("rrt",)
+    default_max_nodes = 20000
+
+    def sample_problem(self, rng: np.random.Generator) -> PendulumProblem:
+        goal = np.array([np.pi + rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)])
+        return PendulumProblem(np.zeros(2), goal)
+
+    def make_problem(self, spec: Any) -> Problem:
+        if isinstance(spec, dict):
+            try:
+                spec = PendulumProblem(spec.get("start", np.zeros(2)), spec["goal"])
+            except KeyError:
+                raise InvalidProblemError("a pendulum problem dict needs a 'goal'") from None
+        return super().make_problem(spec)
+
+    def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
+        from gnn_mp_envs.envs.render import render_pendulum
+        return render_pendulum(problem, tree, path)
