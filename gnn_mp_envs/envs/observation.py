@@ -15,7 +15,7 @@ key                shape / dtype       meaning
 ``num_nodes``      (1,) int64          number of real nodes (they are rows ``0..num_nodes-1``)
 ``start``          (d,) float32        start state
 ``goal``           (d,) float32        goal state
-``active_tree``    Discrete(2)         the tree the next action extends (always 0 for RRT)
+``active_tree``    (1,) int64          the tree the next action extends (always 0 for RRT)
 =================  ==================  =========================================================
 
 ``spaces.Dict`` rather than ``spaces.Graph``: SB3 and TorchRL accept padded boxes, and
@@ -54,7 +54,7 @@ def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int) -> spac
         "num_nodes": spaces.Box(0, max_nodes, shape=(1,), dtype=np.int64),
         "start": spaces.Box(low, high, dtype=np.float32),
         "goal": spaces.Box(low, high, dtype=np.float32),
-        "active_tree": spaces.Discrete(2),
+        "active_tree": spaces.Box(0, 1, shape=(1,), dtype=np.int64),
     })
 
 
@@ -71,7 +71,7 @@ class GraphObservation:
         self.num_nodes = np.zeros(1, dtype=np.int64)
         self.start = np.zeros(state_dim, dtype=np.float32)
         self.goal = np.zeros(state_dim, dtype=np.float32)
-        self.active_tree = 0
+        self.active_tree = np.zeros(1, dtype=np.int64)
         self._problem: Problem | None = None
 
     def reset(self, problem: Problem, tree: TreeStore) -> None:
@@ -84,7 +84,7 @@ class GraphObservation:
         self.num_nodes[0] = 0
         self.start[:] = problem.start
         self.goal[:] = problem.goal
-        self.active_tree = 0
+        self.active_tree[0] = 0
         self._problem = problem
         for i in range(len(tree)):
             self.add(tree, i)
@@ -113,5 +113,5 @@ class GraphObservation:
             "num_nodes": c(self.num_nodes),
             "start": c(self.start),
             "goal": c(self.goal),
-            "active_tree": int(self.active_tree),
+            "active_tree": c(self.active_tree),
         }

@@ -146,7 +146,7 @@ class TreePlanningEnv(gym.Env):
         result = self.planner.step(sample)
         for i in result.added:
             self._obs.add(self.planner.tree, i)
-        self._obs.active_tree = self.planner.active_tree
+        self._obs.active_tree[0] = self.planner.active_tree
         reward = (-self.step_penalty
                   - self.collision_check_cost * (self.problem.collision_checks - checks_before)
                   + (self.success_reward if result.solved else 0.0))
