@@ -118,7 +118,7 @@ class Problem:
     # ------------------------------------------------------------------ extension
     def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
         """Extend from ``x_from`` toward ``x_to`` by at most ``step_size``; None if blocked."""
-        d = float(self.distance(x_to[None], x_from)[0])
+        d = float(self.distance(x_to, x_from))
         if d < 1e-12:
             return None
         x_new = x_to if d <= self.step_size else self.interpolate(x_from, x_to, self.step_size / d)

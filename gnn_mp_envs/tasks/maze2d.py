@@ -57,7 +57,9 @@ class MazeMap:
         """Exact test of segments ``p[i] -> q[i]`` (N, 2) against every obstacle."""
         p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
         q = np.asarray(q, dtype=np.float64).reshape(-1, 2)
-        free = self.is_free(p) & self.is_free(q)
+        # Endpoints inside an obstacle are caught by the slab / closest-point tests below,
+        # so only the square's bounds need a separate point test.
+        free = (np.all((p >= 0.0) & (p <= 1.0), axis=1) & np.all((q >= 0.0) & (q <= 1.0), axis=1))
         d = q - p
         if len(self.walls):
             free &= ~_segments_hit_boxes(p, d, self.walls).any(axis=1)

@@ -1,0 +1,1 @@
+import gnn_mp_envs  # noqa: F401  (registers the environments)

@@ -1,0 +1,199 @@
+"""The Gymnasium environments: API checkers, determinism, validity of paths, bad input."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+from gnn_mp_envs.core.problem import InvalidProblemError
+from gnn_mp_envs.envs.tree_env import TreePlanningEnv
+from gnn_mp_envs.tasks.maze2d import Maze2DTask
+
+ENV_IDS = ["GNNMP/Maze2DRRT-v0", "GNNMP/Maze2DBiRRT-v0", "GNNMP/PendulumRRT-v0"]
+
+
+def run_episode(env, seed, rng_seed=0, max_steps=100_000):
+    obs, info = env.reset(seed=seed)
+    rng = np.random.default_rng(rng_seed)
+    low, high = env.action_space.low, env.action_space.high
+    for _ in range(max_steps):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
+        if terminated or truncated:
+            break
+    return obs, info, terminated
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_gymnasium_checker(env_id):
+    env = gym.make(env_id, max_nodes=300)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_sb3_checker(env_id):
+    from stable_baselines3.common.env_checker import check_env
+    check_env(gym.make(env_id, max_nodes=300).unwrapped, warn=False)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_torchrl_specs(env_id):
+    from torchrl.envs import GymEnv
+    from torchrl.envs.utils import check_env_specs
+    check_env_specs(GymEnv(env_id, max_nodes=300), seed=0)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_same_seed_same_observations(env_id):
+    env_a, env_b = gym.make(env_id, max_nodes=2000), gym.make(env_id, max_nodes=2000)
+    obs_a, _, _ = run_episode(env_a, seed=7, max_steps=200)
+    obs_b, _, _ = run_episode(env_b, seed=7, max_steps=200)
+    for k in obs_a:
+        np.testing.assert_array_equal(obs_a[k], obs_b[k])
+    obs_c, _, _ = run_episode(env_a, seed=8, max_steps=200)
+    assert not np.array_equal(obs_a["goal"], obs_c["goal"])
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_observation_matches_tree(env_id):
+    """The in-place observation equals one rebuilt from the planner's tree."""
+    env = gym.make(env_id).unwrapped
+    obs, info, _ = run_episode(env, seed=3, max_steps=300)
+    tree, problem = env.planner.tree, env.problem
+    n = len(tree)
+    assert obs["num_nodes"][0] == n and obs["mask"].sum() == n and not obs["mask"][n:].any()
+    np.testing.assert_allclose(obs["nodes"][:n], tree.states[:n], rtol=1e-6, atol=1e-6)
+    d = problem.state_dim
+    np.testing.assert_allclose(obs["node_features"][:n, :d], problem.difference(problem.start, tree.states[:n]), atol=1e-5)
+    np.testing.assert_allclose(obs["node_features"][:n, d:2 * d], problem.difference(problem.goal, tree.states[:n]), atol=1e-5)
+    np.testing.assert_array_equal(obs["node_features"][:n, 2 * d], tree.tree_id[:n])
+    np.testing.assert_array_equal(obs["parent"][:n], tree.parent[:n])
+    assert info["nodes_expanded"] == n
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_returned_path_is_valid(env_id):
+    env = gym.make(env_id).unwrapped
+    for seed in range(5):
+        _, info, terminated = run_episode(env, seed=seed, rng_seed=seed)
+        assert terminated and info["is_success"]
+        problem = env.problem
+        path = info["path"]
+        assert np.allclose(path[0], problem.start) and problem.in_goal(path[-1])
+        assert problem.path_valid(path, info["path_controls"])
+        assert np.isfinite(info["path_length"]) and info["path_length"] > 0
+        assert info["collision_checks"] >= info["edges"] >= 1
+
+
+def test_maze_path_is_collision_free_when_densely_resampled():
+    env = gym.make("GNNMP/Maze2DRRT-v0").unwrapped
+    _, info, _ = run_episode(env, seed=11)
+    path, maze = info["path"], env.problem.maze
+    t = np.linspace(0, 1, 200)[:, None]
+    for a, b in zip(path[:-1], path[1:]):
+        assert maze.is_free(a + t * (b - a)).all()
+
+
+@pytest.mark.parametrize("bad", [np.array([np.nan, 0.5]), np.array([0.5, np.inf]), np.zeros(3), np.zeros((1, 2))])
+def test_bad_actions_raise_value_error(bad):
+    env = gym.make("GNNMP/Maze2DRRT-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        env.step(bad)
+
+
+def test_out_of_bounds_actions_are_clipped():
+    env = gym.make("GNNMP/Maze2DRRT-v0").unwrapped
+    env.reset(seed=0)
+    env.step(np.array([5.0, -5.0], dtype=np.float32))
+    n = len(env.planner.tree)
+    assert np.all(env.planner.tree.states[:n] >= 0.0) and np.all(env.planner.tree.states[:n] <= 1.0)
+
+
+def test_given_problem_is_planned_and_bad_problems_raise():
+    env = gym.make("GNNMP/Maze2DRRT-v0").unwrapped
+    spec = {"start": [0.1, 0.5], "goal": [0.9, 0.5], "walls": [[0.45, 0.0, 0.55, 0.45], [0.45, 0.55, 0.55, 1.0]]}
+    obs, _ = env.reset(options={"problem": spec})
+    np.testing.assert_allclose(obs["start"], [0.1, 0.5])
+    with pytest.raises(InvalidProblemError, match="collision"):
+        env.reset(options={"problem": dict(spec, start=[0.5, 0.2])})
+    with pytest.raises(InvalidProblemError, match="shape"):
+        env.reset(options={"problem": dict(spec, start=[0.1, 0.5, 0.0])})
+    with pytest.raises(InvalidProblemError, match="start"):
+        env.reset(options={"problem": {"goal": [0.9, 0.5]}})
+
+
+def test_bad_constructor_arguments():
+    with pytest.raises(ValueError, match="planner"):
+        TreePlanningEnv(task="maze2d", planner="prm")
+    with pytest.raises(ValueError, match="task"):
+        TreePlanningEnv(task="nope")
+    with pytest.raises(ValueError, match="supports planners"):
+        TreePlanningEnv(task="pendulum", planner="birrt")
+
+
+def test_truncation_at_node_budget():
+    env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=20)
+    obs, info = env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(10_000):
+        obs, r, terminated, truncated, info = env.step(rng.uniform(0, 1, 2).astype(np.float32))
+        if terminated or truncated:
+            break
+    assert truncated or terminated
+    if truncated:
+        assert info["nodes_expanded"] == 20 and not info["is_success"]
+
+
+def test_reward_is_step_penalty_plus_success_bonus():
+    env = gym.make("GNNMP/Maze2DRRT-v0", step_penalty=1.0, success_reward=10.0)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    rewards = []
+    while True:
+        _, r, terminated, truncated, _ = env.step(rng.uniform(0, 1, 2).astype(np.float32))
+        rewards.append(r)
+        if terminated or truncated:
+            break
+    assert terminated and rewards[-1] == 9.0 and set(rewards[:-1]) == {-1.0}
+
+
+@pytest.mark.parametrize("env_id", ["GNNMP/Maze2DBiRRT-v0", "GNNMP/PendulumRRT-v0"])
+def test_render_draws_an_image(env_id):
+    env = gym.make(env_id, render_mode="rgb_array")
+    run_episode(env, seed=0)
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 5  # not a blank canvas
+
+
+def test_test_split_is_fixed_and_disjoint_from_train():
+    task = Maze2DTask()
+    a, b = task.problem("test", 4), task.problem("test", 4)
+    np.testing.assert_array_equal(a.start, b.start)
+    np.testing.assert_array_equal(a.maze.walls, b.maze.walls)
+    assert not np.array_equal(task.problem("train", 4).start, a.start)
+
+
+def _solve_rate(env_id, n, seed0=0):
+    env = gym.make(env_id, split="test").unwrapped
+    solved = 0
+    for i in range(n):
+        env.reset(options={"index": i})
+        rng = np.random.default_rng(seed0 + i)
+        low, high = env.action_space.low, env.action_space.high
+        while True:
+            _, _, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
+            if terminated or truncated:
+                break
+        solved += bool(info["is_success"])
+    return solved / n
+
+
+def test_uniform_rrt_solves_heldout_maze2d():
+    """Issue 2: at least 95% of held-out Maze2D problems within 5,000 nodes."""
+    assert _solve_rate("GNNMP/Maze2DRRT-v0", 100) >= 0.95
+
+
+def test_uniform_rrt_solves_heldout_pendulum():
+    """Issue 2: at least 90% of held-out pendulum problems within 20,000 nodes."""
+    assert _solve_rate("GNNMP/PendulumRRT-v0", 30) >= 0.90
