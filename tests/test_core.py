@@ -9,18 +9,46 @@ from gnn_mp_envs.tasks.maze2d import Maze2DProblem, Maze2DTask, MazeMap
 from gnn_mp_envs.tasks.pendulum import PendulumTask
 
 
-def test_nearest_matches_brute_force_per_tree():
+class _Euclid:
+    nn_boxsize = None
+
+    def distance(self, s, x):
+        return np.linalg.norm(s - x, axis=-1)
+
+    def nn_embed(self, s):
+        return s
+
+
+@pytest.mark.parametrize("n", [400, 5000])  # below and above the k-d tree threshold
+def test_nearest_matches_brute_force_per_tree(n):
     rng = np.random.default_rng(0)
-    store = TreeStore(500, 3, num_trees=2)
-    for _ in range(400):
+    store = TreeStore(n, 3, num_trees=2)
+    metric = _Euclid()
+    for k in range(n):
         store.add(rng.random(3), -1, int(rng.integers(2)))
-    euclid = lambda s, x: np.linalg.norm(s - x, axis=-1)  # noqa: E731
+        if k % 97 == 0:  # interleave queries with inserts, as a planner does
+            x = rng.random(3)
+            members = np.flatnonzero(store.tree_id[:store.size] == 0)
+            assert store.nearest(x, 0, metric) == members[np.argmin(metric.distance(store.states[members], x))]
     for _ in range(50):
         x = rng.random(3)
         for t in (0, 1):
             members = np.flatnonzero(store.tree_id[:store.size] == t)
-            expected = members[np.argmin(euclid(store.states[members], x))]
-            assert store.nearest(x, t, euclid) == expected
+            expected = members[np.argmin(metric.distance(store.states[members], x))]
+            assert store.nearest(x, t, metric) == expected
+
+
+def test_nearest_respects_pendulum_angle_wrap():
+    problem = PendulumTask().problem("test", 0)
+    rng = np.random.default_rng(2)
+    store = TreeStore(3000, 2)
+    for _ in range(3000):
+        store.add(problem.sample_uniform(rng), -1, 0)
+    for _ in range(200):
+        x = problem.sample_uniform(rng)
+        x[0] = rng.choice([-np.pi + 1e-3, np.pi - 1e-3, x[0]])
+        d = problem.distance(store.states[:3000], x)
+        assert d[store.nearest(x, 0, problem)] == pytest.approx(d.min())
 
 
 def test_cost_to_come_accumulates_along_parents():

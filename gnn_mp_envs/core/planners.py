@@ -51,7 +51,7 @@ class TreePlanner:
         return self.solution is not None
 
     def _nearest(self, x: np.ndarray, tree: int) -> int:
-        return self.tree.nearest(x, tree, self.problem.distance)
+        return self.tree.nearest(x, tree, self.problem)
 
     def _extend(self, tree: int, target: np.ndarray, added: list[int]) -> int | None:
         """One steer from the nearest node of ``tree`` toward ``target``; new node index."""

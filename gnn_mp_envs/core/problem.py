@@ -82,6 +82,13 @@ class Problem:
         d = self.difference(states, x)
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
+    #: Periodic box sizes of the ``nn_embed`` coordinates for the k-d tree (None: none periodic).
+    nn_boxsize: np.ndarray | None = None
+
+    def nn_embed(self, states: np.ndarray) -> np.ndarray:
+        """Coordinates in which Euclidean distance equals :meth:`distance` (for k-d trees)."""
+        return states
+
     def interpolate(self, a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
         """States a fraction ``t`` of the way from ``a`` to ``b`` (geometric problems)."""
         t = np.asarray(t, dtype=np.float64)[..., None]
