@@ -1,0 +1,244 @@
+"""Critical-sample models: GNN (TAGConv), GAT (GATv2Conv), GNN-CVAE, and CNN / CVAE baselines.
+
+All share PyG's constructor habit ``(in_channels, hidden_channels, num_layers, out_channels)``.
+Graph models read node features ``x`` (N, 5) = ``[x_init - x_n, x_goal - x_n, obstacle]``
+(paper eq. featurestate), stack graph filters, max-pool over the graph and regress one
+critical state with an FC head. Node-level outputs are permutation equivariant and the
+pooled prediction invariant (paper Theorem 1); tests check it.
+
+The CVAEs follow PyG's ``VGAE`` layout: ``encode`` -> ``(mu, logstd)``, ``reparametrize``,
+``decode``, ``recon_loss`` and ``kl_loss``; ``sample`` draws critical states from N(0, I).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+from torch_geometric.nn import GATv2Conv, TAGConv, global_max_pool
+
+#: Node feature width of eq. featurestate in 2-D: two relative vectors and an indicator.
+NODE_FEATURES = 5
+#: Predicted critical state dimension (x, y).
+STATE_DIM = 2
+#: Occupancy, start and goal channels of the CNN baselines.
+IMAGE_CHANNELS = 3
+#: VGAE's clamp on log standard deviations, for numerical safety.
+MAX_LOGSTD = 10.0
+#: Outputs are offset to the centre of the unit square so a zero-initialised head is sensible.
+CENTRE = 0.5
+
+
+def _mlp(in_channels: int, hidden_channels: int, out_channels: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(in_channels, hidden_channels), nn.ReLU(),
+                         nn.Linear(hidden_channels, out_channels))
+
+
+class GraphPoolRegressor(nn.Module):
+    """``num_layers`` graph convolutions -> global max pool -> FC head.
+
+    Subclasses choose the convolution in :meth:`init_conv`.
+    """
+
+    def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
+                 out_channels: int, head_in_extra: int = 0) -> None:
+        super().__init__()
+        self.in_channels, self.hidden_channels = in_channels, hidden_channels
+        self.num_layers, self.out_channels = num_layers, out_channels
+        self.convs = nn.ModuleList(
+            self.init_conv(in_channels if i == 0 else hidden_channels, hidden_channels)
+            for i in range(num_layers))
+        self.head = _mlp(hidden_channels + head_in_extra, hidden_channels, out_channels)
+
+    def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
+        raise NotImplementedError
+
+    def node_embeddings(self, x: Tensor, edge_index: Tensor) -> Tensor:
+        """Per-node outputs of the graph filters (permutation equivariant)."""
+        for conv in self.convs:
+            x = torch.relu(conv(x, edge_index))
+        return x
+
+    def pool(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None) -> Tensor:
+        """Graph max pool of the node embeddings (B, hidden) (permutation invariant)."""
+        return global_max_pool(self.node_embeddings(x, edge_index), batch)
+
+    def forward(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None) -> Tensor:
+        return self.head(self.pool(x, edge_index, batch)) + CENTRE
+
+
+class CriticalGNN(GraphPoolRegressor):
+    """The paper's GNN: K-tap graph filters (TAGConv is eq. 1-3) in L layers."""
+
+    def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
+                 num_layers: int = 3, out_channels: int = STATE_DIM, K: int = 3,
+                 head_in_extra: int = 0) -> None:
+        self.K = K
+        super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra)
+
+    def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
+        return TAGConv(in_channels, out_channels, K=self.K)
+
+
+class CriticalGAT(GraphPoolRegressor):
+    """The paper's GAT: the same stack with attention-weighted aggregation (GATv2Conv)."""
+
+    def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
+                 num_layers: int = 3, out_channels: int = STATE_DIM, heads: int = 1) -> None:
+        self.heads = heads
+        super().__init__(in_channels, hidden_channels, num_layers, out_channels)
+
+    def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
+        return GATv2Conv(in_channels, out_channels, heads=self.heads, concat=False)
+
+
+class _GaussianLatent(nn.Module):
+    """VGAE-style helpers shared by both CVAEs."""
+
+    latent_channels: int
+
+    def reparametrize(self, mu: Tensor, logstd: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        if not self.training:
+            return mu
+        eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype)
+        return mu + eps * logstd.exp()
+
+    @staticmethod
+    def kl_loss(mu: Tensor, logstd: Tensor) -> Tensor:
+        """Mean over the batch of KL(q(z | x, y) || N(0, I))."""
+        logstd = logstd.clamp(max=MAX_LOGSTD)
+        return -0.5 * torch.mean(torch.sum(1 + 2 * logstd - mu ** 2 - logstd.exp() ** 2, dim=1))
+
+    @staticmethod
+    def recon_loss(y_hat: Tensor, y: Tensor) -> Tensor:
+        """Gaussian log-likelihood up to scale: mean over the batch of squared error."""
+        return torch.mean(torch.sum((y_hat - y) ** 2, dim=-1))
+
+    def prior(self, batch_size: int, num_samples: int, generator: torch.Generator | None = None) -> Tensor:
+        return torch.randn((batch_size, num_samples, self.latent_channels), generator=generator)
+
+
+class CriticalGNNCVAE(_GaussianLatent):
+    """GNN-CVAE: a graph encoder q(z | y, x, G) and a graph decoder p(y | z, x, G).
+
+    The encoder sees the label as a node feature ``y - x_n`` next to ``x``; the decoder pools
+    the graph filters of ``x`` and maps ``[pool, z]`` through its FC head, so k samples cost
+    one graph pass.
+    """
+
+    def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
+                 num_layers: int = 3, out_channels: int = STATE_DIM, latent_channels: int = 2,
+                 K: int = 3) -> None:
+        super().__init__()
+        self.latent_channels = latent_channels
+        self.encoder = CriticalGNN(in_channels + out_channels, hidden_channels, num_layers,
+                                   2 * latent_channels, K=K)
+        self.decoder = CriticalGNN(in_channels, hidden_channels, num_layers, out_channels, K=K,
+                                   head_in_extra=latent_channels)
+
+    def encode(self, x: Tensor, edge_index: Tensor, y: Tensor, pos: Tensor,
+               batch: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        rel = y[batch] - pos if batch is not None else y.reshape(1, -1) - pos
+        out = self.encoder.head(self.encoder.pool(torch.cat([x, rel], 1), edge_index, batch))
+        mu, logstd = out.chunk(2, dim=1)
+        return mu, logstd.clamp(max=MAX_LOGSTD)
+
+    def condition(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None) -> Tensor:
+        """Pooled decoder features of the problem; reuse them for many latent samples."""
+        return self.decoder.pool(x, edge_index, batch)
+
+    def decode_pooled(self, pooled: Tensor, z: Tensor) -> Tensor:
+        """Decode z (B, P) or (B, k, P) given pooled features (B, hidden)."""
+        if z.dim() == 3:
+            pooled = pooled[:, None, :].expand(-1, z.shape[1], -1)
+        return self.decoder.head(torch.cat([pooled, z], -1)) + CENTRE
+
+    def decode(self, z: Tensor, x: Tensor, edge_index: Tensor, batch: Tensor | None = None) -> Tensor:
+        return self.decode_pooled(self.condition(x, edge_index, batch), z)
+
+    def sample(self, x: Tensor, edge_index: Tensor, batch: Tensor | None, num_samples: int,
+               generator: torch.Generator | None = None) -> Tensor:
+        """``num_samples`` critical states per graph (B, k, 2) from z ~ N(0, I)."""
+        pooled = self.condition(x, edge_index, batch)
+        return self.decode_pooled(pooled, self.prior(pooled.shape[0], num_samples, generator))
+
+
+class CNNTrunk(nn.Module):
+    """Strided conv layers on (occupancy, start, goal) images -> flat features."""
+
+    def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
+                 image_size: int = 64) -> None:
+        super().__init__()
+        layers, c = [], in_channels
+        for i in range(num_layers):
+            out = hidden_channels * min(2 ** i, 4)
+            layers += [nn.Conv2d(c, out, 3, stride=2, padding=1), nn.ReLU()]
+            c = out
+        self.net = nn.Sequential(*layers, nn.Flatten())
+        side = image_size // 2 ** num_layers
+        self.out_features = c * side * side
+
+    def forward(self, image: Tensor) -> Tensor:
+        return self.net(image)
+
+
+class CriticalCNN(nn.Module):
+    """Baseline: the GNN layers replaced by CNN layers on an occupancy image."""
+
+    def __init__(self, in_channels: int = IMAGE_CHANNELS, hidden_channels: int = 16,
+                 num_layers: int = 4, out_channels: int = STATE_DIM, image_size: int = 64) -> None:
+        super().__init__()
+        self.trunk = CNNTrunk(in_channels, hidden_channels, num_layers, image_size)
+        self.head = _mlp(self.trunk.out_features, 128, out_channels)
+
+    def forward(self, image: Tensor) -> Tensor:
+        return self.head(self.trunk(image)) + CENTRE
+
+
+class CriticalCVAE(_GaussianLatent):
+    """Baseline CVAE: CNN condition embedding, FC encoder and decoder."""
+
+    def __init__(self, in_channels: int = IMAGE_CHANNELS, hidden_channels: int = 16,
+                 num_layers: int = 4, out_channels: int = STATE_DIM, latent_channels: int = 2,
+                 image_size: int = 64, embed_channels: int = 128) -> None:
+        super().__init__()
+        self.latent_channels = latent_channels
+        self.trunk = nn.Sequential(CNNTrunk(in_channels, hidden_channels, num_layers, image_size))
+        self.embed = nn.Sequential(nn.Linear(self.trunk[0].out_features, embed_channels), nn.ReLU())
+        self.encoder = _mlp(embed_channels + out_channels, embed_channels, 2 * latent_channels)
+        self.decoder = _mlp(embed_channels + latent_channels, embed_channels, out_channels)
+
+    def condition(self, image: Tensor) -> Tensor:
+        return self.embed(self.trunk(image))
+
+    def encode(self, image: Tensor, y: Tensor) -> tuple[Tensor, Tensor]:
+        mu, logstd = self.encoder(torch.cat([self.condition(image), y], 1)).chunk(2, dim=1)
+        return mu, logstd.clamp(max=MAX_LOGSTD)
+
+    def decode_pooled(self, cond: Tensor, z: Tensor) -> Tensor:
+        if z.dim() == 3:
+            cond = cond[:, None, :].expand(-1, z.shape[1], -1)
+        return self.decoder(torch.cat([cond, z], -1)) + CENTRE
+
+    def decode(self, z: Tensor, image: Tensor) -> Tensor:
+        return self.decode_pooled(self.condition(image), z)
+
+    def sample(self, image: Tensor, num_samples: int, generator: torch.Generator | None = None) -> Tensor:
+        cond = self.condition(image)
+        return self.decode_pooled(cond, self.prior(cond.shape[0], num_samples, generator))
+
+
+#: Model name -> (class, family). Families: "graph"/"image" inputs, "det"/"cvae" outputs.
+MODELS: dict[str, tuple[type[nn.Module], str, str]] = {
+    "gnn": (CriticalGNN, "graph", "det"),
+    "gat": (CriticalGAT, "graph", "det"),
+    "gnn-cvae": (CriticalGNNCVAE, "graph", "cvae"),
+    "cnn": (CriticalCNN, "image", "det"),
+    "cvae": (CriticalCVAE, "image", "cvae"),
+}
+
+
+def build_model(name: str, **kwargs) -> nn.Module:
+    """Instantiate a critical-sample model by name (see :data:`MODELS`)."""
+    if name not in MODELS:
+        raise ValueError(f"unknown critical model {name!r}; known: {sorted(MODELS)}")
+    return MODELS[name][0](**kwargs)
