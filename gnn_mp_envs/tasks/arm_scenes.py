@@ -1,0 +1,265 @@
+"""Tabletop scene families of the arm task, as data plus one small generator per layout.
+
+A scene is a list of :class:`Obstacle` (boxes and cylinders standing on or above the
+table) and two end-effector targets: where the goal configuration reaches (inside a
+crevice, under a shelf, into a cubby) and where the start configuration is (elsewhere
+around the robot). :data:`SCENE_FAMILIES` holds the parameter ranges of each family; a
+family's ``layout`` names the generator in :data:`LAYOUTS` that turns the ranges and an
+``rng`` into a concrete :class:`Scene`. The robot base sits at the origin on the table top
+(``z = 0``), facing ``+x``.
+
+``train-a`` and ``train-b`` are the training families; ``test`` is held out: different
+obstacle types (cylinders, a thin wall, a closed cubby) and counts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+#: Table top: a box whose upper face is z = 0; [xmin, ymin, xmax, ymax] and thickness.
+TABLE_EXTENT = (-0.55, -0.8, 0.9, 0.8)
+TABLE_THICKNESS = 0.04
+#: Obstacles keep this distance from the robot's base axis (the base link is ~0.1 wide).
+BASE_CLEARANCE = 0.22
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static collision shape: ``box`` (``size`` = half extents x, y, z) or ``cylinder``
+    (``size`` = radius, height), centred at ``position`` and rotated by ``yaw`` about z."""
+
+    kind: str
+    size: tuple[float, ...]
+    position: tuple[float, float, float]
+    yaw: float = 0.0
+
+    def key(self) -> tuple:
+        """Shape identity: bodies with the same key can be moved instead of rebuilt."""
+        return (self.kind,) + tuple(round(float(s), 4) for s in self.size)
+
+
+@dataclass(frozen=True)
+class EndEffectorTarget:
+    """Where a configuration puts the tool: flange position, tool axis (unit vector) and
+    the range of roll about that axis that inverse kinematics may use."""
+
+    position: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    roll: tuple[float, float] = (-np.pi, np.pi)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One concrete scene: its family, obstacles and the goal tool target.
+
+    ``azimuth`` is the direction of the goal structure and ``start_side`` (+1/-1/0) the
+    side of it where start targets are drawn (0: either side, per draw).
+    """
+
+    family: str
+    obstacles: tuple[Obstacle, ...]
+    goal: EndEffectorTarget
+    azimuth: float
+    start_side: float = 0.0
+    meta: dict = field(default_factory=dict, compare=False)
+
+
+#: Family name -> layout and parameter ranges ``(low, high)`` (lengths in m, angles in rad).
+SCENE_FAMILIES: dict[str, dict[str, Any]] = {
+    # Table with box clutter and a crevice between two blocks; the goal points the tool
+    # down into the crevice.
+    "train-a": {
+        "layout": "crevice",
+        "distance": (0.40, 0.50),       # radial distance of the crevice centre
+        "azimuth": (-0.9, 0.9),         # direction of the crevice centre
+        "gap": (0.16, 0.20),            # free width between the blocks
+        "block_half_depth": (0.05, 0.08),
+        "block_half_width": (0.04, 0.07),
+        "block_height": (0.32, 0.40),
+        "goal_height": (0.04, 0.08),    # tool flange height inside the crevice
+        "clutter": (2, 4),              # number of extra boxes
+        "clutter_half_size": (0.03, 0.07),
+        "clutter_height": (0.06, 0.25),
+    },
+    # A shelf whose top board overhangs its open front; the goal reaches in under it.
+    "train-b": {
+        "layout": "shelf",
+        "distance": (0.50, 0.58),       # radial distance of the shelf centre
+        "azimuth": (-0.9, 0.9),
+        "inner_width": (0.34, 0.42),
+        "depth": (0.22, 0.30),
+        "height": (0.40, 0.46),         # height of the underside of the top board
+        "overhang": (0.04, 0.08),       # board overhang beyond the side panels' front
+        "thickness": 0.04,
+        "goal_height": (0.15, 0.22),
+        "goal_inset": (0.06, 0.14),     # tool flange behind the side panels' front edge
+        "clutter": (0, 2),
+        "clutter_half_size": (0.03, 0.06),
+        "clutter_height": (0.06, 0.20),
+    },
+    # Held out: a closed box-cubby (roof, back, sides), cylindrical posts and a thin wall.
+    "test": {
+        "layout": "cubby",
+        "distance": (0.50, 0.58),
+        "azimuth": (-0.8, 0.8),
+        "inner_width": (0.30, 0.36),
+        "depth": (0.22, 0.28),
+        "height": (0.26, 0.32),
+        "thickness": 0.04,
+        "goal_height": (0.10, 0.15),
+        "goal_inset": (0.06, 0.12),
+        "posts": (2, 4),
+        "post_radius": (0.02, 0.035),
+        "post_height": (0.25, 0.45),
+        "wall_length": (0.25, 0.35),
+        "wall_height": (0.20, 0.30),
+        "wall_offset": (0.95, 1.25),    # wall azimuth relative to the cubby (either side)
+    },
+}
+
+#: Start targets, shared by every family: tool down, on the far side of the robot.
+START_RANGES: dict[str, tuple[float, float]] = {
+    "offset": (1.6, 2.8),      # |azimuth of start - azimuth of goal structure|
+    "distance": (0.30, 0.45),
+    "height": (0.25, 0.45),
+}
+
+DOWN = (0.0, 0.0, -1.0)
+
+
+def _u(rng: np.random.Generator, r: tuple[float, float]) -> float:
+    return float(rng.uniform(r[0], r[1]))
+
+
+def _polar(radius: float, azimuth: float, z: float) -> tuple[float, float, float]:
+    return (radius * float(np.cos(azimuth)), radius * float(np.sin(azimuth)), z)
+
+
+def _frame(centre_r: float, azimuth: float):
+    """Position in a frame whose x axis points radially out at ``azimuth`` (u = radial,
+    v = tangential), used to lay out structures facing the robot."""
+    c, s = float(np.cos(azimuth)), float(np.sin(azimuth))
+
+    def at(u: float, v: float, z: float) -> tuple[float, float, float]:
+        x, y = centre_r + u, v
+        return (c * x - s * y, s * x + c * y, z)
+
+    return at
+
+
+def _box(half: tuple[float, float, float], pos: tuple[float, float, float], yaw: float) -> Obstacle:
+    return Obstacle("box", tuple(float(h) for h in half), tuple(float(p) for p in pos), float(yaw))
+
+
+def _clutter(rng: np.random.Generator, spec: dict, avoid: list[tuple[float, float, float]],
+             n: int) -> list[Obstacle]:
+    """``n`` random boxes on the table, away from the base and from ``avoid`` (x, y, radius)."""
+    out: list[Obstacle] = []
+    for _ in range(n):
+        for _ in range(50):
+            r, a = _u(rng, (0.30, 0.65)), _u(rng, (-np.pi, np.pi))
+            hx, hy = _u(rng, spec["clutter_half_size"]), _u(rng, spec["clutter_half_size"])
+            h = _u(rng, spec["clutter_height"])
+            x, y, _ = _polar(r, a, 0.0)
+            if all(np.hypot(x - ax, y - ay) > ar + max(hx, hy) for ax, ay, ar in avoid):
+                out.append(_box((hx, hy, h / 2), (x, y, h / 2), _u(rng, (0, np.pi))))
+                avoid.append((x, y, max(hx, hy) * 1.5))
+                break
+    return out
+
+
+def start_target(scene: Scene, rng: np.random.Generator) -> EndEffectorTarget:
+    """A start tool target (tool down) on the far side of the robot from the goal structure."""
+    side = scene.start_side or float(rng.choice([-1.0, 1.0]))
+    a = scene.azimuth + side * _u(rng, START_RANGES["offset"])
+    return EndEffectorTarget(_polar(_u(rng, START_RANGES["distance"]), a, _u(rng, START_RANGES["height"])),
+                             DOWN)
+
+
+def crevice_layout(rng: np.random.Generator, spec: dict):
+    """Two blocks with a crevice between them (tool down into it) and box clutter."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    gap = _u(rng, spec["gap"])
+    at = _frame(r, a)
+    obstacles = []
+    for side in (-1.0, 1.0):
+        hd, hw, h = _u(rng, spec["block_half_depth"]), _u(rng, spec["block_half_width"]), _u(rng, spec["block_height"])
+        obstacles.append(_box((hd, hw, h / 2), at(0.0, side * (gap / 2 + hw), h / 2), a))
+    goal = EndEffectorTarget(at(0.0, 0.0, _u(rng, spec["goal_height"])), DOWN)
+    cx, cy, _ = at(0.0, 0.0, 0.0)
+    clutter = _clutter(rng, spec, [(cx, cy, gap / 2 + 0.25)], int(rng.integers(spec["clutter"][0], spec["clutter"][1] + 1)))
+    return obstacles + clutter, goal, a, 0.0, {"gap": gap}
+
+
+def _open_box(rng: np.random.Generator, spec: dict, at, a: float, overhang: float,
+              closed_back: bool) -> tuple[list[Obstacle], float, float, float]:
+    """Side panels, top board (and back wall) of a shelf/cubby whose open front faces the
+    robot; returns the obstacles and the interior half width, depth and height."""
+    t = spec["thickness"]
+    w, d, h = _u(rng, spec["inner_width"]), _u(rng, spec["depth"]), _u(rng, spec["height"])
+    obstacles = [_box((d / 2, t / 2, h / 2), at(0.0, s * (w / 2 + t / 2), h / 2), a) for s in (-1.0, 1.0)]
+    obstacles.append(_box(((d + overhang) / 2, w / 2 + t, t / 2), at(-overhang / 2, 0.0, h + t / 2), a))
+    if closed_back:
+        obstacles.append(_box((t / 2, w / 2, h / 2), at(d / 2 + t / 2, 0.0, h / 2), a))
+    return obstacles, w / 2, d, h
+
+
+def shelf_layout(rng: np.random.Generator, spec: dict):
+    """A shelf (side panels + overhanging top board); the tool reaches in horizontally."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    at = _frame(r, a)
+    overhang = _u(rng, spec["overhang"])
+    obstacles, hw, d, h = _open_box(rng, spec, at, a, overhang, closed_back=False)
+    goal_u = -d / 2 + _u(rng, spec["goal_inset"])
+    goal = EndEffectorTarget(at(goal_u, _u(rng, (-0.3, 0.3)) * hw, min(_u(rng, spec["goal_height"]), h - 0.1)),
+                             (float(np.cos(a)), float(np.sin(a)), 0.0))
+    cx, cy, _ = at(0.0, 0.0, 0.0)
+    clutter = _clutter(rng, spec, [(cx, cy, max(hw, d / 2) + 0.2)],
+                       int(rng.integers(spec["clutter"][0], spec["clutter"][1] + 1)))
+    return obstacles + clutter, goal, a, 0.0, {"depth": d}
+
+
+def cubby_layout(rng: np.random.Generator, spec: dict):
+    """A closed cubby (held out): roof, sides and back; posts and a thin wall around it."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    at = _frame(r, a)
+    obstacles, hw, d, h = _open_box(rng, spec, at, a, 0.0, closed_back=True)
+    goal_u = -d / 2 + _u(rng, spec["goal_inset"])
+    goal = EndEffectorTarget(at(goal_u, _u(rng, (-0.25, 0.25)) * hw, min(_u(rng, spec["goal_height"]), h - 0.1)),
+                             (float(np.cos(a)), float(np.sin(a)), 0.0))
+    side = float(rng.choice([-1.0, 1.0]))
+    # A thin radial wall on one side of the cubby; the start lies beyond it.
+    wa = a + side * _u(rng, spec["wall_offset"])
+    length, wh = _u(rng, spec["wall_length"]), _u(rng, spec["wall_height"])
+    wall_r = BASE_CLEARANCE + 0.08 + length / 2
+    obstacles.append(_box((length / 2, spec["thickness"] / 2, wh / 2), _polar(wall_r, wa, wh / 2), wa))
+    cx, cy, _ = at(0.0, 0.0, 0.0)
+    avoid = [(cx, cy, max(hw, d / 2) + 0.18)]
+    wx, wy, _ = _polar(wall_r, wa, 0.0)
+    avoid.append((wx, wy, length / 2 + 0.05))
+    for _ in range(int(rng.integers(spec["posts"][0], spec["posts"][1] + 1))):
+        for _ in range(50):
+            pr, pa = _u(rng, (0.32, 0.7)), _u(rng, (-np.pi, np.pi))
+            rad, ph = _u(rng, spec["post_radius"]), _u(rng, spec["post_height"])
+            x, y, _ = _polar(pr, pa, 0.0)
+            if all(np.hypot(x - ax, y - ay) > ar + rad for ax, ay, ar in avoid):
+                obstacles.append(Obstacle("cylinder", (rad, ph), (x, y, ph / 2)))
+                avoid.append((x, y, rad + 0.12))
+                break
+    return obstacles, goal, a, side, {"wall_azimuth": wa}
+
+
+LAYOUTS: dict[str, Callable] = {"crevice": crevice_layout, "shelf": shelf_layout, "cubby": cubby_layout}
+
+
+def sample_scene(family: str, rng: np.random.Generator) -> Scene:
+    """A random scene of ``family`` (a key of :data:`SCENE_FAMILIES`)."""
+    try:
+        spec = SCENE_FAMILIES[family]
+    except KeyError:
+        raise ValueError(f"unknown arm scene {family!r}; known: {sorted(SCENE_FAMILIES)}") from None
+    obstacles, goal, azimuth, side, meta = LAYOUTS[spec["layout"]](rng, spec)
+    return Scene(family, tuple(obstacles), goal, float(azimuth), float(side), meta)
