@@ -2,9 +2,9 @@
 
 What is generated (defaults, see :class:`DatasetConfig`):
 
-* ``labelled.npz``: 400 Maze2D maps x 10 start/goal pairs = 4,000 problems. Each problem's
+* ``labelled.npz``: 400 Maze2D maps x 12 start/goal pairs = 4,800 problems. Each problem's
   labels are its bottleneck nodes with ``rel_tol = 0.5`` (every path node whose deletion
-  raises the path cost by at least half the largest increase). That gives ~3.9 labels per
+  raises the path cost by at least half the largest increase). That gives ~3.2 labels per
   problem, i.e. ~15,000 labelled (problem, critical node) samples, the paper's size. The
   paper had 400 problems with ~37 labels each; we reach 15k with more start/goal pairs per
   map instead of a looser tolerance, because loose tolerances label nodes far from any
@@ -49,7 +49,7 @@ class DatasetConfig:
 
     seed: int = 0
     num_maps: int = 400
-    pairs_per_map: int = 10
+    pairs_per_map: int = 12
     rel_tol: float = 0.5
     eval_problems: int = 300
     num_blobs: int = 4

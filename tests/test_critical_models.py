@@ -1,0 +1,102 @@
+"""Critical-sample models: output shapes, CVAE API and permutation equivariance (Theorem 1)."""
+
+import numpy as np
+import pytest
+import torch
+
+from agents.critical_data import graph_batch, image_batch, node_features
+from agents.models.critical import (CriticalCNN, CriticalCVAE, CriticalGAT, CriticalGNN,
+                                    CriticalGNNCVAE, build_model)
+from gnn_mp_envs.critical.dataset import CriticalProblems
+from gnn_mp_envs.critical.halton import halton_graph
+
+torch.set_num_threads(2)
+
+
+def _graph_inputs(n=120, seed=0):
+    g = halton_graph(n)
+    rng = np.random.default_rng(seed)
+    free = rng.random(n) > 0.2
+    x = torch.from_numpy(node_features(g.nodes, rng.random(2), rng.random(2), free))
+    e = g.edges[free[g.edges[:, 0]] & free[g.edges[:, 1]]]
+    ei = torch.from_numpy(np.concatenate([e, e[:, ::-1]]).T.copy())
+    return g, x, ei
+
+
+def _permute(x, ei, pos, seed=1):
+    perm = torch.from_numpy(np.random.default_rng(seed).permutation(x.shape[0]))
+    inv = torch.empty_like(perm)
+    inv[perm] = torch.arange(len(perm))
+    return perm, x[perm], inv[ei], pos[perm]
+
+
+@pytest.mark.parametrize("cls", [CriticalGNN, CriticalGAT])
+def test_graph_regressor_shapes_and_equivariance(cls):
+    torch.manual_seed(0)
+    g, x, ei = _graph_inputs()
+    model = cls(5, 16, 3, 2).eval()
+    with torch.no_grad():
+        out = model(x, ei)
+        assert out.shape == (1, 2)
+        pos = torch.from_numpy(g.nodes).float()
+        perm, xp, eip, _ = _permute(x, ei, pos)
+        h, hp = model.node_embeddings(x, ei), model.node_embeddings(xp, eip)
+        assert torch.allclose(hp, h[perm], atol=1e-5)          # node level: permuted
+        assert torch.allclose(model(xp, eip), out, atol=1e-5)   # pooled: unchanged
+        batch = torch.zeros(x.shape[0], dtype=torch.long)
+        assert torch.allclose(model(x, ei, batch), out, atol=1e-6)
+
+
+def test_gnn_cvae_decoder_equivariance_and_api():
+    torch.manual_seed(0)
+    g, x, ei = _graph_inputs()
+    pos = torch.from_numpy(g.nodes).float()
+    model = CriticalGNNCVAE(5, 16, 2, 2, latent_channels=3).eval()
+    z = torch.randn(1, 3)
+    y = torch.tensor([[0.4, 0.6]])
+    with torch.no_grad():
+        perm, xp, eip, posp = _permute(x, ei, pos)
+        assert torch.allclose(model.decoder.node_embeddings(xp, eip),
+                              model.decoder.node_embeddings(x, ei)[perm], atol=1e-5)
+        assert torch.allclose(model.decode(z, xp, eip), model.decode(z, x, ei), atol=1e-5)
+        mu, logstd = model.encode(x, ei, y, pos)
+        mu_p, logstd_p = model.encode(xp, eip, y, posp)
+        assert mu.shape == (1, 3) and torch.allclose(mu, mu_p, atol=1e-5)
+        samples = model.sample(x, ei, None, 7, torch.Generator().manual_seed(0))
+        assert samples.shape == (1, 7, 2)
+    model.train()
+    mu, logstd = model.encode(x, ei, y, pos)
+    zt = model.reparametrize(mu, logstd)
+    loss = model.recon_loss(model.decode(zt, x, ei), y) + model.kl_loss(mu, logstd)
+    loss.backward()
+    assert all(p.grad is not None for p in model.parameters())
+
+
+def test_image_models_shapes():
+    torch.manual_seed(0)
+    occ = np.zeros((3, 64, 64), np.uint8)
+    occ[:, :, 30:33] = 1
+    img = image_batch(occ, np.full((3, 2), 0.2), np.full((3, 2), 0.8))
+    assert img.shape == (3, 3, 64, 64) and float(img[0, 1].max()) > 0.5
+    assert CriticalCNN()(img).shape == (3, 2)
+    cvae = CriticalCVAE()
+    mu, logstd = cvae.encode(img, torch.rand(3, 2))
+    assert mu.shape == (3, 2) and cvae.decode(mu, img).shape == (3, 2)
+    assert cvae.sample(img, 5).shape == (3, 5, 2)
+
+
+def test_graph_batch_follows_labels():
+    g = halton_graph()
+    rng = np.random.default_rng(0)
+    n = g.num_nodes
+    probs = CriticalProblems(
+        walls=[np.zeros((0, 4))] * 2, blobs=[np.zeros((0, 3))] * 2, start=rng.random((2, 2)),
+        goal=rng.random((2, 2)), node_free=np.ones((2, n), bool), edge_free=np.ones((2, len(g.edges)), bool),
+        label_ptr=np.array([0, 1, 3]), label_nodes=np.array([5, 6, 7]), path_cost=np.ones(2),
+        map_index=np.arange(2), split=np.zeros(2, np.int8))
+    b = graph_batch(probs, g, np.arange(2))
+    assert b.x.shape == (2 * n, 5) and b.y.shape == (3, 2)
+    assert b.y_batch.tolist() == [0, 1, 1]
+    assert b.edge_index.shape[1] == 4 * len(g.edges)
+    out = build_model("gnn", hidden_channels=8, num_layers=2)(b.x, b.edge_index, b.batch)
+    assert out.shape == (2, 2)
