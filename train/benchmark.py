@@ -138,13 +138,18 @@ def validate_args(args: BenchmarkArgs) -> None:
 
 def check_ompl() -> None:
     """Fail early (before any planning) when OMPL rows cannot run."""
-    import importlib.util
     try:
         from gnn_mp_envs.baselines import ompl_runner  # noqa: F401
     except ImportError as exc:
         raise BenchmarkError(f"the OMPL runner is not available in this checkout ({exc})") from None
-    if importlib.util.find_spec("ompl") is None:
+    if not ompl_installed():
         raise BenchmarkError(OMPL_INSTALL_HINT)
+
+
+def ompl_installed() -> bool:
+    """Whether OMPL's Python bindings are installed (they are only imported in the runner's subprocess)."""
+    import importlib.util
+    return importlib.util.find_spec("ompl") is not None
 
 
 # ---------------------------------------------------------------------------- one run
@@ -274,9 +279,11 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
 
 def ompl_available() -> bool:
     """Whether the OMPL runner exists and OMPL's Python bindings can be imported."""
-    import importlib.util
-    return (importlib.util.find_spec("gnn_mp_envs.baselines.ompl_runner") is not None
-            and importlib.util.find_spec("ompl") is not None)
+    try:
+        check_ompl()
+    except BenchmarkError:
+        return False
+    return True
 
 
 # ---------------------------------------------------------------------------- statistics

@@ -1,0 +1,84 @@
+"""The benchmark library: statistics, seeds, parallel runs and outputs."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from train import benchmark as bm
+from train import cli
+
+
+def tiny_args(**overrides) -> bm.BenchmarkArgs:
+    kwargs = dict(task="maze2d", samplers=["uniform", "goal-bias"], problems=3, seed=3, max_nodes=150,
+                  progress=False)
+    kwargs.update(overrides)
+    return bm.BenchmarkArgs(**kwargs)
+
+
+def without_wall_time(report: dict) -> dict:
+    runs = {name: [{k: v for k, v in r.items() if k != "wall_time_s"} for r in rs]
+            for name, rs in report["runs"].items()}
+    results = {name: {k: v for k, v in s.items() if k != "wall_time_s"} for name, s in report["results"].items()}
+    return {"runs": runs, "results": results}
+
+
+def test_summarize_ignores_missing_values_and_never_returns_nan():
+    assert bm.summarize([]) == {"median": None, "mean": None, "q25": None, "q75": None}
+    assert bm.summarize([None, float("inf")])["median"] is None
+    stats = bm.summarize([1.0, 2.0, 3.0, None])
+    assert stats == {"median": 2.0, "mean": 2.0, "q25": 1.5, "q75": 2.5}
+
+
+def test_problem_seeds_are_shared_across_samplers_and_distinct_across_problems():
+    assert bm.problem_seed(0, 1) == bm.problem_seed(0, 1)
+    assert len({bm.problem_seed(0, i) for i in range(50)}) == 50
+    assert bm.problem_seed(0, 1) != bm.problem_seed(1, 1)
+
+
+def test_samplers_see_the_same_problems_and_seeds():
+    report = bm.run_benchmark(tiny_args())
+    uniform, goal_bias = report["runs"]["uniform"], report["runs"]["goal-bias"]
+    assert [(r["problem"], r["seed"]) for r in uniform] == [(r["problem"], r["seed"]) for r in goal_bias]
+    json.dumps(report, allow_nan=False)   # no NaN / inf anywhere
+    table = bm.format_table(report)
+    assert "uniform" in table and "goal-bias" in table
+
+
+def test_two_workers_match_a_serial_run():
+    serial = bm.run_benchmark(tiny_args(workers=1, problems=2))
+    parallel = bm.run_benchmark(tiny_args(workers=2, problems=2))
+    assert without_wall_time(parallel) == without_wall_time(serial)
+
+
+def test_unknown_sampler_lists_known_names():
+    with pytest.raises(bm.BenchmarkError, match="known: .*goal-bias.*uniform"):
+        bm.validate_args(tiny_args(samplers=["nope"]))
+
+
+def test_ompl_rows_fail_early_with_an_install_hint(monkeypatch):
+    monkeypatch.setattr(bm, "ompl_installed", lambda: False)
+    with pytest.raises(bm.BenchmarkError, match=r"pip install -e \.\[ompl\]|OMPL runner is not available"):
+        bm.validate_args(tiny_args(samplers=["uniform", "ompl-rrtconnect"]))
+
+
+def test_ompl_record_maps_runner_counters():
+    record = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": True, "collision_checks": 120, "time": 0.02,
+                                                         "path_length": 1.5, "nodes_expanded": 40})
+    assert record["success"] and record["collision_checks"] == 120 and record["wall_time_s"] == 0.02
+    assert record["nodes_expanded"] == 40 and record["edges"] is None
+    failed = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": False, "path_length": float("inf")})
+    assert failed["path_length"] is None
+
+
+def test_plot_writes_a_png(tmp_path):
+    report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform"]))
+    bm.plot_report(report, tmp_path / "box.png")
+    assert (tmp_path / "box.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_passthrough_of_a_missing_module_is_a_one_line_error(capsys):
+    assert cli.run_passthrough.__name__  # the CLI module imports without its optional subcommands
+    with pytest.raises(cli.CLIError, match="not available"):
+        cli.load_module_main("train.no_such_module")

@@ -1,0 +1,100 @@
+"""The `gnn-mp` command end to end, through subprocesses (as a user runs it)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+STATS_KEYS = {"median", "mean", "q25", "q75"}
+METRICS = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s")
+
+
+def gnn_mp(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run the CLI exactly as the `gnn-mp` console script does."""
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def test_samplers_lists_the_baselines():
+    result = gnn_mp("samplers")
+    assert result.returncode == 0, result.stderr
+    names = [line.split()[0] for line in result.stdout.splitlines() if line.strip()]
+    assert "uniform" in names and "goal-bias" in names
+
+
+def validate_report(report: dict, task: str, problems: int, seed: int, samplers: list[str]) -> None:
+    assert report["task"] == task and report["problems"] == problems and report["seed"] == seed
+    assert list(report["results"]) == samplers
+    for name, summary in report["results"].items():
+        assert 0.0 <= summary["success_rate"] <= 1.0
+        for metric in METRICS:
+            stats = summary[metric]
+            assert set(stats) == STATS_KEYS, (name, metric)
+            for value in stats.values():
+                assert value is None or (isinstance(value, (int, float)) and math.isfinite(value))
+            if stats["median"] is not None:
+                assert stats["q25"] <= stats["median"] <= stats["q75"]
+
+
+def test_benchmark_end_to_end_json_plot_and_render(tmp_path: Path):
+    out_json, out_plot, render_dir = tmp_path / "r.json", tmp_path / "r.png", tmp_path / "renders"
+    result = gnn_mp("benchmark", "--task", "maze2d", "--samplers", "uniform,goal-bias", "--problems", "3",
+                    "--seed", "7", "--max-nodes", "200", "--json", str(out_json), "--plot", str(out_plot),
+                    "--render", str(render_dir), "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert "uniform" in result.stdout and "goal-bias" in result.stdout and "success" in result.stdout
+    text = out_json.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    report = json.loads(text)
+    validate_report(report, "maze2d", 3, 7, ["uniform", "goal-bias"])
+    assert report["max_nodes"] == 200 and report["env_id"] == "GNNMP/Maze2DRRT-v0"
+    for runs in report["runs"].values():
+        assert [r["problem"] for r in runs] == [0, 1, 2]
+        assert all(r["nodes_expanded"] <= 200 for r in runs)
+    assert out_plot.stat().st_size > 0
+    assert sorted(p.name for p in render_dir.iterdir()) == ["maze2d_goal-bias_problem0.png",
+                                                            "maze2d_uniform_problem0.png"]
+
+
+@pytest.mark.parametrize("args, fragments", [
+    (["benchmark", "--samplers", "uniform,no-such-sampler", "--problems", "1"], ["no-such-sampler", "uniform"]),
+    (["benchmark", "--task", "no-such-task"], ["no-such-task", "maze2d"]),
+    (["benchmark", "--problems", "-3"], ["--problems"]),
+])
+def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
+    assert_one_line_error(gnn_mp(*args), *fragments)
+
+
+@pytest.mark.parametrize("args, fragments", [
+    (["benchmark", "--workers", "0"], ["--workers"]),
+    (["benchmark", "--max-nodes", "-1"], ["--max-nodes"]),
+    (["benchmark", "--problems", "1", "--checkpoint", "uniform=/no/such/file.pt"], ["missing checkpoint"]),
+    (["benchmark", "--samplers", "ompl-kpiece", "--task", "maze2d"], ["ompl-kpiece"]),
+    (["benchmark", "--suite", "no-such-suite"], ["no-such-suite"]),
+    (["train", "no-such-model"], ["train"]),
+    (["no-such-command"], ["no-such-command"]),
+])
+def test_bad_input_in_process(args: list[str], fragments: list[str], capsys):
+    """The same one-line contract, checked in-process (faster than a subprocess per case)."""
+    from train.cli import main
+    try:
+        code = main(args)
+    except SystemExit as exit_:   # argparse errors exit from inside parse_args
+        code = exit_.code
+    assert code not in (0, None)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(f in err[0] for f in fragments), err
