@@ -1,0 +1,326 @@
+"""The 6-DoF arm task and GNNMP/ArmBiRRT-v0: API checkers, determinism, collision checking
+(scene, table, self-collision), path validity, problem generation, client lifecycle."""
+
+import gymnasium as gym
+import numpy as np
+import pybullet as p
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+from gnn_mp_envs.core.planners import make_planner
+from gnn_mp_envs.core.problem import InvalidProblemError, Problem
+from gnn_mp_envs.tasks.arm import JOINT_HIGH, JOINT_LOW, ArmProblem, ArmTask
+from gnn_mp_envs.tasks.arm_scenes import SCENE_FAMILIES, Obstacle, sample_scene
+
+ENV_ID = "GNNMP/ArmBiRRT-v0"
+#: Forearm folded down so the wrist presses into the base and first link: self-collision only.
+FOLDED = np.array([-1.87, 0.63, 0.05, -1.38, 1.25, 2.62])
+HOME = np.array([0.0, -0.3, -0.6, 0.0, 0.9, 0.0])
+
+
+@pytest.fixture(scope="module")
+def task():
+    t = ArmTask("test")
+    yield t
+    t.close()
+
+
+def make_env(max_nodes=200, scene="test", **kw):
+    return gym.make(ENV_ID, max_nodes=max_nodes, task_kwargs={"scene": scene}, **kw)
+
+
+def run_episode(env, seed, rng_seed=0, max_steps=100_000):
+    obs, info = env.reset(seed=seed)
+    rng = np.random.default_rng(rng_seed)
+    low, high = env.action_space.low, env.action_space.high
+    terminated = False
+    for _ in range(max_steps):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
+        if terminated or truncated:
+            break
+    return obs, info, terminated
+
+
+# ---------------------------------------------------------------------- API checkers
+def test_gymnasium_checker():
+    env = make_env()
+    try:
+        gym_check_env(env.unwrapped, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_sb3_checker():
+    from stable_baselines3.common.env_checker import check_env
+    env = make_env()
+    try:
+        check_env(env.unwrapped, warn=False)
+    finally:
+        env.close()
+
+
+def test_torchrl_specs():
+    from torchrl.envs import GymEnv
+    from torchrl.envs.utils import check_env_specs
+    env = GymEnv(ENV_ID, max_nodes=200, task_kwargs={"scene": "test"})
+    try:
+        check_env_specs(env, seed=0)
+    finally:
+        env.close()
+
+
+def test_spaces_are_the_joint_limits():
+    env = make_env()
+    try:
+        np.testing.assert_allclose(env.action_space.low, JOINT_LOW.astype(np.float32))
+        np.testing.assert_allclose(env.action_space.high, JOINT_HIGH.astype(np.float32))
+        assert env.unwrapped.max_nodes == 200
+        assert gym.spec(ENV_ID).kwargs["max_nodes"] == 20000
+    finally:
+        env.close()
+
+
+# ---------------------------------------------------------------------- determinism
+def test_same_seed_same_observations():
+    env_a, env_b = make_env(1000), make_env(1000)
+    try:
+        obs_a, info_a, _ = run_episode(env_a, seed=5, max_steps=60)
+        obs_b, info_b, _ = run_episode(env_b, seed=5, max_steps=60)
+        for k in obs_a:
+            np.testing.assert_array_equal(obs_a[k], obs_b[k])
+        assert info_a["collision_checks"] == info_b["collision_checks"]
+        obs_c, _, _ = run_episode(env_a, seed=6, max_steps=5)
+        assert not np.array_equal(obs_a["goal"], obs_c["goal"])
+    finally:
+        env_a.close()
+        env_b.close()
+
+
+def test_problems_are_reproducible_across_tasks(task):
+    other = ArmTask("test")
+    try:
+        for i in range(3):
+            a, b = task.problem("test", i), other.problem("test", i)
+            np.testing.assert_array_equal(a.start, b.start)
+            np.testing.assert_array_equal(a.goal, b.goal)
+            assert a.obstacles == b.obstacles
+    finally:
+        other.close()
+
+
+# ---------------------------------------------------------------------- validity
+def test_solved_path_is_collision_free_at_checker_resolution():
+    env = make_env(20000)
+    try:
+        for seed in (0, 1):
+            _, info, terminated = run_episode(env, seed=seed)
+            assert terminated and info["is_success"]
+            path = info["path"]
+            problem = env.unwrapped.problem
+            np.testing.assert_array_equal(path[0], problem.start)
+            np.testing.assert_allclose(path[-1], problem.goal)
+            before = problem.collision_checks
+            assert problem.path_valid(path)
+            assert problem.collision_checks > before  # it really re-checked
+            # Every edge within one step, and every interpolated state valid (uncounted).
+            for a, b in zip(path[:-1], path[1:]):
+                assert np.linalg.norm(b - a) <= problem.step_size + 1e-9
+                n = int(np.ceil(np.linalg.norm(b - a) / problem.resolution))
+                states = a + (b - a) * (np.arange(n + 1) / n)[:, None]
+                assert problem.is_state_valid(states).all()
+            assert info["path_length"] == pytest.approx(
+                float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))))
+    finally:
+        env.close()
+
+
+def test_self_collision_is_on(task):
+    empty = ArmProblem(task.world, (), HOME, HOME)
+    assert empty.is_state_valid(HOME[None])[0]
+    assert not empty.is_state_valid(FOLDED[None])[0]
+    contacts = task.world.contacts(FOLDED)
+    assert contacts and all(a == b == task.world.robot for a, b, *_ in contacts)
+    # Adjacent links are never reported, even over many random configurations.
+    rng = np.random.default_rng(0)
+    robot_pairs = set()
+    for q in rng.uniform(JOINT_LOW, JOINT_HIGH, (400, 6)):
+        task.world.load(())
+        robot_pairs |= {tuple(sorted((la, lb))) for a, b, la, lb, _ in task.world.contacts(q) if a == b}
+    assert robot_pairs, "random configurations should include some self-collisions"
+    assert all(abs(la - lb) > 1 for la, lb in robot_pairs)
+
+
+def test_self_collision_flag_is_what_rejects_the_folded_arm():
+    import pybullet_data
+    cid = p.connect(p.DIRECT)
+    try:
+        p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
+        robot = p.loadURDF("xarm/xarm6_robot.urdf", useFixedBase=True, physicsClientId=cid)
+        p.resetJointStatesMultiDof(robot, [1, 2, 3, 4, 5, 6], [[v] for v in FOLDED], physicsClientId=cid)
+        p.performCollisionDetection(physicsClientId=cid)
+        assert not [c for c in p.getContactPoints(bodyA=robot, physicsClientId=cid) if c[8] <= 0]
+    finally:
+        p.disconnect(cid)
+
+
+def test_table_and_obstacles_collide(task):
+    low_reach = np.array([0.0, 1.9, -0.5, 0.0, 0.0, 0.0])  # shoulder swung down into the table
+    empty = ArmProblem(task.world, (), HOME, HOME)
+    assert not empty.is_state_valid(low_reach[None])[0]
+    flange, _ = task.world.flange(HOME)
+    block = (Obstacle("box", (0.05, 0.05, 0.05), tuple(flange)),)
+    blocked = ArmProblem(task.world, block, HOME, HOME)
+    assert not blocked.is_state_valid(HOME[None])[0]
+    assert empty.is_state_valid(HOME[None])[0]  # switching back restores the empty scene
+
+
+def test_out_of_limits_is_invalid(task):
+    empty = ArmProblem(task.world, (), HOME, HOME)
+    q = HOME.copy()
+    q[2] = JOINT_HIGH[2] + 0.1
+    assert not empty.is_state_valid(q[None])[0]
+
+
+def test_stale_problem_keeps_its_own_scene(task):
+    p0 = task.problem("test", 0)
+    rng = np.random.default_rng(1)
+    qs = rng.uniform(JOINT_LOW, JOINT_HIGH, (50, 6))
+    before = p0.is_state_valid(qs)
+    for i in range(1, 4):
+        task.problem("test", i)  # moves/rebuilds the obstacle bodies
+    np.testing.assert_array_equal(p0.is_state_valid(qs), before)
+
+
+def test_check_motion_counts_like_the_base_class(task):
+    problem = task.problem("test", 2)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = problem.start
+        b = np.clip(a + rng.normal(0, 0.6, 6), JOINT_LOW, JOINT_HIGH)
+        problem.reset_counters()
+        fast = problem.check_motion(a, b)
+        fast_count = problem.collision_checks
+        problem.reset_counters()
+        slow = Problem.check_motion(problem, a, b)
+        assert fast == slow
+        assert fast_count == problem.collision_checks
+
+
+def test_check_state_counts_one(task):
+    problem = task.problem("test", 0)
+    problem.reset_counters()
+    problem.check_state(problem.start)
+    problem.check_state(FOLDED)
+    assert problem.collision_checks == 2
+
+
+# ---------------------------------------------------------------------- problems
+@pytest.mark.parametrize("scene", ["train-a", "train-b", "test"])
+def test_problems_are_valid_and_blocked(scene):
+    t = ArmTask(scene)
+    try:
+        for i in range(5):
+            pr = t.problem("train", i)
+            pr.validate()
+            assert pr.scene.family == scene
+            assert not pr.straight_line_free(), "the straight joint-space segment must be blocked"
+        assert t.unblocked_problems == 0
+    finally:
+        t.close()
+
+
+def test_scene_families_differ():
+    rng = np.random.default_rng(0)
+    kinds = {f: {o.kind for _ in range(5) for o in sample_scene(f, rng).obstacles} for f in SCENE_FAMILIES}
+    assert kinds["train-a"] == kinds["train-b"] == {"box"}
+    assert "cylinder" in kinds["test"]
+    assert {SCENE_FAMILIES[f]["layout"] for f in SCENE_FAMILIES} == {"crevice", "shelf", "cubby"}
+    with pytest.raises(ValueError):
+        ArmTask("kitchen")
+
+
+def test_train_mixture_draws_both_training_families():
+    t = ArmTask("train")
+    try:
+        families = {t.problem("train", i).scene.family for i in range(8)}
+        assert families == {"train-a", "train-b"}
+    finally:
+        t.close()
+
+
+def test_invalid_given_problem_raises():
+    env = make_env()
+    try:
+        good = env.unwrapped.task.problem("test", 0)
+        obs, _ = env.reset(options={"problem": {"start": good.start, "goal": good.goal,
+                                                "obstacles": list(good.obstacles)}})
+        np.testing.assert_allclose(obs["start"], good.start.astype(np.float32))
+        with pytest.raises(InvalidProblemError):
+            env.reset(options={"problem": {"start": FOLDED, "goal": good.goal}})  # self-collision
+        flange, _ = env.unwrapped.task.world.flange(good.goal)
+        box = {"kind": "box", "size": (0.06, 0.06, 0.06), "position": tuple(flange)}
+        with pytest.raises(InvalidProblemError):
+            env.reset(options={"problem": {"start": good.start, "goal": good.goal,
+                                           "obstacles": list(good.obstacles) + [box]}})
+        with pytest.raises(InvalidProblemError):
+            env.reset(options={"problem": {"start": good.start}})
+        with pytest.raises(InvalidProblemError):
+            env.reset(options={"problem": {"start": np.zeros(5), "goal": good.goal}})
+    finally:
+        env.close()
+
+
+# ---------------------------------------------------------------------- lifecycle, render
+def test_close_disconnects_the_client():
+    env = make_env()
+    client = env.unwrapped.task.client
+    assert p.isConnected(client)
+    env.reset(seed=0)
+    env.close()
+    assert not p.isConnected(client)
+    env.close()  # idempotent
+
+
+def test_each_task_has_its_own_client():
+    a, b = ArmTask("train-a"), ArmTask("train-a")
+    try:
+        assert a.client != b.client
+    finally:
+        a.close()
+        b.close()
+    assert not p.isConnected(a.client) and not p.isConnected(b.client)
+
+
+def test_render_draws_arm_scene_and_path():
+    env = make_env(20000, render_mode="rgb_array")
+    try:
+        _, info, terminated = run_episode(env, seed=0)
+        assert terminated
+        img = env.render()
+        assert img.shape == (240, 320, 3) and img.dtype == np.uint8
+        assert img.std() > 10
+        green = (img[..., 1] > 150) & (img[..., 0] < 60) & (img[..., 2] < 100)
+        assert green.sum() > 50  # the flange trace of the path
+    finally:
+        env.close()
+
+
+# ---------------------------------------------------------------------- statistics
+def test_uniform_birrt_solves_heldout_arm_problems():
+    """Issue 3: uniform BiRRT solves >= 90% of held-out test-scene problems within 20,000
+    nodes (10 problems here; train/bench_arm.py measures 50)."""
+    t = ArmTask("test")
+    try:
+        solved = 0
+        for i in range(10):
+            problem = t.problem("test", i)
+            planner = make_planner("birrt", problem, 20000)
+            rng = np.random.default_rng(i)
+            while not planner.solved and not planner.tree.full and planner.iterations < 80000:
+                planner.step(problem.sample_uniform(rng))
+            if planner.solved:
+                solved += 1
+                assert problem.path_valid(planner.solution.states)
+        assert solved >= 9
+    finally:
+        t.close()
