@@ -1,0 +1,146 @@
+"""OMPL baseline runner and the OMPL benchmark-log writer.
+
+Planning tests need the optional ``ompl`` extra and are skipped without it (CI does not
+install it); the availability error path, index parsing and the log format are pure Python.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gnn_mp_envs.baselines import ompl_runner
+from gnn_mp_envs.baselines.ompl_log import STATUS_NAMES, read_ompl_log, run_properties, write_ompl_log
+from gnn_mp_envs.baselines.ompl_runner import OMPLUnavailableError, parse_indices, run_ompl
+
+needs_ompl = pytest.mark.skipif(not ompl_runner.ompl_available(), reason="optional extra 'ompl' not installed")
+
+
+# ---------------------------------------------------------------------- pure Python
+def test_parse_indices():
+    assert parse_indices("0-3") == [0, 1, 2, 3]
+    assert parse_indices("0,3,5-7") == [0, 3, 5, 6, 7]
+    assert parse_indices(4) == [4]
+    assert parse_indices(range(2)) == [0, 1]
+    for bad in ("", "3-1", "-1", "a"):
+        with pytest.raises(ValueError):
+            parse_indices(bad)
+
+
+def test_unavailable_ompl_raises_with_install_hint(monkeypatch):
+    monkeypatch.setattr(ompl_runner, "ompl_available", lambda: False)
+    with pytest.raises(OMPLUnavailableError, match="pip install"):
+        run_ompl("maze2d", [0])
+
+
+def test_runner_process_without_ompl_reports_unavailable(tmp_path):
+    """An interpreter where ``import ompl`` fails: the runner writes an error, exit code 3,
+    and run_ompl turns it into OMPLUnavailableError."""
+    shim = tmp_path / "shim"
+    shim.mkdir()
+    (shim / "ompl.py").write_text("raise ImportError('no ompl here')\n")
+    wrapper = tmp_path / "python_without_ompl"
+    wrapper.write_text(f"#!/bin/sh\nPYTHONPATH={shim}:$PYTHONPATH exec {sys.executable} \"$@\"\n")
+    wrapper.chmod(0o755)
+    out = tmp_path / "out.json"
+    proc = subprocess.run([str(wrapper), "-m", "gnn_mp_envs.baselines.ompl_runner", "--task", "maze2d",
+                           "--indices", "0", "--json", str(out)], capture_output=True, text=True)
+    assert proc.returncode == ompl_runner.EXIT_NO_OMPL
+    assert "no ompl here" in out.read_text()
+    with pytest.raises(OMPLUnavailableError, match="pip install"):
+        run_ompl("maze2d", [0], python=str(wrapper))
+
+
+def test_unknown_planner_is_refused():
+    with pytest.raises(ValueError, match="rrtconnect"):
+        run_ompl("maze2d", [0], planner="prm")
+
+
+def _results():
+    return {
+        "geometric_RRTConnect": [
+            {"solved": True, "status": "Exact solution", "time": 0.25, "collision_checks": 812, "nodes": 40,
+             "path_length": 3.5, "path_valid": True, "index": 0, "path": [[0.0, 1.0]]},
+            {"solved": False, "status": "Timeout", "time": 10.0, "collision_checks": 90000, "nodes": 5000,
+             "path_length": None, "path_valid": None, "index": 1},
+        ],
+        "birrt_uniform": [
+            {"solved": True, "time": 0.5, "collision_checks": 1500, "nodes": 120, "path_length": 4.0, "index": 0},
+        ],
+    }
+
+
+def test_write_ompl_log_structure(tmp_path):
+    path = write_ompl_log(tmp_path / "arm.log", "arm held-out", _results(), time_limit=10.0, seed=3,
+                          planner_settings={"geometric_RRTConnect": {"range": 0.4}}, setup="scene test")
+    lines = Path(path).read_text().splitlines()
+    assert lines[0].split()[1] == "version"
+    assert lines[1] == "Experiment arm held-out"
+    assert lines[2].startswith("Running on ")
+    assert lines[3].startswith("Starting at ")
+    assert lines[4:7] == ["<<<|", "scene test", "|>>>"]
+    assert "3 is the random seed" in lines
+    assert "10.0 seconds per run" in lines
+    assert "2 runs per planner" in lines
+    assert "status|" + "|".join(STATUS_NAMES) in lines
+    assert "2 planners" in lines
+    i = lines.index("geometric_RRTConnect")
+    assert lines[i + 1:i + 3] == ["1 common properties", "range = 0.4"]
+    n = int(lines[i + 3].split()[0])
+    props = lines[i + 4:i + 4 + n]
+    assert props == sorted(props)
+    assert "collision checks INTEGER" in props and "solution length REAL" in props
+    assert "solved BOOLEAN" in props and "status ENUM" in props and "time REAL" in props
+    assert lines[i + 4 + n] == "2 runs"
+    runs = lines[i + 5 + n:i + 7 + n]
+    assert all(r.endswith("; ") and r.count("; ") == n for r in runs)
+    assert lines[i + 7 + n] == "."
+    assert lines[-1] == "."
+
+
+def test_ompl_log_round_trip(tmp_path):
+    path = write_ompl_log(tmp_path / "x.log", "exp", _results(), time_limit=5.0)
+    log = read_ompl_log(path)
+    assert log["experiment"] == "exp" and log["time_limit"] == 5.0 and log["run_count"] == 2
+    rrtc = log["planners"]["geometric_RRTConnect"]
+    assert [r["solved"] for r in rrtc["runs"]] == [1.0, 0.0]
+    assert rrtc["runs"][0]["collision_checks"] == 812.0
+    assert rrtc["runs"][1]["solution_length"] is None  # missing -> NULL
+    assert rrtc["runs"][0]["status"] == STATUS_NAMES.index("Exact solution")
+    assert rrtc["runs"][1]["status"] == STATUS_NAMES.index("Timeout")
+    assert log["planners"]["birrt_uniform"]["runs"][0]["status"] == STATUS_NAMES.index("Exact solution")
+    assert "path" not in run_properties(_results()["geometric_RRTConnect"][0])
+
+
+def test_write_ompl_log_rejects_bad_names(tmp_path):
+    with pytest.raises(ValueError):
+        write_ompl_log(tmp_path / "x.log", "two\nlines", _results())
+    with pytest.raises(ValueError):
+        write_ompl_log(tmp_path / "x.log", "exp", {})
+
+
+# ---------------------------------------------------------------------- with OMPL
+@needs_ompl
+def test_rrtconnect_solves_maze2d_with_the_same_checker():
+    results = run_ompl("maze2d", "0-2", split="test", time_limit=5.0, seed=1)
+    assert [r["index"] for r in results] == [0, 1, 2]
+    for r in results:
+        assert r["solved"] and r["path_valid"]
+        assert r["collision_checks"] > 0 and r["nodes"] >= 2 and r["path_length"] > 0
+        assert r["planner"] == "geometric_RRTConnect" and r["status"] == "Exact solution"
+
+
+@needs_ompl
+def test_rrtconnect_solves_arm_with_the_same_checker():
+    results = run_ompl("arm", [0, 1], split="test", task_kwargs={"scene": "test"}, time_limit=10.0)
+    for r in results:
+        assert r["solved"] and r["path_valid"]
+        # Every edge goes through problem.check_motion: several checks per edge.
+        assert r["collision_checks"] > r["edges_checked"] > 0
+
+
+@needs_ompl
+def test_kinodynamic_task_is_refused_clearly():
+    with pytest.raises(ValueError, match="kinodynamic"):
+        run_ompl("pendulum", [0], time_limit=1.0)
