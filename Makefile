@@ -18,7 +18,7 @@ test: install
 	$(BIN)/python -m pytest -q
 
 benchmark: install
-	$(BIN)/gnn-mp benchmark
+	$(BIN)/gnn-mp benchmark --suite default --out results --workers 2
 
 clean:
 	rm -rf $(VENV) results

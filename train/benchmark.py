@@ -36,10 +36,12 @@ SUCCESS_ONLY_METRICS: frozenset[str] = frozenset({"path_length"})
 OMPL_PREFIX = "ompl-"
 #: OMPL planners each task can run (geometric tasks: RRTConnect; pendulum: control-based planners).
 OMPL_PLANNERS: dict[str, tuple[str, ...]] = {
-    "maze2d": ("rrtconnect",),
-    "arm": ("rrtconnect",),
+    "maze2d": ("rrtconnect", "rrt"),
+    "arm": ("rrtconnect", "rrt"),
     "pendulum": ("rrt", "kpiece"),
 }
+#: Scene benchmarked when --scene is not given: the arm's held-out scene family (train-a/-b are for training).
+DEFAULT_SCENES: dict[str, str] = {"arm": "test"}
 OMPL_INSTALL_HINT = "OMPL is not installed; install the optional extra with `pip install -e .[ompl]`"
 
 
@@ -101,8 +103,10 @@ def known_sampler_names(task: str) -> list[str]:
 
 
 def validate_args(args: BenchmarkArgs) -> None:
-    """Reject bad flags before any planning starts (one-line messages)."""
+    """Reject bad flags before any planning starts (one-line messages); fills in the default scene."""
     env_id_for(args.task)
+    if args.scene is None:
+        args.scene = DEFAULT_SCENES.get(args.task)
     if args.problems < 1:
         raise BenchmarkError(f"--problems must be >= 1, got {args.problems}")
     if args.seed < 0:
@@ -249,8 +253,8 @@ def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]
     success = bool(pick("solved", "success", "is_success"))
     return {
         "sampler": planner_row, "problem": int(index), "seed": seed, "success": success,
-        "nodes_expanded": as_int(pick("nodes_expanded", "graph_states", "vertices")),
-        "edges": as_int(pick("edges", "graph_motions")),
+        "nodes_expanded": as_int(pick("nodes_expanded", "nodes")),
+        "edges": as_int(pick("edges", "edges_checked")),
         "collision_checks": as_int(pick("collision_checks", "valid_segment_checks", "state_checks")),
         "iterations": as_int(pick("iterations")),
         "path_length": _finite_or_none(pick("path_length")) if success else None,
@@ -272,8 +276,8 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
                                        planner=planner, time_limit=args.ompl_time_limit, seed=args.seed)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
-    except (ValueError, NotImplementedError) as exc:
-        raise BenchmarkError(f"{planner_row}: {exc}") from None
+    except (ValueError, NotImplementedError, RuntimeError) as exc:
+        raise BenchmarkError(f"{planner_row} on {args.task}: {exc}".replace("\n", " ")) from None
     return [_ompl_record(planner_row, i, problem_seed(args.seed, i), r) for i, r in zip(indices, results)]
 
 
@@ -438,10 +442,28 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
         raise BenchmarkError(f"the OMPL log writer is not available in this checkout ({exc})") from None
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{args.task}.log"
-    results_by_planner = {name: report["runs"][name] for name in args.samplers}
-    write_ompl_log(path, f"gnn-mp {args.task} seed {args.seed}", results_by_planner,
-                   time_limit=args.ompl_time_limit)
+    results_by_planner = {name: [_as_ompl_run(r) for r in report["runs"][name]] for name in args.samplers}
+    total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
+    settings = {name: {"max_nodes": report["max_nodes"]} for name in args.samplers if not is_ompl(name)}
+    experiment = f"gnn-mp {report['env_id']}" + (f" scene {args.scene}" if args.scene else "")
+    write_ompl_log(path, experiment, results_by_planner, time_limit=args.ompl_time_limit, seed=args.seed,
+                   total_time=total_time, planner_settings=settings)
     return path
+
+
+def _as_ompl_run(record: dict[str, Any]) -> dict[str, Any]:
+    """A benchmark record in the OMPL runner's keys (which the log writer maps to OMPL property names)."""
+    run = dict(record.get("ompl", {}))   # OMPL rows: the runner's own fields (status, approximate, ...)
+    for key in ("task", "split", "index", "planner"):
+        run.pop(key, None)
+    run.update({
+        "solved": record["success"], "time": record["wall_time_s"], "path_length": record["path_length"],
+        "nodes": record["nodes_expanded"], "edges_checked": record["edges"],
+        "collision_checks": record["collision_checks"], "problem": record["problem"],
+    })
+    if record.get("iterations") is not None:
+        run["iterations"] = record["iterations"]
+    return run
 
 
 # ---------------------------------------------------------------------------- main loop
@@ -455,6 +477,12 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     learned = [(n, _checkpoint(args, n)) for n in args.samplers if not is_ompl(n)]
     _check_env_and_samplers(args.task, env_id, env_kwargs, learned)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in args.samplers}
+
+    for name in args.samplers:   # first: an unsupported OMPL combination fails before the long part
+        if is_ompl(name):
+            if args.progress:
+                print(f"{name}: {len(indices)} problems through the OMPL runner ...", file=sys.stderr)
+            runs[name] = run_ompl_rows(args, name, indices)
 
     jobs = [(args.task, env_id, env_kwargs, name, i, args.seed, checkpoint)
             for name, checkpoint in learned for i in indices]
@@ -475,11 +503,6 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
                 bar.update(1)
     bar.close()
 
-    for name in args.samplers:
-        if is_ompl(name):
-            if args.progress:
-                print(f"{name}: {len(indices)} problems through the OMPL runner ...", file=sys.stderr)
-            runs[name] = run_ompl_rows(args, name, indices)
     for name in runs:
         runs[name].sort(key=lambda r: r["problem"])
     return build_report(args, runs)
@@ -550,17 +573,25 @@ class SuiteEntry:
     optional: bool = False   # skipped (with a note) when the task cannot be built
 
 
+#: OMPL rows added to a suite when OMPL is installed (the runner plans geometric tasks only so far).
+SUITE_OMPL_PLANNERS: dict[str, tuple[str, ...]] = {"maze2d": ("rrt", "rrtconnect"), "arm": ("rrtconnect",)}
+
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores.
 SUITES: dict[str, list[SuiteEntry]] = {
     "default": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=30),
         SuiteEntry("pendulum", ["uniform", "goal-bias"], problems=30),
-        SuiteEntry("arm", ["uniform", "goal-bias"], problems=10, scene="test", optional=True),
+        SuiteEntry("arm", ["uniform", "goal-bias"], problems=20, scene="test", optional=True),
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
     ],
 }
+
+
+def _ompl_log_writer_available() -> bool:
+    import importlib.util
+    return importlib.util.find_spec("gnn_mp_envs.baselines.ompl_log") is not None
 
 
 def _task_available(task: str, scene: str | None) -> str | None:
@@ -594,12 +625,13 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
                 continue
         samplers = list(entry.samplers)
         if with_ompl:
-            samplers += [OMPL_PREFIX + p for p in OMPL_PLANNERS.get(entry.task, ())]
+            samplers += [OMPL_PREFIX + p for p in SUITE_OMPL_PLANNERS.get(entry.task, ())]
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers,
                              json=out / f"{entry.task}.json", plot=out / f"{entry.task}.png",
                              render=out / "renders" if render else None,
-                             ompl_log=out / "ompl" if with_ompl else None, progress=progress)
+                             ompl_log=out / "ompl" if with_ompl and _ompl_log_writer_available() else None,
+                             progress=progress)
         task_start = time.perf_counter()
         report = benchmark(args)
         elapsed = time.perf_counter() - task_start
