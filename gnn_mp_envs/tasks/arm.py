@@ -24,11 +24,12 @@ segment from start to goal is collision-free is rejected and redrawn.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import InvalidProblemError, Problem
+from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
 from gnn_mp_envs.tasks.arm_scenes import (SCENE_FAMILIES, TABLE_EXTENT, TABLE_THICKNESS,
                                           EndEffectorTarget, Obstacle, Scene, sample_scene,
                                           start_target)
@@ -124,6 +125,9 @@ class ArmWorld:
         for link in (-1, 0):
             p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
         self._joints = list(JOINTS)
+        self._reset = p.resetJointStatesMultiDof
+        self._detect = p.performCollisionDetection
+        self._contacts = p.getContactPoints
         self._active: list[tuple[tuple, int]] = []
         self._pool: dict[tuple, list[int]] = {}
         self._pooled = 0
@@ -190,12 +194,13 @@ class ArmWorld:
         self.p.resetJointStatesMultiDof(self.robot, self._joints, [[v] for v in np.asarray(q).tolist()],
                                         physicsClientId=self.client)
 
-    def collides(self, q: np.ndarray) -> bool:
-        """True when configuration ``q`` touches the table, an obstacle or itself."""
-        p, cid, robot = self.p, self.client, self.robot
-        p.resetJointStatesMultiDof(robot, self._joints, [[v] for v in q.tolist()], physicsClientId=cid)
-        p.performCollisionDetection(physicsClientId=cid)
-        for cp in p.getContactPoints(bodyA=robot, physicsClientId=cid):
+    def collides(self, q: np.ndarray | list[float]) -> bool:
+        """True when configuration ``q`` (six joint angles) touches the table, an obstacle
+        or itself. The hot path of the task: one call per collision check."""
+        cid, robot = self.client, self.robot
+        self._reset(robot, self._joints, [[v] for v in q], physicsClientId=cid)
+        self._detect(physicsClientId=cid)
+        for cp in self._contacts(bodyA=robot, physicsClientId=cid):
             if cp[8] <= CONTACT_DISTANCE:
                 return True
         return False
@@ -283,6 +288,11 @@ class ArmProblem(Problem):
                          resolution=resolution)
         self.world = world
         self.scene = scene
+        # NaN fails both comparisons, so these bounds tests also reject non-finite states.
+        self._low = self.low - 1e-12
+        self._high = self.high + 1e-12
+        self._low_tol = self._low.tolist()
+        self._high_tol = self._high.tolist()
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
@@ -293,29 +303,65 @@ class ArmProblem(Problem):
         ok = self._in_bounds(s)
         self.world.load(self.scene)
         collides = self.world.collides
-        for i in np.flatnonzero(ok):
-            if collides(s[i]):
+        rows = s.tolist()
+        for i in np.flatnonzero(ok).tolist():
+            if collides(rows[i]):
                 ok[i] = False
         return ok
 
     def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Sequential check at ``resolution`` (``b`` included) that stops at the first
-        invalid configuration; counts exactly as :meth:`Problem.check_motion`."""
+        invalid configuration; counts exactly as :meth:`Problem.check_motion`.
+
+        Plain Python floats: for the ~8 states of an edge this is faster than numpy, and
+        ``a + (k / n) * (b - a)`` gives the same states as the base class.
+        """
         self.edges_checked += 1
-        d = b - a
-        n = max(1, int(np.ceil(float(np.sqrt(d @ d)) / self.resolution)))
-        states = a + (np.arange(1, n + 1) / n)[:, None] * d
-        in_bounds = self._in_bounds(states)
+        al, bl = a.tolist(), b.tolist()
+        dl = [y - x for x, y in zip(al, bl)]
+        n = max(1, math.ceil(math.sqrt(sum(v * v for v in dl)) / self.resolution))
+        lo, hi = self._low_tol, self._high_tol
+        limit = n
+        if not all(l <= v <= h for v, l, h in zip(bl, lo, hi)):
+            # a is valid and the box convex: the states leave it once, somewhere before b.
+            limit = next(k for k in range(1, n + 1)
+                         if not all(l <= x + (k / n) * v <= h for x, v, l, h in zip(al, dl, lo, hi))) - 1
         self.world.load(self.scene)
         collides = self.world.collides
-        for k in range(n):
+        for k in range(1, n + 1):
             self.collision_checks += 1
-            if not in_bounds[k] or collides(states[k]):
+            t = k / n
+            if k > limit or collides([x + t * v for x, v in zip(al, dl)]):
                 return False
         return True
 
+    def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
+        d = states - x  # plain joint-space L2 (no angle wrapping: the box is one turn per joint)
+        return np.sqrt(np.einsum("...i,...i->...", d, d))
+
+    def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
+        """:meth:`Problem.steer` without the generic vectorised helpers (same result)."""
+        d = x_to - x_from
+        dist = math.sqrt(float(d @ d))
+        if dist < 1e-12:
+            return None
+        if dist <= self.step_size:
+            x_new = np.array(x_to, dtype=np.float64)
+        else:
+            x_new = x_from + (self.step_size / dist) * d
+        if not self.check_motion(x_from, x_new):
+            return None
+        return Edge(x_new, min(dist, self.step_size))
+
+    def goal_connection(self, x: np.ndarray) -> Edge | None:
+        d = self.goal - x
+        dist = math.sqrt(float(d @ d))
+        if dist > self.step_size or not self.check_motion(x, self.goal):
+            return None
+        return Edge(self.goal.copy(), dist)
+
     def _in_bounds(self, s: np.ndarray) -> np.ndarray:
-        return np.all((s >= self.low - 1e-12) & (s <= self.high + 1e-12), axis=1) & np.isfinite(s).all(axis=1)
+        return np.all((s >= self._low) & (s <= self._high), axis=-1)
 
     def straight_line_free(self) -> bool:
         """Uncounted: is the straight joint-space segment start -> goal collision-free?"""

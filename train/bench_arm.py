@@ -1,0 +1,226 @@
+"""Arm benchmark: checker speed, env overhead, and uniform BiRRT vs OMPL RRTConnect.
+
+Run: ``python -m train.bench_arm`` (``--help`` for options). It reports
+
+1. raw collision checks per second of the checker alone (``ArmWorld.collides`` on
+   uniformly drawn configurations in held-out scenes);
+2. ``env.step`` calls per second of ``GNNMP/ArmBiRRT-v0`` driven by uniform samples, and
+   the fraction of step time that is environment overhead, i.e. not spent inside the
+   collision checks the step makes (measured by timing every ``collides`` call);
+3. uniform-sampler BiRRT on the first ``--problems`` held-out problems of the ``test``
+   scene family (split ``test``) within ``--max-nodes`` nodes: solve rate, median
+   collision checks, median planning time (sum of step times), median nodes;
+4. the same for OMPL's RRTConnect on the same problems with the same checker, via
+   :func:`gnn_mp_envs.baselines.ompl_runner.run_ompl` (skipped when OMPL is missing).
+
+``--json`` saves every number and per-problem record; ``--ompl-log`` writes both
+planners' runs as an OMPL benchmark log for ``ompl_benchmark_statistics.py``/Planner Arena.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+import gnn_mp_envs  # noqa: F401  (registers the environments)
+from gnn_mp_envs.tasks.arm import ArmTask
+
+ENV_ID = "GNNMP/ArmBiRRT-v0"
+
+
+def raw_checks_per_second(scene: str, num_checks: int, num_scenes: int = 5, seed: int = 0) -> dict[str, float]:
+    """Checks/s of ``ArmWorld.collides`` alone on uniform configurations in ``num_scenes`` scenes."""
+    task = ArmTask(scene)
+    try:
+        low, high = task.state_bounds()
+        rng = np.random.default_rng(seed)
+        total, elapsed, hits = 0, 0.0, 0
+        per_scene = max(1, num_checks // num_scenes)
+        for i in range(num_scenes):
+            problem = task.problem("test", i)
+            task.world.load(problem.scene)
+            qs = rng.uniform(low, high, (per_scene, len(low)))
+            collides = task.world.collides
+            t0 = time.perf_counter()
+            for q in qs:
+                hits += collides(q)
+            elapsed += time.perf_counter() - t0
+            total += per_scene
+        return {"checks_per_second": total / elapsed, "us_per_check": 1e6 * elapsed / total,
+                "collision_fraction": hits / total, "checks": total}
+    finally:
+        task.close()
+
+
+class _CheckTimer:
+    """Wraps ``ArmWorld.collides`` to accumulate the time spent inside collision checks."""
+
+    def __init__(self, world: Any) -> None:
+        self.world = world
+        self.inner = world.collides
+        self.seconds = 0.0
+        self.calls = 0
+        world.collides = self
+
+    def __call__(self, q: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        out = self.inner(q)
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        return out
+
+    def restore(self) -> None:
+        self.world.collides = self.inner
+
+
+def uniform_birrt(scene: str, split: str, problems: int, max_nodes: int, seed: int,
+                  copy_observations: bool = True) -> dict[str, Any]:
+    """Uniform-sample BiRRT through the env on problems ``0..problems-1`` of ``split``."""
+    env = gym.make(ENV_ID, max_nodes=max_nodes, split=split, task_kwargs={"scene": scene},
+                   copy_observations=copy_observations)
+    base = env.unwrapped
+    timer = _CheckTimer(base.task.world)
+    records = []
+    try:
+        low, high = env.action_space.low, env.action_space.high
+        for i in tqdm(range(problems), desc=f"uniform BiRRT ({scene})", leave=False):
+            env.reset(options={"index": i})
+            rng = np.random.default_rng([seed, i])
+            actions = rng.uniform(low, high, (base.max_steps, len(low))).astype(np.float32)
+            check_s0, calls0 = timer.seconds, timer.calls
+            step_time, steps, info = 0.0, 0, {}
+            for a in actions:
+                t0 = time.perf_counter()
+                _, _, terminated, truncated, info = env.step(a)
+                step_time += time.perf_counter() - t0
+                steps += 1
+                if terminated or truncated:
+                    break
+            records.append({"index": i, "solved": bool(info["is_success"]), "time": step_time, "steps": steps,
+                            "collision_checks": int(info["collision_checks"]), "nodes": int(info["nodes_expanded"]),
+                            "path_length": float(info["path_length"]) if info["is_success"] else None,
+                            "check_time": timer.seconds - check_s0, "check_calls": timer.calls - calls0})
+    finally:
+        timer.restore()
+        env.close()
+    return _summary(records)
+
+
+def _summary(records: list[dict[str, Any]]) -> dict[str, Any]:
+    solved = [r for r in records if r["solved"]]
+    out: dict[str, Any] = {"problems": len(records), "solve_rate": len(solved) / max(1, len(records)),
+                           "records": records}
+    for key in ("collision_checks", "time", "nodes"):
+        vals = [r[key] for r in records if r.get(key) is not None]
+        out[f"median_{key}"] = float(np.median(vals)) if vals else float("nan")
+        svals = [r[key] for r in solved if r.get(key) is not None]
+        out[f"median_{key}_solved"] = float(np.median(svals)) if svals else float("nan")
+    if records and "steps" in records[0]:
+        steps = sum(r["steps"] for r in records)
+        step_time = sum(r["time"] for r in records)
+        check_time = sum(r["check_time"] for r in records)
+        out["steps_per_second"] = steps / step_time
+        out["checks_per_second_in_env"] = sum(r["check_calls"] for r in records) / max(check_time, 1e-12)
+        out["overhead_fraction"] = 1.0 - check_time / step_time
+    return out
+
+
+def step_throughput(scene: str, window: int, seed: int, copy_observations: bool) -> dict[str, float]:
+    """Steps/s and overhead over ``window`` uniform steps on held-out problems, the goal test
+    kept on (episodes restart on the next problem when they end)."""
+    env = gym.make(ENV_ID, max_nodes=20000, split="test", task_kwargs={"scene": scene},
+                   copy_observations=copy_observations)
+    base = env.unwrapped
+    timer = _CheckTimer(base.task.world)
+    try:
+        rng = np.random.default_rng(seed)
+        low, high = env.action_space.low, env.action_space.high
+        actions = rng.uniform(low, high, (window, len(low))).astype(np.float32)
+        index = 0
+        env.reset(options={"index": index})
+        step_time = 0.0
+        for a in tqdm(actions, desc="env steps", leave=False):
+            t0 = time.perf_counter()
+            _, _, terminated, truncated, _ = env.step(a)
+            step_time += time.perf_counter() - t0
+            if terminated or truncated:
+                index += 1
+                env.reset(options={"index": index})
+        return {"steps_per_second": window / step_time, "overhead_fraction": 1.0 - timer.seconds / step_time,
+                "checks_per_step": timer.calls / window, "us_per_step": 1e6 * step_time / window}
+    finally:
+        timer.restore()
+        env.close()
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default="test", help="scene family (held out: test)")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--problems", type=int, default=50)
+    ap.add_argument("--max-nodes", type=int, default=20000)
+    ap.add_argument("--raw-checks", type=int, default=20000, help="configurations for the raw checker rate")
+    ap.add_argument("--window", type=int, default=3000, help="env steps for the throughput measurement")
+    ap.add_argument("--time-limit", type=float, default=10.0, help="OMPL time limit per problem (s)")
+    ap.add_argument("--no-ompl", action="store_true", help="skip OMPL RRTConnect")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default=None, help="write all figures and records here")
+    ap.add_argument("--ompl-log", default=None, help="write both planners' runs as an OMPL benchmark log")
+    args = ap.parse_args(argv)
+
+    report: dict[str, Any] = {"scene": args.scene, "split": args.split, "max_nodes": args.max_nodes}
+    raw = raw_checks_per_second(args.scene, args.raw_checks, seed=args.seed)
+    report["raw_checker"] = raw
+    print(f"checker alone: {raw['checks_per_second']:,.0f} checks/s ({raw['us_per_check']:.1f} us/check, "
+          f"{100 * raw['collision_fraction']:.0f}% of uniform configurations in collision)")
+    for copy in (True, False):
+        thr = step_throughput(args.scene, args.window, args.seed, copy)
+        report[f"throughput_copy_{copy}"] = thr
+        print(f"env steps (copy_observations={copy}): {thr['steps_per_second']:,.0f} steps/s, "
+              f"{thr['checks_per_step']:.1f} checks/step, overhead {100 * thr['overhead_fraction']:.1f}% of step time")
+
+    uni = uniform_birrt(args.scene, args.split, args.problems, args.max_nodes, args.seed)
+    report["uniform_birrt"] = uni
+    print(f"uniform BiRRT, {args.problems} held-out '{args.scene}' problems, <= {args.max_nodes} nodes: "
+          f"solved {100 * uni['solve_rate']:.0f}%, median checks {uni['median_collision_checks']:,.0f}, "
+          f"median time {uni['median_time']:.3f} s, median nodes {uni['median_nodes']:.0f}; "
+          f"{uni['steps_per_second']:,.0f} steps/s, overhead {100 * uni['overhead_fraction']:.1f}%")
+
+    ompl_results = None
+    if not args.no_ompl:
+        from gnn_mp_envs.baselines.ompl_runner import OMPLUnavailableError, run_ompl
+        try:
+            ompl_results = run_ompl("arm", list(range(args.problems)), split=args.split,
+                                    task_kwargs={"scene": args.scene}, planner="rrtconnect",
+                                    time_limit=args.time_limit, seed=args.seed)
+        except OMPLUnavailableError as e:
+            print(f"OMPL RRTConnect skipped: {e}")
+    if ompl_results is not None:
+        om = _summary(ompl_results)
+        report["ompl_rrtconnect"] = om
+        print(f"OMPL RRTConnect, same problems, {args.time_limit:g} s limit: solved {100 * om['solve_rate']:.0f}%, "
+              f"median checks {om['median_collision_checks']:,.0f}, median time {om['median_time']:.3f} s, "
+              f"median nodes {om['median_nodes']:.0f}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(report, f, indent=1, default=float)
+    if args.ompl_log:
+        from gnn_mp_envs.baselines.ompl_log import write_ompl_log
+        runs = {"birrt_uniform": [dict(r, status="Exact solution" if r["solved"] else "Timeout")
+                                  for r in uni["records"]]}
+        if ompl_results is not None:
+            runs["geometric_RRTConnect"] = ompl_results
+        write_ompl_log(args.ompl_log, f"arm {args.scene} {args.split}", runs, time_limit=args.time_limit,
+                       seed=args.seed, setup=f"task=arm scene={args.scene} split={args.split} "
+                       f"problems=0..{args.problems - 1} max_nodes={args.max_nodes}")
+    return report
+
+
+if __name__ == "__main__":
+    main()
