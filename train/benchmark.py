@@ -66,6 +66,7 @@ class BenchmarkArgs:
     ompl_log: Path | None = None
     ompl_time_limit: float = 10.0
     checkpoints: dict[str, Path] = field(default_factory=dict)   # sampler name -> checkpoint file
+    sampler_modules: list[str] = field(default_factory=list)     # imported first: they register samplers
     progress: bool = True
 
 
@@ -102,9 +103,20 @@ def known_sampler_names(task: str) -> list[str]:
     return available_samplers() + [OMPL_PREFIX + p for p in OMPL_PLANNERS.get(task, ())]
 
 
+def import_sampler_modules(modules: list[str]) -> None:
+    """Import modules that call ``register_sampler`` (in the main process and in every worker)."""
+    import importlib
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise BenchmarkError(f"cannot import sampler module {module!r}: {exc}") from None
+
+
 def validate_args(args: BenchmarkArgs) -> None:
     """Reject bad flags before any planning starts (one-line messages); fills in the default scene."""
     env_id_for(args.task)
+    import_sampler_modules(args.sampler_modules)
     if args.scene is None:
         args.scene = DEFAULT_SCENES.get(args.task)
     if args.problems < 1:
@@ -230,9 +242,11 @@ def _run_episode_job(job: tuple) -> dict[str, Any]:
 
 
 def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
-                    samplers: list[tuple[str, str | None]]) -> None:
-    """Worker initializer: build the env and samplers and run one inference each, so that lazy
-    imports and first-call costs stay out of the measured wall time (as in a serial run)."""
+                    samplers: list[tuple[str, str | None]], sampler_modules: list[str]) -> None:
+    """Worker initializer: register plugin samplers, build the env and samplers and run one
+    inference each, so that lazy imports and first-call costs stay out of the measured wall
+    time (as in a serial run)."""
+    import_sampler_modules(sampler_modules)
     env = _cached_env(env_id, env_kwargs)
     obs, _ = env.reset(seed=0, options={"index": 0})
     for name, checkpoint in samplers:
@@ -495,7 +509,7 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     else:
         context = multiprocessing.get_context("spawn")   # torch + fork can deadlock
         with ProcessPoolExecutor(max_workers=args.workers, mp_context=context, initializer=_warm_up_worker,
-                                 initargs=(args.task, env_id, env_kwargs, learned)) as pool:
+                                 initargs=(args.task, env_id, env_kwargs, learned, args.sampler_modules)) as pool:
             futures = [pool.submit(_run_episode_job, job) for job in jobs]
             for future in as_completed(futures):
                 record = future.result()

@@ -128,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="seconds per problem for OMPL rows")
     bench.add_argument("--checkpoint", action="append", type=checkpoint_pair, default=[],
                        metavar="SAMPLER=PATH", help="checkpoint of a learned sampler (repeatable)")
+    bench.add_argument("--sampler-module", action="append", default=[], metavar="MODULE",
+                       help="import MODULE first (it calls register_sampler); repeatable")
     bench.add_argument("--suite", default=None, help="run a named suite instead (e.g. default, smoke); "
                        "writes <task>.json/.png/.txt and summary.md to --out")
     bench.add_argument("--out", type=Path, default=Path("results"), help="output directory of --suite")
@@ -172,6 +174,7 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
                                 max_nodes=ns.max_nodes, scene=ns.scene, workers=ns.workers, json=ns.json,
                                 plot=ns.plot, render=ns.render, ompl_log=ns.ompl_log,
                                 ompl_time_limit=ns.ompl_time_limit, checkpoints=dict(ns.checkpoint),
+                                sampler_modules=ns.sampler_module,
                                 progress=progress)
         bm.benchmark(args)
     except bm.BenchmarkError as exc:
