@@ -98,3 +98,20 @@ def test_bad_input_in_process(args: list[str], fragments: list[str], capsys):
     assert code not in (0, None)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and all(f in err[0] for f in fragments), err
+
+
+def test_environment_docs_cover_every_id_and_info_key():
+    """docs/environments.md stays consistent with the registration table and the env's info."""
+    import gymnasium as gym
+
+    from gnn_mp_envs.registration import ENVIRONMENTS
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "environments.md").read_text()
+    for env_id in ENVIRONMENTS:
+        assert f"`{env_id}`" in text, env_id
+    env = gym.make("GNNMP/Maze2DRRT-v0", split="test", max_nodes=50)
+    _, info = env.reset(options={"index": 0})
+    for key in [*info, "path", "path_controls"]:
+        assert f"`{key}`" in text, key
+    for key in env.observation_space.spaces:
+        assert f"`{key}`" in text, key

@@ -347,9 +347,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
 def _fmt(x: float | None, digits: int) -> str:
     if x is None:
         return "-"
-    if digits == 0:
-        return f"{x:.0f}"
-    return f"{x:.{digits}g}" if abs(x) < 1 else f"{x:.{digits}f}"
+    return f"{x:.{digits}f}"
 
 
 def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -> str:
