@@ -75,7 +75,7 @@ def test_spaces_are_the_joint_limits():
         np.testing.assert_allclose(env.action_space.low, JOINT_LOW.astype(np.float32))
         np.testing.assert_allclose(env.action_space.high, JOINT_HIGH.astype(np.float32))
         assert env.unwrapped.max_nodes == 200
-        assert gym.spec(ENV_ID).kwargs["max_nodes"] == 20000
+        assert gym.spec(ENV_ID).kwargs["max_nodes"] == 5000
     finally:
         env.close()
 

@@ -454,7 +454,7 @@ class ArmTask(Task):
 
     name = "arm"
     planners = ("birrt", "rrt")
-    default_max_nodes = 20000
+    default_max_nodes = 5000
 
     def __init__(self, scene: str = "train-a", step_size: float = STEP_SIZE,
                  resolution: float = RESOLUTION, require_blocked: bool = True,
