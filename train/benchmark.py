@@ -148,8 +148,25 @@ def validate_args(args: BenchmarkArgs) -> None:
             raise BenchmarkError(f"missing checkpoint for sampler {name!r}: {path} is not a file")
         if not os.access(path, os.R_OK):
             raise BenchmarkError(f"checkpoint of sampler {name!r} is not readable: {path}")
+    for flag, path, is_dir in (("--json", args.json, False), ("--plot", args.plot, False),
+                               ("--render", args.render, True), ("--ompl-log", args.ompl_log, True)):
+        if path is not None:
+            check_output_path(flag, Path(path), is_dir)
     if any(is_ompl(n) for n in args.samplers):
         check_ompl()
+
+
+def check_output_path(flag: str, path: Path, is_dir: bool) -> None:
+    """Fail before planning when an output cannot be written (wrong kind, parent is a file, no access)."""
+    if path.exists() and path.is_dir() != is_dir:
+        raise BenchmarkError(f"{flag} {path}: expected a {'directory' if is_dir else 'file'}")
+    parent = path if (is_dir and path.exists()) else path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise BenchmarkError(f"{flag} {path}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK):
+        raise BenchmarkError(f"{flag} {path}: {parent} is not writable")
 
 
 def check_ompl() -> None:
@@ -211,9 +228,9 @@ def run_episode(task: str, env_id: str, env_kwargs: dict[str, Any], sampler_name
     sample_seed = problem_seed(seed, index)
     snapshots: list[tuple[int, int, np.ndarray]] = []
 
-    start_time = time.perf_counter()
     sampler.reset(sample_seed)
     obs, info = env.reset(seed=sample_seed, options={"index": index})
+    start_time = time.perf_counter()   # planning only: problem generation (reset) is not timed
     done = False
     while not done:
         obs, _, terminated, truncated, info = env.step(sampler.act(obs))
@@ -292,7 +309,8 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
     except (ValueError, NotImplementedError, RuntimeError) as exc:
         raise BenchmarkError(f"{planner_row} on {args.task}: {exc}".replace("\n", " ")) from None
-    return [_ompl_record(planner_row, i, problem_seed(args.seed, i), r) for i, r in zip(indices, results)]
+    # OMPL's RNG is seeded once per runner call (with --seed + 1), so the run's seed is --seed.
+    return [_ompl_record(planner_row, i, args.seed, r) for i, r in zip(indices, results)]
 
 
 def ompl_available() -> bool:
@@ -372,7 +390,8 @@ def format_table(report: dict[str, Any]) -> str:
     title = (f"{report['task']} ({report['env_id']}, max_nodes={report['max_nodes']}"
              + (f", scene={report['scene']}" if report.get("scene") else "")
              + f"): {report['problems']} held-out problems, seed {report['seed']}")
-    note = "median [q25, q75]; *path length over successful runs only; wall time includes sampler inference"
+    note = ("median [q25, q75]; *path length over successful runs only; "
+            "wall time = planning loop incl. sampler inference (OMPL: solve time)")
     return "\n".join([title, *lines, note])
 
 

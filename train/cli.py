@@ -228,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return fail(str(exc))
     except KeyboardInterrupt:
         return fail("interrupted", 130)
-    except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+    except OSError as exc:   # unreadable / unwritable files from any subcommand
         return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
 
 
