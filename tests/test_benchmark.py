@@ -65,7 +65,7 @@ def test_ompl_rows_fail_early_with_an_install_hint(monkeypatch):
 
 def test_ompl_record_maps_runner_counters():
     record = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": True, "collision_checks": 120, "time": 0.02,
-                                                         "path_length": 1.5, "nodes_expanded": 40})
+                                                         "path_length": 1.5, "nodes": 40})
     assert record["success"] and record["collision_checks"] == 120 and record["wall_time_s"] == 0.02
     assert record["nodes_expanded"] == 40 and record["edges"] is None
     failed = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": False, "path_length": float("inf")})
@@ -90,3 +90,12 @@ def test_ompl_log_of_our_samplers(tmp_path):
     report = bm.run_benchmark(args)
     text = bm.write_ompl_logs(args, report, tmp_path).read_text()
     assert "\nuniform\n" in text and "2 runs" in text and "collision checks INTEGER" in text
+
+
+@pytest.mark.skipif(not bm.ompl_available(), reason="OMPL (optional extra) not installed")
+def test_ompl_rows_run_the_same_problems():
+    report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "ompl-rrtconnect"]))
+    runs = report["runs"]["ompl-rrtconnect"]
+    assert [r["problem"] for r in runs] == [0, 1]
+    assert all(r["success"] and r["collision_checks"] > 0 and r["nodes_expanded"] > 0 for r in runs)
+    assert report["results"]["ompl-rrtconnect"]["success_rate"] == 1.0

@@ -271,26 +271,20 @@ def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
 
 
 def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]) -> dict[str, Any]:
-    """Map one result of the OMPL runner onto the benchmark's record."""
-    def pick(*keys):
-        for k in keys:
-            if result.get(k) is not None:
-                return result[k]
-        return None
-
-    def as_int(x):
+    """Map one result of the OMPL runner (see ``ompl_runner.solve_problem``) onto a benchmark record."""
+    def as_int(x: Any) -> int | None:
         return None if x is None else int(x)
 
-    success = bool(pick("solved", "success", "is_success"))
+    success = bool(result.get("solved"))
     return {
         "sampler": planner_row, "problem": int(index), "seed": seed, "success": success,
-        "nodes_expanded": as_int(pick("nodes_expanded", "nodes")),
-        "edges": as_int(pick("edges", "edges_checked")),
-        "collision_checks": as_int(pick("collision_checks", "valid_segment_checks", "state_checks")),
-        "iterations": as_int(pick("iterations")),
-        "path_length": _finite_or_none(pick("path_length")) if success else None,
-        "wall_time_s": _finite_or_none(pick("time", "wall_time_s")),
-        "ompl": {k: v for k, v in result.items() if k != "path" and isinstance(v, (int, float, str, bool))},
+        "nodes_expanded": as_int(result.get("nodes")),            # OMPL planner-data vertices
+        "edges": as_int(result.get("edges_checked")),
+        "collision_checks": as_int(result.get("collision_checks")),
+        "iterations": None,
+        "path_length": _finite_or_none(result.get("path_length")) if success else None,
+        "wall_time_s": _finite_or_none(result.get("time")),       # OMPL's solve() time
+        "ompl": {k: v for k, v in result.items() if isinstance(v, (int, float, str, bool))},
     }
 
 
