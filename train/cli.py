@@ -198,8 +198,14 @@ def load_module_main(module: str) -> Callable[[list[str]], int | None]:
     return main_fn
 
 
-def run_passthrough(module: str, argv: list[str]) -> int:
-    code = load_module_main(module)(argv)
+def run_passthrough(module: str, argv: list[str], prog: str) -> int:
+    """Call ``module.main(argv)``; its argparse usage lines read ``prog`` (e.g. ``gnn-mp bench-env``)."""
+    main_fn = load_module_main(module)
+    saved_argv0, sys.argv[0] = sys.argv[0], prog
+    try:
+        code = main_fn(argv)
+    finally:
+        sys.argv[0] = saved_argv0
     return int(code or 0)
 
 
@@ -207,13 +213,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if argv and argv[0] in PASSTHROUGH:
-            return run_passthrough(PASSTHROUGH[argv[0]][0], argv[1:])
+            return run_passthrough(PASSTHROUGH[argv[0]][0], argv[1:], f"{PROG} {argv[0]}")
         if argv and argv[0] == "train":
             if len(argv) < 2 or argv[1] not in TRAIN_TARGETS:
                 got = repr(argv[1]) if len(argv) > 1 else "nothing"
                 return fail(f"train: expected one of {', '.join(sorted(TRAIN_TARGETS))}, got {got}")
             module, prefix = TRAIN_TARGETS[argv[1]]
-            return run_passthrough(module, prefix + argv[2:])
+            return run_passthrough(module, prefix + argv[2:], PROG)
         parser = build_parser()
         ns = parser.parse_args(argv)
         if ns.command is None:
