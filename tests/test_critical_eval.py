@@ -1,0 +1,65 @@
+"""Shipped critical-sample checkpoints load and evaluate; planning returns valid paths."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from gnn_mp_envs.critical.dataset import DatasetConfig, generate_eval
+from gnn_mp_envs.critical.halton import halton_graph
+from gnn_mp_envs.critical.planning import compare_planners, path_is_valid, summarize
+from train.critical import CHECKPOINT_DIR, MODELS, evaluate, load_checkpoint, predict
+
+torch.set_num_threads(2)
+TINY = DatasetConfig(seed=5, num_maps=2, pairs_per_map=1, eval_problems=3)
+
+
+@pytest.fixture(scope="module")
+def tiny_blob_set():
+    return generate_eval(TINY, "blob", progress=False)
+
+
+def test_planning_comparison_returns_valid_paths(tiny_blob_set):
+    probs = tiny_blob_set
+    g = halton_graph()
+    results = []
+    for i in range(len(probs)):
+        labels = g.nodes[probs.labels_of(i)]
+        res = compare_planners(probs.maze(i), probs.start[i], probs.goal[i], {"oracle": labels})
+        assert res["dense"].success  # labels came from a dense-graph path
+        for r in res.values():
+            if r.success:
+                assert path_is_valid(probs.maze(i), r.path)
+                assert np.allclose(r.path[0], probs.start[i]) and np.allclose(r.path[-1], probs.goal[i])
+                assert r.cost >= np.linalg.norm(probs.goal[i] - probs.start[i]) - 1e-9
+        results.append(res)
+    summary = summarize(results)
+    assert summary["dense"]["success_rate"] == 1.0
+    assert set(summary) == {"sparse", "dense", "oracle", "_common"}
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_shipped_checkpoint_predicts(name, tiny_blob_set):
+    path = CHECKPOINT_DIR / f"critical_{name}.pt"
+    if not path.exists():
+        pytest.skip(f"no shipped checkpoint {path}")
+    model, loaded, meta = load_checkpoint(path)
+    assert loaded == name and meta["model"] == name
+    point, samples = predict(model, name, tiny_blob_set, halton_graph(), num_samples=4)
+    assert point.shape == (len(tiny_blob_set), 2) and np.isfinite(point).all()
+    assert (samples is None) == (MODELS[name][2] == "det")
+    assert path.stat().st_size < 3_000_000
+
+
+def test_evaluate_end_to_end_on_a_few_problems(tmp_path):
+    if not (CHECKPOINT_DIR / "critical_gnn.pt").exists():
+        pytest.skip("no shipped checkpoints")
+    rep = evaluate(models=["gnn", "gnn-cvae"], data_dir=tmp_path, num_problems=2, num_samples=4,
+                   plan_samples=4, json_path=tmp_path / "r.json", plot_path=tmp_path / "p.png",
+                   dataset=TINY, progress=False)
+    assert (tmp_path / "r.json").exists() and (tmp_path / "p.png").stat().st_size > 1000
+    assert set(rep["accuracy"]) >= {"gnn", "gnn-cvae"}
+    assert "blob_best_of_4" in rep["accuracy"]["gnn-cvae"]
+    assert rep["planning"]["test"]["dense"]["success_rate"] == 1.0
+    assert {"sparse", "sparse+gnn", "sparse+gnn-cvae"} <= set(rep["planning"]["blob"])
