@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gnn_mp_envs.baselines import ompl_runner
@@ -141,6 +142,64 @@ def test_rrtconnect_solves_arm_with_the_same_checker():
 
 
 @needs_ompl
-def test_kinodynamic_task_is_refused_clearly():
+def test_planner_that_does_not_fit_the_task_is_refused_clearly():
     with pytest.raises(ValueError, match="kinodynamic"):
-        run_ompl("pendulum", [0], time_limit=1.0)
+        run_ompl("pendulum", [0], planner="rrtconnect", time_limit=1.0)
+    with pytest.raises(ValueError, match="geometric"):
+        run_ompl("maze2d", [0], planner="kpiece", time_limit=1.0)
+
+
+PENDULUM_KEYS = {"planner", "status", "solved", "approximate", "collision_checks", "edges_checked", "time",
+                 "plan_time", "path_length", "path_states", "nodes", "goal_reached", "path_valid",
+                 "propagation_steps", "task", "split", "index"}
+
+
+@needs_ompl
+@pytest.mark.parametrize("planner,name", [("rrt", "control_RRT"), ("kpiece", "control_KPIECE1")])
+def test_control_planners_solve_pendulum_with_the_same_dynamics_and_checker(planner, name):
+    """oc.RRT / oc.KPIECE1 on two held-out pendulum problems: solved exactly, every
+    integrated state counted by problem.check_state, and the returned controls, re-simulated
+    here with pendulum.rollout, arrive at states satisfying problem.in_goal."""
+    from gnn_mp_envs.envs.tree_env import make_task
+    from gnn_mp_envs.tasks import pendulum as pend
+
+    results = run_ompl("pendulum", [0, 1], time_limit=10.0, planner=planner, seed=0, keep_paths=True)
+    task = make_task("pendulum")
+    try:
+        for i, r in zip([0, 1], results):
+            assert PENDULUM_KEYS <= set(r)
+            assert r["index"] == i and r["planner"] == name
+            assert r["solved"] and r["status"] == "Exact solution" and not r["approximate"]
+            assert r["goal_reached"] and r["path_valid"]
+            # One check per 0.02 s integration step, plus OMPL's check of the start state.
+            assert r["collision_checks"] == r["propagation_steps"] + 1 > 0
+            assert r["edges_checked"] > 0 and r["nodes"] >= 2
+            # path_length is the path's duration in seconds, in whole integration steps.
+            dt = pend.EDGE_DURATION / pend.INTEGRATION_STEPS
+            assert r["path_length"] == pytest.approx(sum(r["durations"]))
+            assert r["path_length"] / dt == pytest.approx(round(r["path_length"] / dt), abs=1e-6)
+            if planner == "rrt":   # every RRT edge is one torque held for EDGE_DURATION
+                assert r["durations"] == pytest.approx([pend.EDGE_DURATION] * len(r["controls"]))
+            problem = task.problem("test", i)
+            states = np.array(r["path"])
+            assert np.allclose(states[0], problem.start)
+            assert problem.in_goal(states[-1])
+            x = states[0]
+            for u, duration in zip(r["controls"], r["durations"]):
+                assert abs(u) <= pend.MAX_TORQUE
+                steps = int(round(duration / dt))
+                traj = pend.rollout(x[0], x[1], np.array([u]), duration, steps)[:, 0]
+                assert problem.is_state_valid(traj).all()
+                x = problem.normalize(traj[-1])
+            assert problem.in_goal(x)
+            assert np.allclose(problem.difference(x, states[-1]), 0.0, atol=1e-6)
+    finally:
+        task.close()
+
+
+@needs_ompl
+def test_pendulum_timeout_is_reported_as_unsolved():
+    """A time limit too short to swing up: an approximate solution at most, never 'solved'."""
+    (r,) = run_ompl("pendulum", [0], time_limit=0.01, planner="rrt")
+    assert not r["solved"] and r["path_length"] is None and r["path_valid"] is None
+    assert r["collision_checks"] > 0

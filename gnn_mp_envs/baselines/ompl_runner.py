@@ -17,9 +17,14 @@ cleanly), and a crash must not take the caller down. :func:`run_ompl` therefore 
 
 which writes its results to ``OUT``, flushes, and leaves with ``os._exit(0)``.
 
-Kinodynamic tasks (the pendulum) need OMPL's control planners; they get their own entry
-in :data:`SETUP_BUILDERS` (keyed by ``problem.geometric``) when added. Until then they are
-refused with a clear ``ValueError`` before any planning starts.
+Kinodynamic tasks use OMPL's control planners (``oc.RRT`` as ``"rrt"``, ``oc.KPIECE1`` as
+``"kpiece"``) through :data:`SETUP_BUILDERS` (keyed by ``problem.geometric``) and a per-task
+entry in :data:`CONTROL_BUILDERS` (the pendulum; see :func:`_pendulum_setup`): the state
+space, a propagator integrating the task's own dynamics, ``problem.check_state`` as the
+validity checker (counted) and a goal satisfied exactly when ``problem.in_goal`` holds.
+A planner that does not fit the problem (``rrtconnect`` on the pendulum, ``kpiece`` on a
+geometric task) is refused with a ``ValueError`` before any planning starts. Details and
+the settings that make edges comparable to ours: ``docs/ompl.md``.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -39,6 +45,10 @@ import numpy as np
 
 #: Planner name -> OMPL geometric planner class name.
 GEOMETRIC_PLANNERS = {"rrtconnect": "RRTConnect", "rrt": "RRT"}
+#: Planner name -> OMPL control (kinodynamic) planner class name.
+CONTROL_PLANNERS = {"rrt": "RRT", "kpiece": "KPIECE1"}
+#: Every planner name the runner accepts (which ones fit depends on ``problem.geometric``).
+PLANNERS = sorted(set(GEOMETRIC_PLANNERS) | set(CONTROL_PLANNERS))
 INSTALL_HINT = ("OMPL's Python bindings are an optional extra: pip install 'gnn-mp-envs[ompl]' "
                 "(i.e. pip install ompl==1.7.0) into the environment running gnn_mp_envs")
 #: Exit code of the runner process when ``import ompl`` fails.
@@ -82,15 +92,20 @@ def parse_indices(spec: str | int | list[int] | tuple[int, ...] | range) -> list
 # ---------------------------------------------------------------------- library side
 def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str, Any] | None = None,
              planner: str = "rrtconnect", time_limit: float = 10.0, seed: int = 0,
-             timeout: float | None = None, python: str | None = None) -> list[dict[str, Any]]:
+             timeout: float | None = None, python: str | None = None,
+             keep_paths: bool = False) -> list[dict[str, Any]]:
     """Solve ``make_task(task, **task_kwargs).problem(split, i)`` for each index with OMPL,
-    in a subprocess; one result dict per problem (see :func:`solve_problem`).
+    in a subprocess; one result dict per problem (see :func:`solve_problem`). Solution
+    paths (``path``; for control planners also ``controls`` and ``durations``) are kept
+    only with ``keep_paths``.
 
     Raises :class:`OMPLUnavailableError` when OMPL is not installed, ``ValueError`` for an
-    unknown planner or a task OMPL cannot plan yet, ``RuntimeError`` when the runner fails.
+    unknown planner, a planner that does not fit the task (geometric vs. kinodynamic) or a
+    task OMPL cannot plan yet, ``RuntimeError`` when the runner fails.
     """
-    if planner not in GEOMETRIC_PLANNERS:
-        raise ValueError(f"unknown OMPL planner {planner!r}; known: {sorted(GEOMETRIC_PLANNERS)}")
+    if planner not in PLANNERS:
+        raise ValueError(f"unknown OMPL planner {planner!r}; known: {PLANNERS} (geometric tasks: "
+                         f"{sorted(GEOMETRIC_PLANNERS)}, kinodynamic tasks: {sorted(CONTROL_PLANNERS)})")
     idx = parse_indices(indices)
     if python is None and not ompl_available():
         raise OMPLUnavailableError(f"cannot import ompl. {INSTALL_HINT}")
@@ -103,6 +118,8 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
                "--planner", planner, "--seed", str(int(seed)), "--json", str(out)]
         if task_kwargs:
             cmd += ["--task-kwargs", json.dumps(task_kwargs)]
+        if keep_paths:
+            cmd.append("--keep-paths")
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
         data = json.loads(out.read_text()) if out.exists() else None
         if proc.returncode == EXIT_NO_OMPL or (data or {}).get("error") == "ompl_unavailable":
@@ -117,8 +134,28 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
 
 
 # ---------------------------------------------------------------------- runner side
-def _geometric_setup(ob: Any, og: Any, problem: Any, planner: str) -> tuple[Any, Any, list]:
+@dataclass
+class _Setup:
+    """What a builder hands :func:`solve_problem`: the configured ``SimpleSetup`` and planner,
+    how to read a solution path, and anything the callbacks need kept alive."""
+
+    ss: Any
+    planner: Any
+    name: str                                   # e.g. "geometric_RRTConnect", "control_KPIECE1"
+    path_result: Callable[[Any], dict[str, Any]]  # solution path -> path fields of the result
+    counters: Callable[[], dict[str, int]]      # edges_checked (and more) since reset_counters
+    reset_counters: Callable[[], None]          # called with problem.reset_counters() before solve
+    keep: list = field(default_factory=list)
+
+
+def _geometric_setup(problem: Any, planner: str) -> _Setup:
     """SimpleSetup over a RealVectorStateSpace with the problem's checker and motion validator."""
+    from ompl import base as ob
+    from ompl import geometric as og
+
+    if planner not in GEOMETRIC_PLANNERS:
+        raise ValueError(f"OMPL planner {planner!r} is a control (kinodynamic) planner; the {problem.task!r} "
+                         f"problem is geometric (geometric planners: {sorted(GEOMETRIC_PLANNERS)})")
     d = problem.state_dim
     space = ob.RealVectorStateSpace(d)
     bounds = ob.RealVectorBounds(d)
@@ -153,59 +190,255 @@ def _geometric_setup(ob: Any, og: Any, problem: Any, planner: str) -> tuple[Any,
     plan = getattr(og, GEOMETRIC_PLANNERS[planner])(si)
     plan.setRange(float(problem.step_size))
     ss.setPlanner(plan)
-    # Keep the Python-side callbacks alive as long as the setup.
-    return ss, plan, [checker, validator, as_array, space, start, goal]
+
+    def path_result(path: Any) -> dict[str, Any]:
+        states = np.array([as_array(path.getState(k)) for k in range(path.getStateCount())])
+        return {"path_length": float(path.length()), "path": states.tolist(), "path_states": int(len(states)),
+                "goal_reached": bool(problem.in_goal(states[-1])),
+                "path_valid": bool(problem.path_valid(states))}
+
+    return _Setup(ss, plan, f"geometric_{GEOMETRIC_PLANNERS[planner]}", path_result,
+                  lambda: {"edges_checked": int(problem.edges_checked)}, lambda: None,
+                  # Keep the Python-side callbacks alive as long as the setup.
+                  [checker, validator, as_array, space, start, goal])
 
 
-#: problem.geometric -> setup builder. Kinodynamic (control-based) setups plug in here.
-SETUP_BUILDERS: dict[bool, Callable] = {True: _geometric_setup}
+#: KPIECE1's projection of a pendulum state is (theta, omega); these are its grid cell sizes
+#: (rad, rad/s): ~31 x 32 cells over [-pi, pi) x [-MAX_SPEED, MAX_SPEED].
+PENDULUM_CELL_SIZES = (0.2, 0.5)
+#: Threshold of the pendulum goal region and the smallest distance reported outside it, so
+#: OMPL's ``distanceGoal(s) < threshold`` holds exactly when ``problem.in_goal(s)`` does.
+GOAL_THRESHOLD, GOAL_MIN_OUTSIDE = 1e-9, 1e-6
+
+
+def _pendulum_setup(problem: Any, planner: str) -> _Setup:
+    """Control-based SimpleSetup for :class:`~gnn_mp_envs.tasks.pendulum.PendulumProblem`.
+
+    * State space SO(2) x R (weights 1 and ``VELOCITY_WEIGHT``, as our distance), omega
+      bounded by +-``MAX_SPEED``; SO(2) wraps theta to [-pi, pi) like ``wrap_angle``.
+    * Control space R^1, torque bounded by +-``MAX_TORQUE``.
+    * Propagation step ``EDGE_DURATION / INTEGRATION_STEPS`` (0.02 s) and control durations
+      of exactly ``INTEGRATION_STEPS`` steps: every edge is one constant torque held for
+      ``EDGE_DURATION`` (0.2 s), integrated with ``pendulum.rollout`` (RK4, the same 0.02 s
+      step), and OMPL checks every 0.02 s state with ``problem.check_state``, as our steer
+      does. (KPIECE1 splits an edge where it crosses projection cells, so its paths have
+      shorter pieces, and it checks the goal at each piece's end.)
+    * Goal: a ``GoalSampleableRegion`` whose ``distanceGoal`` is 0 inside the
+      ``in_goal`` box and at least ``GOAL_MIN_OUTSIDE`` outside; samples are uniform in the
+      box (used by the planners' default 5% goal bias).
+    """
+    from ompl import base as ob
+    from ompl import control as oc
+    from ompl import util as ou
+
+    from gnn_mp_envs.tasks import pendulum as pend
+
+    if planner not in CONTROL_PLANNERS:
+        raise ValueError(f"OMPL planner {planner!r} is geometric-only; the {problem.task!r} problem is "
+                         f"kinodynamic (control planners: {sorted(CONTROL_PLANNERS)})")
+    dt = pend.EDGE_DURATION / pend.INTEGRATION_STEPS
+    space = ob.CompoundStateSpace()
+    theta_space, omega_space = ob.SO2StateSpace(), ob.RealVectorStateSpace(1)
+    omega_bounds = ob.RealVectorBounds(1)
+    omega_bounds.setLow(-pend.MAX_SPEED)
+    omega_bounds.setHigh(pend.MAX_SPEED)
+    omega_space.setBounds(omega_bounds)
+    space.addSubspace(theta_space, 1.0)
+    space.addSubspace(omega_space, pend.VELOCITY_WEIGHT)
+
+    class PendulumProjection(ob.ProjectionEvaluator):
+        """(theta, omega) on a grid of ``PENDULUM_CELL_SIZES`` (KPIECE1's discretisation)."""
+
+        def getDimension(self) -> int:
+            return 2
+
+        def defaultCellSizes(self) -> None:
+            sizes = ou.vectorDouble()
+            for c in PENDULUM_CELL_SIZES:
+                sizes.append(float(c))
+            self.setCellSizes(sizes)
+
+        def project(self, s: Any, projection: Any) -> None:
+            projection[0] = s[0].value
+            projection[1] = s[1][0]
+
+    projection = PendulumProjection(space)
+    space.registerDefaultProjection(projection)
+
+    cspace = oc.RealVectorControlSpace(space, 1)
+    torque_bounds = ob.RealVectorBounds(1)
+    torque_bounds.setLow(-pend.MAX_TORQUE)
+    torque_bounds.setHigh(pend.MAX_TORQUE)
+    cspace.setBounds(torque_bounds)
+    ss = oc.SimpleSetup(cspace)
+    si = ss.getSpaceInformation()
+
+    def as_array(s: Any) -> np.ndarray:
+        return np.array([s[0].value, s[1][0]], dtype=np.float64)
+
+    checker = ob.StateValidityCheckerFn(lambda s: problem.check_state(as_array(s)))
+    ss.setStateValidityChecker(checker)
+
+    # Edges = runs of propagation steps continuing from the previous result with the same torque.
+    counter = {"edges": 0, "steps": 0, "run": 0, "last": None}
+
+    def propagate(start: Any, control: Any, duration: float, result: Any) -> None:
+        th, om, u = start[0].value, start[1][0], control[0]
+        if counter["last"] != (th, om, u) or counter["run"] >= pend.INTEGRATION_STEPS:
+            counter["edges"] += 1
+            counter["run"] = 0
+        steps = max(1, int(round(duration / dt)))
+        x = pend.rollout(th, om, np.array([u]), duration, steps)[-1, 0]
+        th_new, om_new = float(pend.wrap_angle(x[0])), float(x[1])
+        result[0].value = th_new
+        result[1][0] = om_new
+        counter["steps"] += steps
+        counter["run"] += steps
+        counter["last"] = (th_new, om_new, u)
+
+    propagator = oc.StatePropagatorFn(propagate)
+    ss.setStatePropagator(propagator)
+    si.setPropagationStepSize(dt)
+    si.setMinMaxControlDuration(pend.INTEGRATION_STEPS, pend.INTEGRATION_STEPS)
+
+    tolerance = np.array([pend.GOAL_ANGLE_TOLERANCE, pend.GOAL_SPEED_TOLERANCE])
+    weights = np.array([1.0, pend.VELOCITY_WEIGHT])
+
+    class PendulumGoal(ob.GoalSampleableRegion):
+        """Satisfied exactly when ``problem.in_goal`` holds; samples uniformly in the goal box."""
+
+        def __init__(self, si: Any) -> None:
+            super().__init__(si)
+            self.setThreshold(GOAL_THRESHOLD)
+            self.rng = ou.RNG()
+
+        def distanceGoal(self, s: Any) -> float:
+            x = as_array(s)
+            if problem.in_goal(x):
+                return 0.0
+            excess = np.maximum(np.abs(problem.difference(x, problem.goal)) - tolerance, 0.0) * weights
+            return max(float(np.hypot(excess[0], excess[1])), GOAL_MIN_OUTSIDE)
+
+        def sampleGoal(self, s: Any) -> None:
+            th = problem.goal[0] + self.rng.uniformReal(-tolerance[0], tolerance[0])
+            om = problem.goal[1] + self.rng.uniformReal(-tolerance[1], tolerance[1])
+            s[0].value = float(pend.wrap_angle(th))
+            s[1][0] = float(np.clip(om, -pend.MAX_SPEED, pend.MAX_SPEED))
+
+        def maxSampleCount(self) -> int:
+            return 2 ** 31 - 1
+
+    goal = PendulumGoal(si)
+    start = ob.State(space)
+    start()[0].value = float(problem.start[0])
+    start()[1][0] = float(problem.start[1])
+    ss.setStartState(start)
+    ss.setGoal(goal)
+    plan = getattr(oc, CONTROL_PLANNERS[planner])(si)
+    if planner == "kpiece":
+        plan.setProjectionEvaluator(projection)
+    ss.setPlanner(plan)
+
+    def path_result(path: Any) -> dict[str, Any]:
+        n = path.getStateCount()
+        states = np.array([as_array(path.getState(k)) for k in range(n)])
+        controls = np.array([path.getControl(k)[0] for k in range(path.getControlCount())], dtype=np.float64)
+        durations = np.array([path.getControlDuration(k) for k in range(path.getControlCount())],
+                             dtype=np.float64)
+        return {"path_length": float(durations.sum()), "path": states.tolist(), "path_states": int(n),
+                "controls": controls.tolist(), "durations": durations.tolist(),
+                "goal_reached": bool(problem.in_goal(states[-1])),
+                "path_valid": _control_path_valid(problem, states, controls, durations, dt)}
+
+    def reset() -> None:
+        counter.update(edges=0, steps=0, run=0, last=None)
+
+    return _Setup(ss, plan, f"control_{CONTROL_PLANNERS[planner]}", path_result,
+                  lambda: {"edges_checked": counter["edges"], "propagation_steps": counter["steps"]}, reset,
+                  [checker, propagator, projection, goal, as_array, propagate, space, cspace, start, counter])
+
+
+def _control_path_valid(problem: Any, states: np.ndarray, controls: np.ndarray, durations: np.ndarray,
+                        dt: float) -> bool:
+    """Re-simulate a control path with the task's dynamics (uncounted): starts at the start,
+    every edge arrives at the next state, every integrated state is valid, ends in the goal."""
+    from gnn_mp_envs.tasks import pendulum as pend
+
+    if len(states) < 1 or len(controls) != len(states) - 1 or not problem.in_goal(states[-1]):
+        return False
+    if not np.allclose(problem.difference(states[0], problem.start), 0.0, atol=1e-9):
+        return False
+    for i, (u, duration) in enumerate(zip(controls, durations)):
+        steps = max(1, int(round(duration / dt)))
+        traj = pend.rollout(states[i, 0], states[i, 1], np.array([u]), float(duration), steps)[:, 0]
+        if not problem.is_state_valid(traj).all():
+            return False
+        if not np.allclose(problem.difference(problem.normalize(traj[-1]), states[i + 1]), 0.0, atol=1e-6):
+            return False
+    return True
+
+
+def _control_setup(problem: Any, planner: str) -> _Setup:
+    builder = CONTROL_BUILDERS.get(problem.task)
+    if builder is None:
+        raise ValueError(f"no control-based OMPL setup for the kinodynamic {problem.task!r} problem yet "
+                         f"(known: {sorted(CONTROL_BUILDERS)}; add one to CONTROL_BUILDERS)")
+    return builder(problem, planner)
+
+
+#: problem.task -> control-based setup builder (kinodynamic tasks).
+CONTROL_BUILDERS: dict[str, Callable[[Any, str], _Setup]] = {"pendulum": _pendulum_setup}
+#: problem.geometric -> setup builder.
+SETUP_BUILDERS: dict[bool, Callable[[Any, str], _Setup]] = {True: _geometric_setup, False: _control_setup}
 
 
 def solve_problem(problem: Any, planner: str = "rrtconnect", time_limit: float = 10.0) -> dict[str, Any]:
-    """Plan one problem with OMPL (importing it): solved, collision_checks, edges_checked,
-    time (s, wall, of ``solve``), path_length (None when unsolved), path_states, nodes
-    (planner graph vertices), status, path_valid (the returned path re-checked, uncounted)."""
+    """Plan one problem with OMPL (importing it). The result holds: planner, status, solved
+    (an exact solution whose final state satisfies ``problem.in_goal``; approximate
+    solutions count as unsolved), approximate, collision_checks, edges_checked, time (s,
+    wall, of ``solve``), plan_time, path_length (None when unsolved; for control planners
+    the path's duration in seconds), path_states, nodes (planner graph vertices),
+    goal_reached and path_valid (the returned path re-checked, uncounted; None when
+    unsolved), and for control planners propagation_steps (integration steps of
+    ``EDGE_DURATION / INTEGRATION_STEPS`` each)."""
     from ompl import base as ob
-    from ompl import geometric as og
 
-    builder = SETUP_BUILDERS.get(bool(problem.geometric))
-    if builder is None:
-        raise ValueError(f"OMPL baselines cover geometric tasks only so far; the {problem.task!r} "
-                         "problem is kinodynamic (add a control-based builder to SETUP_BUILDERS)")
-    ss, plan, keep = builder(ob, og, problem, planner)
+    setup = SETUP_BUILDERS[bool(problem.geometric)](problem, planner)
+    ss, plan = setup.ss, setup.planner
     ss.setup()
     problem.reset_counters()
+    setup.reset_counters()
     t0 = time.perf_counter()
     status = ss.solve(float(time_limit))
     elapsed = time.perf_counter() - t0
-    checks, edges = problem.collision_checks, problem.edges_checked
+    checks, counts = problem.collision_checks, setup.counters()
+    edges = counts.pop("edges_checked")
     exact = bool(ss.haveExactSolutionPath())
     data = ob.PlannerData(ss.getSpaceInformation())
     plan.getPlannerData(data)
     result: dict[str, Any] = {
-        "planner": f"geometric_{GEOMETRIC_PLANNERS[planner]}",
+        "planner": setup.name,
         "status": str(status.asString()) if hasattr(status, "asString") else str(status),
-        "solved": exact,
+        "solved": False,
         "approximate": bool(ss.haveSolutionPath()) and not exact,
         "collision_checks": int(checks),
-        "edges_checked": int(edges),
+        "edges_checked": edges,
         "time": float(elapsed),
         "plan_time": float(ss.getLastPlanComputationTime()),
         "path_length": None,
         "path_states": 0,
         "nodes": int(data.numVertices()),
+        "goal_reached": None,
         "path_valid": None,
     }
+    result.update(counts)
     if exact:
-        path = ss.getSolutionPath()
-        d = problem.state_dim
-        states = np.array([[path.getState(k)[i] for i in range(d)] for k in range(path.getStateCount())])
-        result["path_length"] = float(path.length())
-        result["path_states"] = int(len(states))
-        result["path"] = states.tolist()
-        result["path_valid"] = bool(problem.path_valid(states))
+        result.update(setup.path_result(ss.getSolutionPath()))
+        result["solved"] = bool(result["goal_reached"])
+        if not result["solved"]:   # OMPL called it exact, our goal test disagrees: report honestly
+            result["path_length"] = None
         problem.collision_checks, problem.edges_checked = checks, edges
-    del keep
+    del setup
     return result
 
 
@@ -223,11 +456,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--split", default="test")
     ap.add_argument("--indices", default="0-9")
     ap.add_argument("--time-limit", type=float, default=10.0)
-    ap.add_argument("--planner", default="rrtconnect", choices=sorted(GEOMETRIC_PLANNERS))
+    ap.add_argument("--planner", default="rrtconnect", choices=PLANNERS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--task-kwargs", default="{}", help="JSON dict of task constructor arguments")
     ap.add_argument("--json", required=True, help="output file")
-    ap.add_argument("--keep-paths", action="store_true", help="keep solution paths in the output")
+    ap.add_argument("--keep-paths", action="store_true",
+                    help="keep solution paths (and controls, durations) in the output")
     args = ap.parse_args(argv)
     try:
         from ompl import util as ou
@@ -248,7 +482,8 @@ def main(argv: list[str] | None = None) -> None:
                 r = solve_problem(task.problem(args.split, i), args.planner, args.time_limit)
                 r.update(task=args.task, split=args.split, index=i)
                 if not args.keep_paths:
-                    r.pop("path", None)
+                    for key in ("path", "controls", "durations"):
+                        r.pop(key, None)
                 results.append(r)
         finally:
             task.close()
