@@ -1,7 +1,7 @@
 """OMPL baseline runner and the OMPL benchmark-log writer.
 
-Planning tests need the optional ``ompl`` extra and are skipped without it (CI does not
-install it); the availability error path, index parsing and the log format are pure Python.
+Planning tests need the ``ompl`` extra (``make install`` takes it) and are skipped without
+it; the availability error path, index parsing and the log format are pure Python.
 """
 
 import subprocess

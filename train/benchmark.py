@@ -595,40 +595,23 @@ class SuiteEntry:
     problems: int
     max_nodes: int | None = None
     scene: str | None = None
-    optional: bool = False   # skipped (with a note) when the task cannot be built
 
 
-#: OMPL rows added to a suite when OMPL is installed (the runner plans geometric tasks only so far).
-SUITE_OMPL_PLANNERS: dict[str, tuple[str, ...]] = {"maze2d": ("rrt", "rrtconnect"), "arm": ("rrtconnect",)}
+#: OMPL rows added to a suite when OMPL is installed (control-based RRT / KPIECE1 for the pendulum).
+SUITE_OMPL_PLANNERS: dict[str, tuple[str, ...]] = {"maze2d": ("rrt", "rrtconnect"), "arm": ("rrtconnect",),
+                                                   "pendulum": ("rrt", "kpiece")}
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores.
 SUITES: dict[str, list[SuiteEntry]] = {
     "default": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=30),
         SuiteEntry("pendulum", ["uniform", "goal-bias"], problems=30),
-        SuiteEntry("arm", ["uniform", "goal-bias"], problems=20, scene="test", optional=True),
+        SuiteEntry("arm", ["uniform", "goal-bias"], problems=20, scene="test"),
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
     ],
 }
-
-
-def _ompl_log_writer_available() -> bool:
-    import importlib.util
-    return importlib.util.find_spec("gnn_mp_envs.baselines.ompl_log") is not None
-
-
-def _task_available(task: str, scene: str | None) -> str | None:
-    """None if the task's env can be built, else the reason."""
-    import gymnasium as gym
-    import gnn_mp_envs  # noqa: F401
-    try:
-        env = gym.make(env_id_for(task), split="test", **({"task_kwargs": {"scene": scene}} if scene else {}))
-        env.close()
-    except Exception as exc:   # noqa: BLE001  (any failure means: skip this optional entry)
-        return f"{type(exc).__name__}: {exc}"
-    return None
 
 
 def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: bool = True,
@@ -643,11 +626,6 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
     tables: list[str] = []
     suite_start = time.perf_counter()
     for entry in SUITES[name]:
-        if entry.optional:
-            reason = _task_available(entry.task, entry.scene)
-            if reason is not None:
-                print(f"skipping {entry.task}: {reason}", file=sys.stderr)
-                continue
         samplers = list(entry.samplers)
         if with_ompl:
             samplers += [OMPL_PREFIX + p for p in SUITE_OMPL_PLANNERS.get(entry.task, ())]
@@ -655,7 +633,7 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers,
                              json=out / f"{entry.task}.json", plot=out / f"{entry.task}.png",
                              render=out / "renders" if render else None,
-                             ompl_log=out / "ompl" if with_ompl and _ompl_log_writer_available() else None,
+                             ompl_log=out / "ompl" if with_ompl else None,
                              progress=progress)
         task_start = time.perf_counter()
         report = benchmark(args)
