@@ -53,7 +53,7 @@ def test_shipped_checkpoint_predicts(name, tiny_blob_set):
 
 
 def test_evaluate_end_to_end_on_a_few_problems(tmp_path):
-    if not (CHECKPOINT_DIR / "critical_gnn.pt").exists():
+    if not all((CHECKPOINT_DIR / f"critical_{m}.pt").exists() for m in ("gnn", "gnn-cvae")):
         pytest.skip("no shipped checkpoints")
     rep = evaluate(models=["gnn", "gnn-cvae"], data_dir=tmp_path, num_problems=2, num_samples=4,
                    plan_samples=4, json_path=tmp_path / "r.json", plot_path=tmp_path / "p.png",

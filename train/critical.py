@@ -181,6 +181,7 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
     cfg = dataset or DatasetConfig()
     hp = dict(HPARAMS[model_name])
     epochs = int(epochs if epochs is not None else hp["epochs"])
+    hp.update(epochs=epochs, time_budget_min=time_budget_min, max_train_problems=max_train_problems)
     graph = halton_graph(cfg.graph_nodes)
     labelled = load_or_generate(cfg, data_dir, "labelled", progress)
     train_set, val_set = labelled.split_subset("train"), labelled.split_subset("val")
@@ -294,6 +295,13 @@ def evaluate(models: Sequence[str] = tuple(MODELS), checkpoint_dir: str | Path =
         "metric": "1 - mean over problems of mean-over-coordinates squared error to the nearest label"}}
     report["accuracy"]["mean-label (reference)"] = {
         k: accuracy(np.tile(mean_label, (len(v), 1)), v, graph) for k, v in sets.items()}
+    # Uniform random states: what "best of k" is worth without any learning.
+    ref_rng = np.random.default_rng([seed, 11])
+    uniform = {}
+    for k, v in sets.items():
+        uniform[k] = accuracy(ref_rng.uniform(size=(len(v), 2)), v, graph)
+        uniform[f"{k}_best_of_{num_samples}"] = accuracy(ref_rng.uniform(size=(len(v), num_samples, 2)), v, graph)
+    report["accuracy"]["uniform random (reference)"] = uniform
     preds: dict[str, dict[str, tuple]] = {k: {} for k in sets}
     for name in models:
         path = Path(checkpoint_dir) / f"critical_{name}.pt"
@@ -434,8 +442,8 @@ def format_table(report: dict[str, Any]) -> str:
     lines = ["| model | in-dist acc | blob acc | in-dist best-of-k | blob best-of-k |", "|---|---|---|---|---|"]
     for name, acc in report["accuracy"].items():
         bk = [v for k, v in acc.items() if "best_of" in k]
-        lines.append(f"| {name} | {acc['test']:.4f} | {acc['blob']:.4f} | "
-                     + " | ".join(f"{v:.4f}" for v in bk) + (" | - | - |" if not bk else " |"))
+        cells = [f"{acc['test']:.4f}", f"{acc['blob']:.4f}"] + ([f"{v:.4f}" for v in bk] if bk else ["-", "-"])
+        lines.append("| " + " | ".join([name] + cells) + " |")
     for key, summ in report["planning"].items():
         common = summ.get("_common", {})
         lines += ["", f"planning on {key} ({common.get('problems')} problems, {common.get('solved_by_all')} solved by all)",
