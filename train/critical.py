@@ -28,7 +28,8 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.critical_data import graph_batch, image_batch, label_positions, occupancy_images
-from agents.models.critical import MODELS, build_model
+from agents.models.critical import (MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION,
+                                    build_model)
 from gnn_mp_envs.critical.dataset import CriticalProblems, DatasetConfig, generate_all, load_or_generate
 from gnn_mp_envs.critical.halton import HaltonGraph, halton_graph
 from gnn_mp_envs.critical.planning import compare_planners, path_is_valid, summarize
@@ -39,11 +40,14 @@ DEFAULT_DATA_DIR = Path("data/critical")
 CHECKPOINT_DIR = Path(__file__).resolve().parent.parent / "agents" / "checkpoints"
 #: Per-model defaults: architecture kwargs and optimisation settings.
 HPARAMS: dict[str, dict[str, Any]] = {
-    "gnn": {"model": {"hidden_channels": 32, "num_layers": 3, "K": 3},
+    "gnn": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "K": 3,
+                      "readout": "attention"},
             "lr": 3e-3, "batch_size": 16, "epochs": 3},
-    "gat": {"model": {"hidden_channels": 32, "num_layers": 3, "heads": 1},
+    "gat": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "heads": 1,
+                      "readout": "attention"},
             "lr": 3e-3, "batch_size": 16, "epochs": 2},
-    "gnn-cvae": {"model": {"hidden_channels": 32, "num_layers": 3, "K": 3, "latent_channels": 2},
+    "gnn-cvae": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "K": 3,
+                           "latent_channels": 2, "readout": "attention"},
                  "lr": 3e-3, "batch_size": 16, "epochs": 2, "kl_weight": 0.005},
     "cnn": {"model": {"hidden_channels": 16, "num_layers": 4},
             "lr": 1e-3, "batch_size": 64, "epochs": 30},
@@ -62,13 +66,15 @@ EVAL_SAMPLES = 16
 class Inputs:
     """Turns problem indices into model inputs; caches occupancy images for the CNNs."""
 
-    def __init__(self, problems: CriticalProblems, graph: HaltonGraph, kind: str) -> None:
+    def __init__(self, problems: CriticalProblems, graph: HaltonGraph, kind: str,
+                 with_position: bool = False) -> None:
         self.problems, self.graph, self.kind = problems, graph, kind
+        self.with_position = with_position
         self.occupancy = occupancy_images(problems) if kind == "image" else None
 
     def __call__(self, idx: np.ndarray) -> dict[str, torch.Tensor]:
         if self.kind == "graph":
-            b = graph_batch(self.problems, self.graph, idx)
+            b = graph_batch(self.problems, self.graph, idx, self.with_position)
             return {"x": b.x, "edge_index": b.edge_index, "batch": b.batch, "pos": b.pos,
                     "y": b.y, "owner": b.y_batch, "size": len(idx)}
         ys = [label_positions(self.problems, self.graph, int(i)) for i in idx]
@@ -94,16 +100,22 @@ def _one_label_each(y: torch.Tensor, owner: torch.Tensor, size: int, gen: torch.
     return y[pick]
 
 
+def uses_position(model: torch.nn.Module) -> bool:
+    """Whether a graph model reads the 7 node features (``x_n`` appended) rather than 5."""
+    return getattr(model, "in_channels", NODE_FEATURES) == NODE_FEATURES_WITH_POSITION
+
+
 def _loss(model: torch.nn.Module, name: str, inp: dict, hp: dict, gen: torch.Generator) -> torch.Tensor:
     kind, out = MODELS[name][1], MODELS[name][2]
     if out == "det":
-        pred = model(inp["x"], inp["edge_index"], inp["batch"]) if kind == "graph" else model(inp["image"])
+        pred = (model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"]) if kind == "graph"
+                else model(inp["image"]))
         return _nearest_label_loss(pred, inp["y"], inp["owner"])
     y = _one_label_each(inp["y"], inp["owner"], inp["size"], gen)
     if kind == "graph":
         mu, logstd = model.encode(inp["x"], inp["edge_index"], y, inp["pos"], inp["batch"])
         z = model.reparametrize(mu, logstd, gen)
-        y_hat = model.decode(z, inp["x"], inp["edge_index"], inp["batch"])
+        y_hat = model.decode(z, inp["x"], inp["edge_index"], inp["batch"], inp["pos"])
     else:
         mu, logstd = model.encode(inp["image"], y)
         y_hat = model.decode(model.reparametrize(mu, logstd, gen), inp["image"])
@@ -123,16 +135,17 @@ def predict(model: torch.nn.Module, name: str, problems: CriticalProblems, graph
     """
     model.eval()
     kind, out = MODELS[name][1], MODELS[name][2]
-    inputs = Inputs(problems, graph, kind)
+    inputs = Inputs(problems, graph, kind, kind == "graph" and uses_position(model))
     gen = torch.Generator().manual_seed(seed)
     points, samples = [], []
     for s in tqdm(range(0, len(problems), batch_size), desc=f"predict {name}", disable=not progress):
         inp = inputs(np.arange(s, min(s + batch_size, len(problems))))
         if out == "det":
-            p = model(inp["x"], inp["edge_index"], inp["batch"]) if kind == "graph" else model(inp["image"])
+            p = (model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"]) if kind == "graph"
+                 else model(inp["image"]))
             points.append(p.numpy())
         else:
-            smp = (model.sample(inp["x"], inp["edge_index"], inp["batch"], num_samples, gen)
+            smp = (model.sample(inp["x"], inp["edge_index"], inp["batch"], num_samples, gen, inp["pos"])
                    if kind == "graph" else model.sample(inp["image"], num_samples, gen))
             samples.append(smp.numpy())
             points.append(smp.mean(1).numpy())
@@ -169,8 +182,12 @@ def _checkpoint_paths(name: str, out: str | Path | None, data_dir: Path) -> tupl
 def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int | None = None,
           seed: int = 0, out: str | Path | None = None, resume: bool = False,
           time_budget_min: float | None = None, max_train_problems: int | None = None,
-          dataset: DatasetConfig | None = None, progress: bool = True) -> dict[str, Any]:
+          dataset: DatasetConfig | None = None, progress: bool = True, lr: float | None = None,
+          batch_size: int | None = None, model_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Train one model; keeps the best-validation weights in ``out`` (+ a json of metadata).
+
+    ``lr``, ``batch_size`` and ``model_overrides`` (constructor kwargs, e.g.
+    ``{"readout": "max", "in_channels": 5}``) override :data:`HPARAMS`.
 
     Resume state (optimizer, epoch, RNG-free since shuffles derive from ``[seed, epoch]``)
     is written to ``data_dir/resume_<model>.pt`` after every epoch.
@@ -180,6 +197,11 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
     data_dir = Path(data_dir)
     cfg = dataset or DatasetConfig()
     hp = dict(HPARAMS[model_name])
+    hp["model"] = {**hp["model"], **(model_overrides or {})}
+    if lr is not None:
+        hp["lr"] = lr
+    if batch_size is not None:
+        hp["batch_size"] = batch_size
     epochs = int(epochs if epochs is not None else hp["epochs"])
     hp.update(epochs=epochs, time_budget_min=time_budget_min, max_train_problems=max_train_problems)
     graph = halton_graph(cfg.graph_nodes)
@@ -189,10 +211,9 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
         train_set = train_set.subset(np.arange(max_train_problems))
     val_set = val_set.subset(np.arange(min(VAL_PROBLEMS, len(val_set))))
     kind = MODELS[model_name][1]
-    inputs = Inputs(train_set, graph, kind)
-
     torch.manual_seed(seed)
     model = build_model(model_name, **hp["model"])
+    inputs = Inputs(train_set, graph, kind, kind == "graph" and uses_position(model))
     opt = torch.optim.Adam(model.parameters(), lr=hp["lr"])
     ckpt_path, meta_path, resume_path = _checkpoint_paths(model_name, out, data_dir)
     start_epoch, history, best = 0, [], {"val_accuracy": -math.inf, "epoch": -1}
@@ -404,6 +425,14 @@ def add_subparsers(subparsers: Any) -> None:
     t.add_argument("--out", default=None, help="checkpoint path (default agents/checkpoints/critical_<model>.pt)")
     t.add_argument("--time-budget", type=float, default=None, help="stop after this many minutes")
     t.add_argument("--max-train-problems", type=int, default=None)
+    t.add_argument("--lr", type=float, default=None, help="override the default learning rate")
+    t.add_argument("--batch-size", type=int, default=None)
+    t.add_argument("--hidden", type=int, default=None, help="override hidden_channels")
+    t.add_argument("--readout", choices=["max", "attention"], default=None,
+                   help="graph models: the paper's max pool + FC, or attention over node positions")
+    t.add_argument("--features", choices=["paper", "position"], default=None,
+                   help="graph models: eq. featurestate (5) or with x_n appended (7)")
+    t.add_argument("--threads", type=int, default=2, help="torch threads")
     _dataset_args(t)
     t.set_defaults(func=_cmd_train)
     e = subparsers.add_parser("evaluate", help="accuracy table, figure and planning comparison")
@@ -426,8 +455,17 @@ def _cmd_generate(a: argparse.Namespace) -> None:
 
 
 def _cmd_train(a: argparse.Namespace) -> None:
+    torch.set_num_threads(a.threads)
+    over: dict[str, Any] = {}
+    if a.hidden is not None:
+        over["hidden_channels"] = a.hidden
+    if a.readout is not None:
+        over["readout"] = a.readout
+    if a.features is not None:
+        over["in_channels"] = NODE_FEATURES_WITH_POSITION if a.features == "position" else NODE_FEATURES
     res = train(a.model, a.data, a.epochs, a.seed, a.out, a.resume, a.time_budget,
-                a.max_train_problems, DatasetConfig(seed=a.data_seed))
+                a.max_train_problems, DatasetConfig(seed=a.data_seed), lr=a.lr,
+                batch_size=a.batch_size, model_overrides=over)
     print(json.dumps(res["best"]))
 
 
