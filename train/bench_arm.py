@@ -160,7 +160,14 @@ def step_throughput(scene: str, window: int, seed: int, copy_observations: bool)
         env.close()
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry (``gnn-mp bench-arm``): prints the figures; exit status 0."""
+    run(argv)
+    return 0
+
+
+def run(argv: list[str] | None = None) -> dict[str, Any]:
+    """Measure and print everything; returns the report (also written with ``--json``)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="test", help="scene family (held out: test)")
     ap.add_argument("--split", default="test")
@@ -224,4 +231,4 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
