@@ -411,7 +411,8 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
         ax.set_title(label)
         ax.grid(axis="y", alpha=0.3)
     rates = ", ".join(f"{n}: {100 * report['results'][n]['success_rate']:.0f}%" for n in names)
-    fig.suptitle(f"{report['task']}: {report['problems']} held-out problems (success {rates})", fontsize=9)
+    # Two lines: the success rates of four or more samplers overflow a one-line title.
+    fig.suptitle(f"{report['task']}: {report['problems']} held-out problems\nsuccess {rates}", fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
