@@ -45,24 +45,29 @@ def label_positions(problems: CriticalProblems, graph: HaltonGraph, i: int) -> n
     return graph.nodes[problems.labels_of(i)]
 
 
-def to_data(problems: CriticalProblems, graph: HaltonGraph, i: int, with_position: bool = False) -> Data:
-    """One problem as a PyG graph: ``x``, ``edge_index``, ``pos`` and all labels ``y`` (L, 2)."""
+def to_data(problems: CriticalProblems, graph: HaltonGraph, i: int, with_position: bool = False,
+            all_edges: bool = False) -> Data:
+    """One problem as a PyG graph: ``x``, ``edge_index``, ``pos`` and all labels ``y`` (L, 2).
+
+    ``all_edges``: every edge of the fixed graph instead of the problem's valid ones.
+    """
     x = node_features(graph.nodes, problems.start[i], problems.goal[i], problems.node_free[i],
                       with_position)
-    return Data(x=torch.from_numpy(x), edge_index=edge_index_of(graph, problems.edge_free[i]),
+    free = np.ones(len(graph.edges), bool) if all_edges else problems.edge_free[i]
+    return Data(x=torch.from_numpy(x), edge_index=edge_index_of(graph, free),
                 pos=torch.from_numpy(graph.nodes.astype(np.float32)),
                 y=torch.from_numpy(label_positions(problems, graph, i).astype(np.float32)))
 
 
 def graph_batch(problems: CriticalProblems, graph: HaltonGraph, indices: np.ndarray,
-                with_position: bool = False) -> Batch:
+                with_position: bool = False, all_edges: bool = False) -> Batch:
     """A PyG batch; ``y_batch`` maps each label to its graph (several labels per problem).
 
     Building a 16-problem batch takes ~11 ms, negligible next to the model pass, so
     batches are built on the fly rather than cached (cached edge indices of the 3,840
     training problems would take ~1.7 GB).
     """
-    return Batch.from_data_list([to_data(problems, graph, int(i), with_position) for i in indices],
+    return Batch.from_data_list([to_data(problems, graph, int(i), with_position, all_edges) for i in indices],
                                 follow_batch=["y"])
 
 

@@ -168,3 +168,39 @@ def test_tagconv_csr_propagation_matches_message_passing():
         ref = torch.relu(c(ref, ei))
     with torch.no_grad():
         assert torch.allclose(model.node_embeddings(x, ei), ref, atol=1e-5)
+
+
+def test_attention_log_attention_and_label_likelihood():
+    """Log attention normalises per graph; the label term rewards attention on label nodes."""
+    from train.critical import _label_log_likelihood
+    torch.manual_seed(0)
+    g, x, ei = _graph_inputs()
+    pos = torch.from_numpy(g.nodes).float()
+    model = CriticalGNN(5, 8, 2, 2, readout="attention").eval()
+    xx, ee = torch.cat([x, x]), torch.cat([ei, ei + x.shape[0]], 1)
+    batch = torch.cat([torch.zeros(len(x)), torch.ones(len(x))]).long()
+    with torch.no_grad():
+        out, log_a = model(xx, ee, batch, torch.cat([pos, pos]), return_log_attention=True)
+    assert out.shape == (2, 2) and log_a.shape == (2 * len(x),)
+    sums = torch.zeros(2).index_add(0, batch, log_a.exp())
+    assert torch.allclose(sums, torch.ones(2), atol=1e-5)
+    label_index, owner = torch.tensor([3, 7, len(x) + 5]), torch.tensor([0, 0, 1])
+    ll = _label_log_likelihood(log_a, label_index, owner, 2)
+    want = (torch.log(log_a[[3, 7]].exp().sum()) + log_a[len(x) + 5]) / 2
+    assert torch.allclose(ll, want, atol=1e-5)
+
+
+def test_graph_batch_all_edges_and_position():
+    g = halton_graph()
+    n = g.num_nodes
+    probs = CriticalProblems(
+        walls=[np.zeros((0, 4))], blobs=[np.zeros((0, 3))], start=np.full((1, 2), 0.1),
+        goal=np.full((1, 2), 0.9), node_free=np.ones((1, n), bool), edge_free=np.zeros((1, len(g.edges)), bool),
+        label_ptr=np.array([0, 1]), label_nodes=np.array([5]), path_cost=np.ones(1),
+        map_index=np.arange(1), split=np.zeros(1, np.int8))
+    assert graph_batch(probs, g, np.arange(1)).edge_index.shape[1] == 0
+    b = graph_batch(probs, g, np.arange(1), with_position=True, all_edges=True)
+    assert b.edge_index.shape[1] == 2 * len(g.edges) and b.x.shape == (n, 7)
+    assert torch.allclose(b.x[:, 5:], torch.from_numpy(g.nodes).float())
+    with pytest.raises(ValueError):
+        CriticalGNN(edges="some")

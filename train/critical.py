@@ -67,16 +67,20 @@ class Inputs:
     """Turns problem indices into model inputs; caches occupancy images for the CNNs."""
 
     def __init__(self, problems: CriticalProblems, graph: HaltonGraph, kind: str,
-                 with_position: bool = False) -> None:
+                 with_position: bool = False, all_edges: bool = False) -> None:
         self.problems, self.graph, self.kind = problems, graph, kind
-        self.with_position = with_position
+        self.with_position, self.all_edges = with_position, all_edges
         self.occupancy = occupancy_images(problems) if kind == "image" else None
 
     def __call__(self, idx: np.ndarray) -> dict[str, torch.Tensor]:
         if self.kind == "graph":
-            b = graph_batch(self.problems, self.graph, idx, self.with_position)
+            b = graph_batch(self.problems, self.graph, idx, self.with_position, self.all_edges)
+            n = self.graph.num_nodes
+            ptr = self.problems.label_ptr
+            lab = [self.problems.label_nodes[ptr[i]:ptr[i + 1]] + k * n for k, i in enumerate(idx)]
             return {"x": b.x, "edge_index": b.edge_index, "batch": b.batch, "pos": b.pos,
-                    "y": b.y, "owner": b.y_batch, "size": len(idx)}
+                    "y": b.y, "owner": b.y_batch, "size": len(idx),
+                    "label_index": torch.from_numpy(np.concatenate(lab).astype(np.int64))}
         ys = [label_positions(self.problems, self.graph, int(i)) for i in idx]
         return {"image": image_batch(self.occupancy[idx], self.problems.start[idx], self.problems.goal[idx]),
                 "y": torch.from_numpy(np.concatenate(ys).astype(np.float32)),
@@ -91,13 +95,23 @@ def _nearest_label_loss(pred: torch.Tensor, y: torch.Tensor, owner: torch.Tensor
     return best.mean()
 
 
-def _one_label_each(y: torch.Tensor, owner: torch.Tensor, size: int, gen: torch.Generator) -> torch.Tensor:
+def _one_label_each(y: torch.Tensor, owner: torch.Tensor, size: int, gen: torch.Generator,
+                    return_index: bool = False):
     """One random label per problem (CVAE targets: the label distribution is the target)."""
     counts = torch.bincount(owner, minlength=size)
     start = torch.cumsum(counts, 0) - counts
     pick = start + (torch.rand(size, generator=gen) * counts).long().clamp(max=counts.max() - 1)
     pick = torch.minimum(pick, start + counts - 1)
-    return y[pick]
+    return (y[pick], pick) if return_index else y[pick]
+
+
+def _label_log_likelihood(log_a: torch.Tensor, label_index: torch.Tensor, owner: torch.Tensor,
+                          size: int) -> torch.Tensor:
+    """Mean over problems of log(sum of attention on the problem's label nodes)."""
+    la = log_a[label_index]
+    m = la.detach().max()
+    per = torch.zeros(size).index_add(0, owner, torch.exp(la - m))
+    return (torch.log(per.clamp_min(1e-30)) + m).mean()
 
 
 def uses_position(model: torch.nn.Module) -> bool:
@@ -105,16 +119,35 @@ def uses_position(model: torch.nn.Module) -> bool:
     return getattr(model, "in_channels", NODE_FEATURES) == NODE_FEATURES_WITH_POSITION
 
 
+def graph_inputs_of(model: torch.nn.Module, problems: CriticalProblems, graph: HaltonGraph,
+                    kind: str) -> "Inputs":
+    """The input builder matching a model's feature width and edge mode."""
+    if kind != "graph":
+        return Inputs(problems, graph, kind)
+    return Inputs(problems, graph, kind, uses_position(model), getattr(model, "edges", "valid") == "all")
+
+
 def _loss(model: torch.nn.Module, name: str, inp: dict, hp: dict, gen: torch.Generator) -> torch.Tensor:
     kind, out = MODELS[name][1], MODELS[name][2]
+    node_w = hp.get("node_loss_weight", 0.0) if getattr(model, "readout", "max") == "attention" else 0.0
     if out == "det":
+        if kind == "graph" and node_w > 0:
+            pred, log_a = model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"], return_log_attention=True)
+            return (_nearest_label_loss(pred, inp["y"], inp["owner"])
+                    - node_w * _label_log_likelihood(log_a, inp["label_index"], inp["owner"], inp["size"]))
         pred = (model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"]) if kind == "graph"
                 else model(inp["image"]))
         return _nearest_label_loss(pred, inp["y"], inp["owner"])
-    y = _one_label_each(inp["y"], inp["owner"], inp["size"], gen)
+    y, pick = _one_label_each(inp["y"], inp["owner"], inp["size"], gen, return_index=True)
     if kind == "graph":
         mu, logstd = model.encode(inp["x"], inp["edge_index"], y, inp["pos"], inp["batch"])
         z = model.reparametrize(mu, logstd, gen)
+        if node_w > 0:
+            y_hat, log_a = model.decode(z, inp["x"], inp["edge_index"], inp["batch"], inp["pos"],
+                                        return_log_attention=True)
+            ll = log_a[inp["label_index"][pick]].mean()
+            return (model.recon_loss(y_hat, y) + hp["kl_weight"] * model.kl_loss(mu, logstd)
+                    - node_w * ll)
         y_hat = model.decode(z, inp["x"], inp["edge_index"], inp["batch"], inp["pos"])
     else:
         mu, logstd = model.encode(inp["image"], y)
@@ -135,7 +168,7 @@ def predict(model: torch.nn.Module, name: str, problems: CriticalProblems, graph
     """
     model.eval()
     kind, out = MODELS[name][1], MODELS[name][2]
-    inputs = Inputs(problems, graph, kind, kind == "graph" and uses_position(model))
+    inputs = graph_inputs_of(model, problems, graph, kind)
     gen = torch.Generator().manual_seed(seed)
     points, samples = [], []
     for s in tqdm(range(0, len(problems), batch_size), desc=f"predict {name}", disable=not progress):
@@ -183,7 +216,8 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
           seed: int = 0, out: str | Path | None = None, resume: bool = False,
           time_budget_min: float | None = None, max_train_problems: int | None = None,
           dataset: DatasetConfig | None = None, progress: bool = True, lr: float | None = None,
-          batch_size: int | None = None, model_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+          batch_size: int | None = None, model_overrides: dict[str, Any] | None = None,
+          hp_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Train one model; keeps the best-validation weights in ``out`` (+ a json of metadata).
 
     ``lr``, ``batch_size`` and ``model_overrides`` (constructor kwargs, e.g.
@@ -198,6 +232,7 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
     cfg = dataset or DatasetConfig()
     hp = dict(HPARAMS[model_name])
     hp["model"] = {**hp["model"], **(model_overrides or {})}
+    hp.update(hp_overrides or {})
     if lr is not None:
         hp["lr"] = lr
     if batch_size is not None:
@@ -213,7 +248,7 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
     kind = MODELS[model_name][1]
     torch.manual_seed(seed)
     model = build_model(model_name, **hp["model"])
-    inputs = Inputs(train_set, graph, kind, kind == "graph" and uses_position(model))
+    inputs = graph_inputs_of(model, train_set, graph, kind)
     opt = torch.optim.Adam(model.parameters(), lr=hp["lr"])
     ckpt_path, meta_path, resume_path = _checkpoint_paths(model_name, out, data_dir)
     start_epoch, history, best = 0, [], {"val_accuracy": -math.inf, "epoch": -1}
@@ -432,6 +467,10 @@ def add_subparsers(subparsers: Any) -> None:
                    help="graph models: the paper's max pool + FC, or attention over node positions")
     t.add_argument("--features", choices=["paper", "position"], default=None,
                    help="graph models: eq. featurestate (5) or with x_n appended (7)")
+    t.add_argument("--edges", choices=["valid", "all"], default=None,
+                   help="graph models: collision-free edges only, or the whole fixed graph")
+    t.add_argument("--node-loss", type=float, default=None,
+                   help="attention readout: weight of the label-node log-likelihood term")
     t.add_argument("--threads", type=int, default=2, help="torch threads")
     _dataset_args(t)
     t.set_defaults(func=_cmd_train)
@@ -463,9 +502,15 @@ def _cmd_train(a: argparse.Namespace) -> None:
         over["readout"] = a.readout
     if a.features is not None:
         over["in_channels"] = NODE_FEATURES_WITH_POSITION if a.features == "position" else NODE_FEATURES
+    if a.edges is not None:
+        over["edges"] = a.edges
+    if a.node_loss is not None:
+        hp_extra = {"node_loss_weight": a.node_loss}
+    else:
+        hp_extra = {}
     res = train(a.model, a.data, a.epochs, a.seed, a.out, a.resume, a.time_budget,
                 a.max_train_problems, DatasetConfig(seed=a.data_seed), lr=a.lr,
-                batch_size=a.batch_size, model_overrides=over)
+                batch_size=a.batch_size, model_overrides=over, hp_overrides=hp_extra)
     print(json.dumps(res["best"]))
 
 

@@ -31,6 +31,10 @@ NODE_FEATURES = 5
 NODE_FEATURES_WITH_POSITION = 7
 #: Graph readouts: the paper's global max pool + FC, or attention over node positions.
 READOUTS = ("max", "attention")
+#: Which edges the graph filters run on: the problem's collision-free edges only, or every
+#: edge of the fixed r-disc graph (then the obstacle indicator reaches free nodes). The
+#: models only record the choice; :mod:`agents.critical_data` builds the edges.
+EDGE_MODES = ("valid", "all")
 #: Predicted critical state dimension (x, y).
 STATE_DIM = 2
 #: Occupancy, start and goal channels of the CNN baselines.
@@ -54,8 +58,12 @@ class GraphPoolRegressor(nn.Module):
     """
 
     def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
-                 out_channels: int, head_in_extra: int = 0, readout: str = "max") -> None:
+                 out_channels: int, head_in_extra: int = 0, readout: str = "max",
+                 edges: str = "valid") -> None:
         super().__init__()
+        if edges not in EDGE_MODES:
+            raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
+        self.edges = edges
         if readout not in READOUTS:
             raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
         if readout == "attention" and out_channels != STATE_DIM:
@@ -89,11 +97,13 @@ class GraphPoolRegressor(nn.Module):
         """Graph max pool of the node embeddings (B, hidden) (permutation invariant)."""
         return global_max_pool(self.node_embeddings(x, edge_index), batch)
 
-    def attend(self, h: Tensor, pos: Tensor, batch: Tensor | None, extra: Tensor | None = None) -> Tensor:
+    def attend(self, h: Tensor, pos: Tensor, batch: Tensor | None, extra: Tensor | None = None,
+               return_log_attention: bool = False):
         """Attention readout of node embeddings ``h`` (N, H).
 
         ``extra`` (N, E) or (N, k, E) is concatenated to every node embedding before scoring
-        (the GNN-CVAE's latent); the result is (B, 2) or (B, k, 2).
+        (the GNN-CVAE's latent); the result is (B, 2) or (B, k, 2), and with
+        ``return_log_attention`` also the per-node log attention (N,) or (N, k).
         """
         if batch is None:
             batch = torch.zeros(h.shape[0], dtype=torch.long, device=h.device)
@@ -102,19 +112,26 @@ class GraphPoolRegressor(nn.Module):
             if extra.dim() == 3:
                 h = h[:, None, :].expand(-1, extra.shape[1], -1)
             h = torch.cat([h, extra], -1)
-        a = softmax(self.score(h).squeeze(-1), batch, num_nodes=h.shape[0], dim=0)  # (N,) or (N, k)
+        s = self.score(h).squeeze(-1)
+        a = softmax(s, batch, num_nodes=h.shape[0], dim=0)  # (N,) or (N, k)
         w = a.unsqueeze(-1)
         p = pos if a.dim() == 1 else pos[:, None, :]
         mean_pos = scatter(w * p, batch, dim=0, dim_size=num_graphs, reduce="sum")
         pooled = scatter(w * h, batch, dim=0, dim_size=num_graphs, reduce="sum")
-        return mean_pos + self.head(pooled)
+        out = mean_pos + self.head(pooled)
+        if return_log_attention:
+            lse = torch.log(scatter(torch.exp(s - s.max()), batch, dim=0, dim_size=num_graphs,
+                                    reduce="sum")) + s.max()
+            return out, s - lse[batch]
+        return out
 
     def forward(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None,
-                pos: Tensor | None = None) -> Tensor:
+                pos: Tensor | None = None, return_log_attention: bool = False):
         if self.readout == "attention":
             if pos is None:
                 raise ValueError("the attention readout needs the node positions pos")
-            return self.attend(self.node_embeddings(x, edge_index), pos, batch)
+            return self.attend(self.node_embeddings(x, edge_index), pos, batch,
+                               return_log_attention=return_log_attention)
         return self.head(self.pool(x, edge_index, batch)) + CENTRE
 
 
@@ -123,9 +140,10 @@ class CriticalGNN(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, K: int = 3,
-                 head_in_extra: int = 0, readout: str = "max") -> None:
+                 head_in_extra: int = 0, readout: str = "max", edges: str = "valid") -> None:
         self.K = K
-        super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra, readout)
+        super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra, readout,
+                         edges)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         # Normalisation is done once per pass in propagation() (same result as normalize=True).
@@ -146,9 +164,10 @@ class CriticalGAT(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, heads: int = 1,
-                 readout: str = "max") -> None:
+                 readout: str = "max", edges: str = "valid") -> None:
         self.heads = heads
-        super().__init__(in_channels, hidden_channels, num_layers, out_channels, readout=readout)
+        super().__init__(in_channels, hidden_channels, num_layers, out_channels, readout=readout,
+                         edges=edges)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         return GATv2Conv(in_channels, out_channels, heads=self.heads, concat=False)
@@ -192,9 +211,12 @@ class CriticalGNNCVAE(_GaussianLatent):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, latent_channels: int = 2,
-                 K: int = 3, readout: str = "max") -> None:
+                 K: int = 3, readout: str = "max", edges: str = "valid") -> None:
         super().__init__()
+        if edges not in EDGE_MODES:
+            raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
         self.in_channels, self.latent_channels, self.readout = in_channels, latent_channels, readout
+        self.edges = edges
         self.encoder = CriticalGNN(in_channels + out_channels, hidden_channels, num_layers,
                                    2 * latent_channels, K=K)
         self.decoder = CriticalGNN(in_channels, hidden_channels, num_layers, out_channels, K=K,
@@ -219,19 +241,19 @@ class CriticalGNNCVAE(_GaussianLatent):
             return (self.decoder.node_embeddings(x, edge_index), pos, batch)
         return self.decoder.pool(x, edge_index, batch)
 
-    def decode_pooled(self, pooled, z: Tensor) -> Tensor:
+    def decode_pooled(self, pooled, z: Tensor, return_log_attention: bool = False):
         """Decode z (B, P) or (B, k, P) given :meth:`condition`'s output."""
         if self.readout == "attention":
             h, pos, batch = pooled
             zn = z[batch] if batch is not None else z.expand(h.shape[0], *z.shape[1:])
-            return self.decoder.attend(h, pos, batch, zn)
+            return self.decoder.attend(h, pos, batch, zn, return_log_attention)
         if z.dim() == 3:
             pooled = pooled[:, None, :].expand(-1, z.shape[1], -1)
         return self.decoder.head(torch.cat([pooled, z], -1)) + CENTRE
 
     def decode(self, z: Tensor, x: Tensor, edge_index: Tensor, batch: Tensor | None = None,
-               pos: Tensor | None = None) -> Tensor:
-        return self.decode_pooled(self.condition(x, edge_index, batch, pos), z)
+               pos: Tensor | None = None, return_log_attention: bool = False):
+        return self.decode_pooled(self.condition(x, edge_index, batch, pos), z, return_log_attention)
 
     def sample(self, x: Tensor, edge_index: Tensor, batch: Tensor | None, num_samples: int,
                generator: torch.Generator | None = None, pos: Tensor | None = None) -> Tensor:
