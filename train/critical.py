@@ -41,14 +41,15 @@ CHECKPOINT_DIR = Path(__file__).resolve().parent.parent / "agents" / "checkpoint
 #: Per-model defaults: architecture kwargs and optimisation settings.
 HPARAMS: dict[str, dict[str, Any]] = {
     "gnn": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "K": 3,
-                      "readout": "attention"},
-            "lr": 3e-3, "batch_size": 16, "epochs": 3},
+                      "readout": "attention", "edges": "all"},
+            "lr": 3e-3, "batch_size": 16, "epochs": 3, "node_loss_weight": 0.05},
     "gat": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "heads": 1,
-                      "readout": "attention"},
-            "lr": 3e-3, "batch_size": 16, "epochs": 2},
+                      "readout": "attention", "edges": "all"},
+            "lr": 3e-3, "batch_size": 16, "epochs": 2, "node_loss_weight": 0.05},
     "gnn-cvae": {"model": {"in_channels": 7, "hidden_channels": 32, "num_layers": 3, "K": 3,
-                           "latent_channels": 2, "readout": "attention"},
-                 "lr": 3e-3, "batch_size": 16, "epochs": 2, "kl_weight": 0.005},
+                           "latent_channels": 2, "readout": "attention", "edges": "all"},
+                 "lr": 3e-3, "batch_size": 16, "epochs": 2, "kl_weight": 0.005,
+                 "node_loss_weight": 0.05},
     "cnn": {"model": {"hidden_channels": 16, "num_layers": 4},
             "lr": 1e-3, "batch_size": 64, "epochs": 30},
     "cvae": {"model": {"hidden_channels": 16, "num_layers": 4, "latent_channels": 2},
@@ -273,6 +274,11 @@ def train(model_name: str, data_dir: str | Path = DEFAULT_DATA_DIR, epochs: int 
         out_of_time = False
         for step in bar:
             idx = order[step * hp["batch_size"]:(step + 1) * hp["batch_size"]]
+            if hp.get("cosine") and budget_s is not None:
+                # learning rate on a cosine over the wall-clock budget (anneals to 5% of lr)
+                frac = min(1.0, (time.perf_counter() - t_start) / budget_s)
+                for group in opt.param_groups:
+                    group["lr"] = hp["lr"] * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * frac)))
             loss = _loss(model, model_name, inputs(idx), hp, gen)
             opt.zero_grad()
             loss.backward()
@@ -471,6 +477,8 @@ def add_subparsers(subparsers: Any) -> None:
                    help="graph models: collision-free edges only, or the whole fixed graph")
     t.add_argument("--node-loss", type=float, default=None,
                    help="attention readout: weight of the label-node log-likelihood term")
+    t.add_argument("--cosine", action="store_true",
+                   help="with --time-budget: cosine learning-rate decay over the wall-clock budget")
     t.add_argument("--threads", type=int, default=2, help="torch threads")
     _dataset_args(t)
     t.set_defaults(func=_cmd_train)
@@ -504,10 +512,11 @@ def _cmd_train(a: argparse.Namespace) -> None:
         over["in_channels"] = NODE_FEATURES_WITH_POSITION if a.features == "position" else NODE_FEATURES
     if a.edges is not None:
         over["edges"] = a.edges
+    hp_extra: dict[str, Any] = {}
     if a.node_loss is not None:
-        hp_extra = {"node_loss_weight": a.node_loss}
-    else:
-        hp_extra = {}
+        hp_extra["node_loss_weight"] = a.node_loss
+    if a.cosine:
+        hp_extra["cosine"] = True
     res = train(a.model, a.data, a.epochs, a.seed, a.out, a.resume, a.time_budget,
                 a.max_train_problems, DatasetConfig(seed=a.data_seed), lr=a.lr,
                 batch_size=a.batch_size, model_overrides=over, hp_overrides=hp_extra)
