@@ -117,11 +117,26 @@ def test_birrt_rejects_kinodynamic_problems():
 
 def test_blocked_motion_adds_no_node_and_counts_checks():
     maze = MazeMap(walls=[[0.45, 0.0, 0.55, 1.0]])  # no gap: unsolvable
-    problem = Maze2DProblem(maze, [0.2, 0.5], [0.8, 0.5])
+    problem = Maze2DProblem(maze, [0.43, 0.5], [0.8, 0.5])
     planner = RRT(problem, 100)
-    result = planner.step(np.array([0.8, 0.5]))
-    assert result.added == [] or np.all(planner.tree.states[result.added][:, 0] < 0.45)
-    assert problem.collision_checks >= 1
+    result = planner.step(np.array([0.8, 0.5]))  # the first step of 0.05 would enter the wall
+    assert result.added == [] and len(planner.tree) == 1
+    assert problem.collision_checks == 1 and problem.edges_checked == 1
+    result = planner.step(np.array([0.43, 0.9]))  # along the wall: free
+    assert len(result.added) == 1
+
+
+def test_birrt_connects_when_the_other_tree_already_holds_the_target():
+    """Sampling a root of the other tree must join the trees, not stall on a zero-length motion."""
+    problem = Maze2DProblem(MazeMap(), [0.5, 0.5], [0.53125, 0.5])
+    planner = BiRRT(problem, 50)
+    for _ in range(4):
+        target = problem.goal if planner.active_tree == 0 else problem.start
+        if planner.step(target.copy()).solved:
+            break
+    assert planner.solved
+    np.testing.assert_allclose(planner.solution.states[[0, -1]], [problem.start, problem.goal])
+    assert planner.solution.length == pytest.approx(0.03125)
 
 
 def test_pendulum_edges_reintegrate_to_stored_states():

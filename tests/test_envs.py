@@ -129,6 +129,10 @@ def test_bad_constructor_arguments():
         TreePlanningEnv(task="nope")
     with pytest.raises(ValueError, match="supports planners"):
         TreePlanningEnv(task="pendulum", planner="birrt")
+    with pytest.raises(ValueError, match="max_nodes"):
+        TreePlanningEnv(task="maze2d", max_nodes=0)
+    with pytest.raises(ValueError, match="max_steps"):
+        TreePlanningEnv(task="maze2d", max_steps=0)
 
 
 def test_truncation_at_node_budget():
@@ -139,9 +143,8 @@ def test_truncation_at_node_budget():
         obs, r, terminated, truncated, info = env.step(rng.uniform(0, 1, 2).astype(np.float32))
         if terminated or truncated:
             break
-    assert truncated or terminated
-    if truncated:
-        assert info["nodes_expanded"] == 20 and not info["is_success"]
+    assert truncated and not terminated
+    assert info["nodes_expanded"] == 20 and not info["is_success"]
 
 
 def test_reward_is_step_penalty_plus_success_bonus():

@@ -19,7 +19,6 @@ planners' runs as an OMPL benchmark log for ``ompl_benchmark_statistics.py``/Pla
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from typing import Any
@@ -30,6 +29,7 @@ from tqdm import tqdm
 
 import gnn_mp_envs  # noqa: F401  (registers the environments)
 from gnn_mp_envs.tasks.arm import ArmTask
+from train.args import OneLineParser
 
 ENV_ID = "GNNMP/ArmBiRRT-v0"
 
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(argv: list[str] | None = None) -> dict[str, Any]:
     """Measure and print everything; returns the report (also written with ``--json``)."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = OneLineParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="test", help="scene family (held out: test)")
     ap.add_argument("--split", default="test")
     ap.add_argument("--problems", type=int, default=50)

@@ -10,7 +10,6 @@ neighbour query is the only part that scans the tree.
 
 from __future__ import annotations
 
-import argparse
 import time
 from dataclasses import dataclass
 
@@ -19,6 +18,7 @@ import numpy as np
 
 import gnn_mp_envs  # noqa: F401  (registers the environments)
 from gnn_mp_envs.registration import TASK_ENV_IDS
+from train.args import OneLineParser
 
 
 @dataclass
@@ -44,7 +44,8 @@ def _goal_free(problem) -> None:
 def measure(task: str, sizes: tuple[int, ...], window: int, seed: int,
             copy_observations: bool = True) -> dict[int, float]:
     """Steps per second of ``env.step`` at each tree size in ``sizes``."""
-    max_nodes = max(sizes) + window + 10
+    registered = gym.spec(TASK_ENV_IDS[task]).kwargs["max_nodes"]
+    max_nodes = max(registered, max(sizes) + window + 10)  # pad as users get it, or more if needed
     env = gym.make(TASK_ENV_IDS[task], max_nodes=max_nodes, max_steps=100 * max_nodes,
                    split="test", copy_observations=copy_observations).unwrapped
     problem = env.task.problem("test", 0)
@@ -66,7 +67,7 @@ def measure(task: str, sizes: tuple[int, ...], window: int, seed: int,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="gnn-mp bench-env", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="gnn-mp bench-env", description=__doc__.splitlines()[0])
     parser.add_argument("--tasks", default=",".join(Args.tasks), help="comma-separated tasks")
     parser.add_argument("--sizes", default=",".join(map(str, Args.sizes)), help="comma-separated tree sizes")
     parser.add_argument("--window", type=int, default=Args.window, help=Args.__doc__ and "timed steps per size")

@@ -19,6 +19,8 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from train.args import OneLineParser
+
 PROG = "gnn-mp"
 
 #: Subcommands handled by another module's ``main(argv)``; imported only when used.
@@ -35,13 +37,6 @@ TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
 
 class CLIError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """argparse, but errors are a single line on stderr (usage stays available via --help)."""
-
-    def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def fail(message: str, code: int = 2):

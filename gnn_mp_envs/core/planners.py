@@ -53,11 +53,12 @@ class TreePlanner:
     def _nearest(self, x: np.ndarray, tree: int) -> int:
         return self.tree.nearest(x, tree, self.problem)
 
-    def _extend(self, tree: int, target: np.ndarray, added: list[int]) -> int | None:
-        """One steer from the nearest node of ``tree`` toward ``target``; new node index."""
+    def _extend(self, tree: int, target: np.ndarray, added: list[int], near: int | None = None) -> int | None:
+        """One steer from the nearest node of ``tree`` (or ``near``) toward ``target``; new node index."""
         if self.tree.full:
             return None
-        near = self._nearest(target, tree)
+        if near is None:
+            near = self._nearest(target, tree)
         edge = self.problem.steer(self.tree.states[near], target)
         if edge is None:
             return None
@@ -123,13 +124,18 @@ class BiRRT(TreePlanner):
         self.tree.add(problem.goal, -1, 1)
 
     def _connect(self, tree: int, target: np.ndarray, added: list[int]) -> int | None:
-        """Extend ``tree`` toward ``target`` until it is reached (index) or blocked (None)."""
+        """Extend ``tree`` toward ``target`` until it is reached (index) or blocked (None).
+
+        A node of ``tree`` already at ``target`` (e.g. both trees sampled the same root)
+        counts as reached: steering toward it would be a zero-length, refused motion.
+        """
+        near = self._nearest(target, tree)
         while True:
-            i = self._extend(tree, target, added)
-            if i is None:
+            if float(self.problem.distance(target[None], self.tree.states[near])[0]) < 1e-9:
+                return near
+            near = self._extend(tree, target, added, near)
+            if near is None:
                 return None
-            if float(self.problem.distance(target[None], self.tree.states[i])[0]) < 1e-9:
-                return i
 
     def step(self, sample: np.ndarray) -> StepResult:
         self.iterations += 1

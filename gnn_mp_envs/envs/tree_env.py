@@ -94,10 +94,10 @@ class TreePlanningEnv(gym.Env):
         self.task = make_task(task, **(task_kwargs or {}))
         if planner not in self.task.planners:
             raise ValueError(f"task {task!r} supports planners {self.task.planners}, not {planner!r}")
-        self.max_nodes = int(max_nodes or self.task.default_max_nodes)
+        self.max_nodes = self.task.default_max_nodes if max_nodes is None else int(max_nodes)
         if self.max_nodes < 2:
             raise ValueError(f"max_nodes must be >= 2, got {self.max_nodes}")
-        self.max_steps = int(max_steps or 4 * self.max_nodes)
+        self.max_steps = 4 * self.max_nodes if max_steps is None else int(max_steps)
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         self.planner_name = planner

@@ -40,7 +40,7 @@ GOAL_SPEED_TOLERANCE = 0.5    # rad/s
 
 
 def wrap_angle(theta: np.ndarray | float) -> np.ndarray:
-    """Wrap to [-pi, pi)."""
+    """Wrap to [-pi, pi] (pi itself only through float rounding just below -pi)."""
     return (np.asarray(theta) + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -106,7 +106,7 @@ class PendulumProblem(Problem):
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
     def nn_embed(self, states: np.ndarray) -> np.ndarray:
-        """``[theta + pi (periodic, 2 pi), VELOCITY_WEIGHT * (omega + MAX_SPEED)]``."""
+        """``[theta + pi (periodic, 2 pi), VELOCITY_WEIGHT * (omega + 4 MAX_SPEED)]`` (non-negative)."""
         s = np.asarray(states, dtype=np.float64)
         return np.stack([np.mod(s[..., 0] + np.pi, 2 * np.pi),
                          VELOCITY_WEIGHT * (s[..., 1] + 4 * MAX_SPEED)], axis=-1)
