@@ -30,6 +30,36 @@ from gymnasium import spaces
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore
 
+#: glibc ``mallopt`` parameters (see ``man mallopt``).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_heap_tuned = False
+
+
+def keep_freed_heap(trim_threshold: int = 64 << 20, mmap_threshold: int = 32 << 20) -> bool:
+    """Stop glibc from handing freed heap back to the OS after every step (once per process).
+
+    Each step returns fresh copies of the padded arrays (0.7 MB for the 20,000-node
+    pendulum observation). By default glibc returns the freed copies to the OS (``brk``
+    trimming), so the next copies page-fault in anew: measured 185 us per step against
+    22 us once freed memory stays in the heap. Raising the trim threshold to 64 MiB (and
+    pinning the mmap threshold at 32 MiB, which setting the former would otherwise freeze
+    at 128 KiB) keeps it; the process then holds at most that much idle heap. A no-op
+    returning False where glibc is not the allocator.
+    """
+    global _heap_tuned
+    if _heap_tuned:
+        return True
+    try:
+        import ctypes
+        libc = ctypes.CDLL("libc.so.6")
+        ok = bool(libc.mallopt(_M_MMAP_THRESHOLD, mmap_threshold)) and bool(
+            libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold))
+    except (OSError, AttributeError):
+        return False
+    _heap_tuned = ok
+    return ok
+
+
 OBSERVATION_KEYS = ("nodes", "node_features", "parent", "mask", "num_nodes", "start", "goal",
                     "active_tree")
 

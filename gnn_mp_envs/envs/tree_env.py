@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from gnn_mp_envs.core.planners import PLANNERS, make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.envs.observation import GraphObservation, observation_space
+from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, observation_space
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS, Task
 
 #: Task name -> "module:Class". Tasks are imported on first use (the arm pulls in pybullet).
@@ -107,6 +107,8 @@ class TreePlanningEnv(gym.Env):
         self.success_reward = float(success_reward)
         self.collision_check_cost = float(collision_check_cost)
         self.copy_observations = bool(copy_observations)
+        if self.copy_observations:
+            keep_freed_heap()
 
         low, high = self.task.state_bounds()
         self.state_dim = int(low.shape[0])
