@@ -45,34 +45,23 @@ def fail(message: str, code: int = 2):
 
 
 # ---------------------------------------------------------------------------- argument types
-def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
+def _bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: str) -> Callable[[str], float]:
+    """An argparse type: ``cast(text)`` that must be ``> minimum`` (strict) or ``>= minimum``."""
+    def parse(text: str):
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        if not (value > minimum if strict else value >= minimum):  # also rejects NaN
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {minimum}, got {value}")
+        return value
+    parse.__name__ = noun
+    return parse
 
 
-def non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {value}")
-    return value
+positive_int = _bounded(int, 1, False, "a positive integer")
+non_negative_int = _bounded(int, 0, False, "a non-negative integer")
+positive_float = _bounded(float, 0, True, "a positive number")
 
 
 def checkpoint_pair(text: str) -> tuple[str, Path]:
