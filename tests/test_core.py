@@ -80,13 +80,19 @@ def test_axis_parallel_segments_hit_walls():
     assert maze.segments_free(p, q).tolist() == [False, True, False]
 
 
+def solve_uniform(planner, problem, seed=0, on_step=None):
+    """Drive ``planner`` with uniform samples until it finds a path."""
+    rng = np.random.default_rng(seed)
+    while not planner.solved:
+        if on_step is not None:
+            on_step(planner)
+        planner.step(problem.sample_uniform(rng))
+    return planner.solution
+
+
 def test_rrt_path_is_valid_and_connects_start_to_goal():
     problem = Maze2DTask().problem("test", 3)
-    planner = RRT(problem, 5000)
-    rng = np.random.default_rng(0)
-    while not planner.solved:
-        planner.step(problem.sample_uniform(rng))
-    sol = planner.solution
+    sol = solve_uniform(RRT(problem, 5000), problem)
     assert np.allclose(sol.states[0], problem.start)
     assert np.allclose(sol.states[-1], problem.goal)
     assert problem.path_valid(sol.states)
@@ -95,14 +101,9 @@ def test_rrt_path_is_valid_and_connects_start_to_goal():
 
 def test_birrt_alternates_trees_and_joins_them():
     problem = Maze2DTask().problem("test", 5)
-    planner = BiRRT(problem, 5000)
-    rng = np.random.default_rng(0)
     active = []
-    while not planner.solved:
-        active.append(planner.active_tree)
-        planner.step(problem.sample_uniform(rng))
+    sol = solve_uniform(BiRRT(problem, 5000), problem, on_step=lambda pl: active.append(pl.active_tree))
     assert active[:4] == [0, 1, 0, 1]
-    sol = planner.solution
     assert np.allclose(sol.states[0], problem.start) and np.allclose(sol.states[-1], problem.goal)
     steps = np.linalg.norm(np.diff(sol.states, axis=0), axis=1)
     assert np.all(steps > 0) and np.all(steps <= problem.step_size + 1e-9)
@@ -141,11 +142,7 @@ def test_birrt_connects_when_the_other_tree_already_holds_the_target():
 
 def test_pendulum_edges_reintegrate_to_stored_states():
     problem = PendulumTask().problem("test", 0)
-    planner = RRT(problem, 20000)
-    rng = np.random.default_rng(0)
-    while not planner.solved:
-        planner.step(problem.sample_uniform(rng))
-    sol = planner.solution
+    sol = solve_uniform(RRT(problem, 20000), problem)
     assert problem.in_goal(sol.states[-1])
     assert problem.path_valid(sol.states, sol.controls)
     # Tampering with a control breaks the re-check: the check is not vacuous.

@@ -67,10 +67,10 @@ class TreePlanner:
         return i
 
     def _path(self, nodes: list[int]) -> Solution:
+        """The root-to-node path ``nodes``; its length is the last node's cost-to-come."""
         t = self.tree
         return Solution(states=t.states[nodes].copy(), controls=t.controls[nodes].copy(),
-                        length=float(sum(t.cost[i] - t.cost[t.parent[i]] for i in nodes[1:])
-                                     if len(nodes) > 1 else 0.0))
+                        length=float(t.cost[nodes[-1]]))
 
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
