@@ -1,12 +1,163 @@
-"""Argument parsing shared by the ``gnn-mp`` entry points."""
+"""Argument parsing shared by the ``gnn-mp`` entry points.
+
+Each entry point keeps its flags in one dataclass (CleanRL's habit): a field's default,
+type and help text are written once, next to each other, and :func:`add_dataclass_arguments`
+turns them into argparse flags. :func:`from_namespace` builds the dataclass back from the
+parsed flags, so the training and benchmark functions take the dataclass, not ``argparse``.
+
+    @dataclass
+    class Args:
+        epochs: int = arg(20, "passes over the training set")
+        out: Path | None = arg(None, "checkpoint file (default: a run directory)")
+
+    parser = OneLineParser(prog="gnn-mp thing")
+    add_dataclass_arguments(parser, Args)
+    args = from_namespace(Args, parser.parse_args(argv))
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
+import types
+import typing
+from pathlib import Path
+from typing import Any, Callable
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse, but errors are a single line on stderr (usage stays available via --help)."""
+    """argparse, but errors are a single line on stderr (usage stays available via --help);
+    ``--help`` shows every flag's default."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def arg(default: Any, help: str, *, flag: str | None = None, choices: typing.Sequence[Any] | None = None,
+        metavar: str | None = None, parse: Callable[[str], Any] | None = None) -> Any:
+    """A dataclass field carrying its command-line help (and optional flag name, choices, parser).
+
+    Mutable defaults (lists, dicts, tuples of lists) are copied per instance.
+    """
+    meta = {"help": help, "flag": flag, "choices": choices, "metavar": metavar, "parse": parse}
+    if isinstance(default, (list, dict, set)):
+        return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+# ---------------------------------------------------------------------------- value parsers
+def bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: str) -> Callable[[str], float]:
+    """An argparse type: ``cast(text)`` that must be ``> minimum`` (strict) or ``>= minimum``."""
+    def parse(text: str):
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        if not (value > minimum if strict else value >= minimum) or (
+                isinstance(value, float) and not math.isfinite(value)):  # NaN and inf too
+            raise argparse.ArgumentTypeError(f"must be a finite number {'>' if strict else '>='} {minimum}, "
+                                             f"got {text}")
+        return value
+    parse.__name__ = noun
+    return parse
+
+
+positive_int = bounded(int, 1, False, "a positive integer")
+non_negative_int = bounded(int, 0, False, "a non-negative integer")
+positive_float = bounded(float, 0, True, "a positive number")
+non_negative_float = bounded(float, 0, False, "a non-negative number")
+
+
+def name_list(text: str) -> list[str]:
+    """A comma-separated list of names (at least one)."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected a comma-separated list of names")
+    return names
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        return [int(v) for v in name_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def _float_list(text: str) -> list[float]:
+    try:
+        return [float(v) for v in name_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+# ---------------------------------------------------------------------------- dataclass -> flags
+def _unwrap_optional(tp: Any) -> tuple[Any, bool]:
+    """``X | None`` -> (X, True); anything else -> (tp, False)."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) == 1 and len(typing.get_args(tp)) == 2:
+            return args[0], True
+    return tp, False
+
+
+def _parser_for(tp: Any) -> tuple[Callable[[str], Any] | None, bool]:
+    """(argparse type, is_sequence) for a field annotation."""
+    origin = typing.get_origin(tp)
+    if origin in (list, tuple):
+        (item, *_) = typing.get_args(tp) or (str,)
+        return {int: _int_list, float: _float_list}.get(item, name_list), True
+    if tp is Path:
+        return Path, False
+    if tp in (int, float, str):
+        return tp, False
+    return None, False
+
+
+def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, skip: typing.Iterable[str] = ()) -> None:
+    """Add one ``--flag`` per field of the dataclass ``cls`` (``snake_case`` -> ``--snake-case``).
+
+    Booleans become switches: ``--name`` when the default is False, ``--no-name`` when it
+    is True. Lists and tuples are comma-separated. A field's ``arg(parse=...)`` overrides
+    the parser chosen from its annotation.
+    """
+    hints = typing.get_type_hints(cls)
+    skip = set(skip)
+    for f in dataclasses.fields(cls):
+        if f.name in skip or not f.init:
+            continue
+        meta = f.metadata
+        tp, _optional = _unwrap_optional(hints[f.name])
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        help_text = meta.get("help", "")
+        if tp is bool:
+            flag = meta.get("flag") or ("--no-" if default else "--") + f.name.replace("_", "-")
+            parser.add_argument(flag, dest=f.name, action="store_false" if default else "store_true",
+                                help=help_text + "%(default).0s")   # a switch: no "(default: ...)"
+            continue
+        flag = meta.get("flag") or "--" + f.name.replace("_", "-")
+        parse, _ = _parser_for(tp)
+        parse = meta.get("parse") or parse
+        if parse is None:
+            raise TypeError(f"{cls.__name__}.{f.name}: no command-line parser for {hints[f.name]!r}; "
+                            "give arg(parse=...)")
+        help_text = help_text or ""
+        if isinstance(default, (list, tuple)):
+            # Comma-separated default in --help instead of a Python repr ("%(default).0s" prints
+            # nothing and stops the formatter from appending the repr).
+            help_text += f" (default: {','.join(map(str, default))})%(default).0s"
+        parser.add_argument(flag, dest=f.name, type=parse, default=default, choices=meta.get("choices"),
+                            metavar=meta.get("metavar"), help=help_text)
+
+
+def from_namespace(cls: type, ns: argparse.Namespace, **overrides: Any):
+    """The dataclass ``cls`` built from parsed flags (fields absent from ``ns`` keep their default)."""
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    values = {k: v for k, v in vars(ns).items() if k in names}
+    values.update(overrides)
+    return cls(**values)
