@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from gnn_mp_envs.core.planners import make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.tasks.arm import JOINT_HIGH, JOINT_LOW, ArmProblem, ArmTask
-from gnn_mp_envs.tasks.arm_scenes import SCENE_FAMILIES, Obstacle, sample_scene
+from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, Obstacle, sample_scene
 
 ENV_ID = "GNNMP/ArmBiRRT-v0"
 #: Forearm folded down so the wrist presses into the base and first link: self-collision only.

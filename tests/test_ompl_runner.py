@@ -160,7 +160,7 @@ def test_control_planners_solve_pendulum_with_the_same_dynamics_and_checker(plan
     """oc.RRT / oc.KPIECE1 on two held-out pendulum problems: solved exactly, every
     integrated state counted by problem.check_state, and the returned controls, re-simulated
     here with pendulum.rollout, arrive at states satisfying problem.in_goal."""
-    from gnn_mp_envs.envs.tree_env import make_task
+    from gnn_mp_envs.registration import make_task
     from gnn_mp_envs.tasks import pendulum as pend
 
     results = run_ompl("pendulum", [0, 1], time_limit=10.0, planner=planner, seed=0, keep_paths=True)

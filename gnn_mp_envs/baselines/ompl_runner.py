@@ -471,7 +471,7 @@ def main(argv: list[str] | None = None) -> None:
         os._exit(EXIT_NO_OMPL)
     code = 0
     try:
-        from gnn_mp_envs.envs.tree_env import make_task
+        from gnn_mp_envs.registration import make_task
 
         ou.setLogLevel(ou.LOG_WARN)
         ou.RNG.setSeed(int(args.seed) + 1)  # OMPL seeds must be positive

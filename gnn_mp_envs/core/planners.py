@@ -26,11 +26,17 @@ class StepResult:
 
 @dataclass
 class Solution:
-    """A start-to-goal path through the tree(s)."""
+    """A start-to-goal path through the tree(s).
+
+    ``nodes`` are the path's global node indices (start to goal), so the tree as it stood
+    when path node k was inserted is the node rows ``0..nodes[k]-1`` (what the learned
+    samplers' datasets are built from).
+    """
 
     states: np.ndarray
     controls: np.ndarray
     length: float
+    nodes: np.ndarray
 
 
 class TreePlanner:
@@ -70,7 +76,7 @@ class TreePlanner:
         """The root-to-node path ``nodes``; its length is the last node's cost-to-come."""
         t = self.tree
         return Solution(states=t.states[nodes].copy(), controls=t.controls[nodes].copy(),
-                        length=float(t.cost[nodes[-1]]))
+                        length=float(t.cost[nodes[-1]]), nodes=np.asarray(nodes, dtype=np.int64))
 
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -156,7 +162,8 @@ class BiRRT(TreePlanner):
                 self.solution = Solution(
                     np.vstack([head.states, self.tree.states[tail]]),
                     np.vstack([head.controls, self.tree.controls[tail]]),
-                    head.length + float(self.tree.cost[from_goal]))
+                    head.length + float(self.tree.cost[from_goal]),
+                    np.concatenate([head.nodes, np.asarray(tail, dtype=np.int64)]))
                 result.solved = True
         self.active_tree = b
         return result

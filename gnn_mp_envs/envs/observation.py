@@ -68,7 +68,6 @@ def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int) -> spac
     """The padded-graph observation space for a state box ``[low, high]``."""
     low = np.asarray(low, dtype=np.float32)
     high = np.asarray(high, dtype=np.float32)
-    d = low.shape[0]
     span = high - low
     feat_high = np.concatenate([span, span, [1.0]]).astype(np.float32)
     feat_low = np.concatenate([-span, -span, [0.0]]).astype(np.float32)

@@ -3,7 +3,6 @@ the next sample is the action."""
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 import gymnasium as gym
@@ -13,24 +12,8 @@ from gymnasium import spaces
 from gnn_mp_envs.core.planners import PLANNERS, make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, observation_space
-from gnn_mp_envs.tasks.base import SPLIT_SEEDS, Task
-
-#: Task name -> "module:Class". Tasks are imported on first use (the arm pulls in pybullet).
-TASKS: dict[str, str] = {
-    "maze2d": "gnn_mp_envs.tasks.maze2d:Maze2DTask",
-    "pendulum": "gnn_mp_envs.tasks.pendulum:PendulumTask",
-    "arm": "gnn_mp_envs.tasks.arm:ArmTask",
-}
-
-
-def make_task(name: str, **kwargs: Any) -> Task:
-    """Instantiate a task family by name."""
-    try:
-        module, cls = TASKS[name].split(":")
-    except KeyError:
-        raise ValueError(f"unknown task {name!r}; known: {sorted(TASKS)}") from None
-    return getattr(importlib.import_module(module), cls)(**kwargs)
-
+from gnn_mp_envs.registration import make_task, task_spec
+from gnn_mp_envs.tasks.base import SPLIT_SEEDS
 
 class TreePlanningEnv(gym.Env):
     """Sampling-based planning as an MDP: each step is one RRT/BiRRT iteration.
@@ -75,7 +58,8 @@ class TreePlanningEnv(gym.Env):
     checked, successful or not), ``collision_checks`` (validity checks, one per state,
     exact segment tests count one), ``iterations``, ``path_length`` (sum of edge costs:
     Euclidean length for geometric tasks, seconds for the pendulum; inf until solved) and,
-    on success, ``path`` (states, start to goal) and ``path_controls``.
+    on success, ``path`` (states, start to goal), ``path_controls`` and ``path_nodes`` (the path's
+    node indices in the observation's rows).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -94,7 +78,7 @@ class TreePlanningEnv(gym.Env):
         self.task = make_task(task, **(task_kwargs or {}))
         if planner not in self.task.planners:
             raise ValueError(f"task {task!r} supports planners {self.task.planners}, not {planner!r}")
-        self.max_nodes = self.task.default_max_nodes if max_nodes is None else int(max_nodes)
+        self.max_nodes = task_spec(task).max_nodes if max_nodes is None else int(max_nodes)
         if self.max_nodes < 2:
             raise ValueError(f"max_nodes must be >= 2, got {self.max_nodes}")
         self.max_steps = 4 * self.max_nodes if max_steps is None else int(max_steps)
@@ -195,4 +179,5 @@ class TreePlanningEnv(gym.Env):
         if pl.solved:
             info["path"] = pl.solution.states.copy()
             info["path_controls"] = pl.solution.controls.copy()
+            info["path_nodes"] = pl.solution.nodes.copy()
         return info

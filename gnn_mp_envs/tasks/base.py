@@ -14,13 +14,15 @@ SPLIT_SEEDS = {"train": 0, "val": 1, "test": 2}
 
 
 class Task:
-    """A family of problems; one instance per environment (it may own a simulator)."""
+    """A family of problems; one instance per environment (it may own a simulator).
+
+    Facts that tools need without building the task (environment ids, node budget, scenes,
+    OMPL planners) live in its :class:`~gnn_mp_envs.registration.TaskSpec`.
+    """
 
     name = "task"
     #: Which planners make sense for the task (kinodynamic tasks cannot run BiRRT).
     planners: tuple[str, ...] = ("rrt", "birrt")
-    #: Environment defaults for this task (node budget etc.).
-    default_max_nodes = 5000
 
     def sample_problem(self, rng: np.random.Generator) -> Problem:
         """Draw a problem from the family's distribution."""

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
+from gnn_mp_envs.envs.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task
 
 #: Extension length of RRT/BiRRT in the unit square.
@@ -182,7 +183,6 @@ class Maze2DTask(Task):
     """Seeded Maze2D problems: 1-3 walls with narrow gaps, start and goal across them."""
 
     name = "maze2d"
-    default_max_nodes = 5000
 
     def __init__(self, num_walls: tuple[int, int] = (1, 3), num_blobs: int = 0,
                  step_size: float = STEP_SIZE) -> None:
@@ -205,5 +205,27 @@ class Maze2DTask(Task):
         return super().make_problem(spec)
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
-        from gnn_mp_envs.envs.render import render_maze2d
         return render_maze2d(problem, tree, path)
+
+
+def render_maze2d(problem: Maze2DProblem, tree: Any, path: np.ndarray | None) -> np.ndarray:
+    """Walls (grey), blobs, the tree(s), start (green), goal (red) and the path (magenta)."""
+    from matplotlib.patches import Circle, Rectangle
+    fig, ax = figure()
+    maze = problem.maze
+    for x0, y0, x1, y1 in maze.walls:
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.35"))
+    for cx, cy, r in maze.blobs:
+        ax.add_patch(Circle((cx, cy), r, color="0.5"))
+    draw_tree(ax, tree)
+    if path is not None:
+        ax.plot(path[:, 0], path[:, 1], color="m", linewidth=2.0)
+    ax.plot(*problem.start, "o", color="tab:green", markersize=8)
+    ax.plot(*problem.goal, "*", color="tab:red", markersize=12)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.tight_layout()
+    return to_rgb(fig)

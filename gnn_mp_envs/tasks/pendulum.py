@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
+from gnn_mp_envs.envs.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task
 
 GRAVITY = 9.81          # m/s^2
@@ -149,7 +150,6 @@ class PendulumTask(Task):
 
     name = "pendulum"
     planners = ("rrt",)
-    default_max_nodes = 20000
 
     def sample_problem(self, rng: np.random.Generator) -> PendulumProblem:
         goal = np.array([np.pi + rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)])
@@ -164,5 +164,27 @@ class PendulumTask(Task):
         return super().make_problem(spec)
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
-        from gnn_mp_envs.envs.render import render_pendulum
         return render_pendulum(problem, tree, path)
+
+
+def render_pendulum(problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
+    """The tree in phase space (theta, omega), the goal box and the path."""
+    from matplotlib.patches import Rectangle
+    fig, ax = figure()
+    draw_tree(ax, tree, wrap_period=2 * np.pi)
+    g = problem.goal
+    ax.add_patch(Rectangle((g[0] - GOAL_ANGLE_TOLERANCE, g[1] - GOAL_SPEED_TOLERANCE),
+                           2 * GOAL_ANGLE_TOLERANCE, 2 * GOAL_SPEED_TOLERANCE,
+                           color="tab:red", alpha=0.3))
+    if path is not None:
+        jumps = np.flatnonzero(np.abs(np.diff(path[:, 0])) > np.pi) + 1
+        for piece in np.split(path, jumps):
+            ax.plot(piece[:, 0], piece[:, 1], color="m", linewidth=2.0)
+    ax.plot(*problem.start, "o", color="tab:green", markersize=8)
+    ax.plot(*g, "*", color="tab:red", markersize=12)
+    ax.set_xlim(-np.pi, np.pi)
+    ax.set_ylim(-MAX_SPEED, MAX_SPEED)
+    ax.set_xlabel("theta [rad]")
+    ax.set_ylabel("omega [rad/s]")
+    fig.tight_layout()
+    return to_rgb(fig)

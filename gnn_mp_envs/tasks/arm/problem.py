@@ -1,0 +1,116 @@
+"""Joint-space planning problems of the xArm6: bounds, straight-line steering and counted,
+sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
+
+Each configuration checked counts one collision check; edges are interpolated every
+:data:`RESOLUTION` rad (joint-space L2) and stop at the first invalid configuration.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gnn_mp_envs.core.problem import Edge, Problem
+from gnn_mp_envs.tasks.arm.scenes import Obstacle, Scene
+from gnn_mp_envs.tasks.arm.world import JOINT_HIGH, JOINT_LOW, ArmWorld
+
+#: RRT/BiRRT extension length in joint space (rad, L2 over the six joints).
+STEP_SIZE = 0.4
+#: Collision-checking resolution along edges (rad, L2); 0.05 rad moves the flange <= ~4 cm.
+RESOLUTION = 0.05
+
+
+class ArmProblem(Problem):
+    """Joint-space planning for the xArm6 in one scene of an :class:`ArmWorld`."""
+
+    task = "arm"
+    geometric = True
+
+    def __init__(self, world: ArmWorld, scene: Scene | tuple[Obstacle, ...], start: np.ndarray,
+                 goal: np.ndarray, step_size: float = STEP_SIZE, resolution: float = RESOLUTION) -> None:
+        super().__init__(start, goal, low=JOINT_LOW, high=JOINT_HIGH, step_size=step_size,
+                         resolution=resolution)
+        self.world = world
+        self.scene = scene
+        # NaN fails both comparisons, so these bounds tests also reject non-finite states.
+        self._low = self.low - 1e-12
+        self._high = self.high + 1e-12
+        self._low_tol = self._low.tolist()
+        self._high_tol = self._high.tolist()
+
+    @property
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        return self.scene.obstacles if isinstance(self.scene, Scene) else tuple(self.scene)
+
+    def is_state_valid(self, states: np.ndarray) -> np.ndarray:
+        s = np.asarray(states, dtype=np.float64).reshape(-1, self.state_dim)
+        ok = self._in_bounds(s)
+        self.world.load(self.scene)
+        collides = self.world.collides
+        rows = s.tolist()
+        for i in np.flatnonzero(ok).tolist():
+            if collides(rows[i]):
+                ok[i] = False
+        return ok
+
+    def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Sequential check at ``resolution`` (``b`` included) that stops at the first
+        invalid configuration; counts exactly as :meth:`Problem.check_motion`.
+
+        Plain Python floats: for the ~8 states of an edge this is faster than numpy, and
+        ``a + (k / n) * (b - a)`` gives the same states as the base class.
+        """
+        self.edges_checked += 1
+        al, bl = a.tolist(), b.tolist()
+        dl = [y - x for x, y in zip(al, bl)]
+        n = max(1, math.ceil(math.sqrt(sum(v * v for v in dl)) / self.resolution))
+        lo, hi = self._low_tol, self._high_tol
+        limit = n
+        if not all(l <= v <= h for v, l, h in zip(bl, lo, hi)):
+            # a is valid and the box convex: the states leave it once, somewhere before b.
+            limit = next(k for k in range(1, n + 1)
+                         if not all(l <= x + (k / n) * v <= h for x, v, l, h in zip(al, dl, lo, hi))) - 1
+        self.world.load(self.scene)
+        collides = self.world.collides
+        for k in range(1, n + 1):
+            self.collision_checks += 1
+            t = k / n
+            if k > limit or collides([x + t * v for x, v in zip(al, dl)]):
+                return False
+        return True
+
+    def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
+        d = states - x  # plain joint-space L2 (no angle wrapping: the box is one turn per joint)
+        return np.sqrt(np.einsum("...i,...i->...", d, d))
+
+    def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
+        """:meth:`Problem.steer` without the generic vectorised helpers (same result)."""
+        d = x_to - x_from
+        dist = math.sqrt(float(d @ d))
+        if dist < 1e-12:
+            return None
+        if dist <= self.step_size:
+            x_new = np.array(x_to, dtype=np.float64)
+        else:
+            x_new = x_from + (self.step_size / dist) * d
+        if not self.check_motion(x_from, x_new):
+            return None
+        return Edge(x_new, min(dist, self.step_size))
+
+    def goal_connection(self, x: np.ndarray) -> Edge | None:
+        d = self.goal - x
+        dist = math.sqrt(float(d @ d))
+        if dist > self.step_size or not self.check_motion(x, self.goal):
+            return None
+        return Edge(self.goal.copy(), dist)
+
+    def _in_bounds(self, s: np.ndarray) -> np.ndarray:
+        return np.all((s >= self._low) & (s <= self._high), axis=-1)
+
+    def straight_line_free(self) -> bool:
+        """Uncounted: is the straight joint-space segment start -> goal collision-free?"""
+        before = (self.collision_checks, self.edges_checked)
+        free = self.check_motion(self.start, self.goal)
+        self.collision_checks, self.edges_checked = before
+        return free
