@@ -105,14 +105,14 @@ def test_environment_docs_cover_every_id_and_info_key():
     """docs/environments.md stays consistent with the registration table and the env's info."""
     import gymnasium as gym
 
-    from gnn_mp_envs.registration import ENVIRONMENTS
+    from gnn_mp_envs.registration import BUILTIN_TASKS
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "environments.md").read_text()
-    for env_id in ENVIRONMENTS:
+    for env_id in (env_id for spec in BUILTIN_TASKS for env_id in spec.envs):
         assert f"`{env_id}`" in text, env_id
     env = gym.make("GNNMP/Maze2DRRT-v0", split="test", max_nodes=50)
     _, info = env.reset(options={"index": 0})
-    for key in [*info, "path", "path_controls"]:
+    for key in [*info, "path", "path_controls", "path_nodes"]:
         assert f"`{key}`" in text, key
     for key in env.observation_space.spaces:
         assert f"`{key}`" in text, key

@@ -38,13 +38,16 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def arg(default: Any, help: str, *, flag: str | None = None, choices: typing.Sequence[Any] | None = None,
-        metavar: str | None = None, parse: Callable[[str], Any] | None = None) -> Any:
-    """A dataclass field carrying its command-line help (and optional flag name, choices, parser).
+def arg(default: Any, help: str, *, flag: str | tuple[str, ...] | None = None,
+        choices: typing.Sequence[Any] | None = None, metavar: str | None = None,
+        parse: Callable[[str], Any] | None = None, append: bool = False) -> Any:
+    """A dataclass field carrying its command-line help (and optional flag name(s), choices, parser).
 
-    Mutable defaults (lists, dicts, tuples of lists) are copied per instance.
+    ``append``: the flag may be repeated, each value parsed on its own (a ``dict`` field
+    collects ``(key, value)`` pairs). Mutable defaults are copied per instance.
     """
-    meta = {"help": help, "flag": flag, "choices": choices, "metavar": metavar, "parse": parse}
+    meta = {"help": help, "flag": flag, "choices": choices, "metavar": metavar, "parse": parse,
+            "append": append}
     if isinstance(default, (list, dict, set)):
         return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -140,24 +143,35 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, skip: ty
             parser.add_argument(flag, dest=f.name, action="store_false" if default else "store_true",
                                 help=help_text + "%(default).0s")   # a switch: no "(default: ...)"
             continue
-        flag = meta.get("flag") or "--" + f.name.replace("_", "-")
+        flags = meta.get("flag") or "--" + f.name.replace("_", "-")
+        flags = (flags,) if isinstance(flags, str) else tuple(flags)
+        if meta.get("append"):
+            parser.add_argument(*flags, dest=f.name, action="append", type=meta.get("parse") or str,
+                                default=[], metavar=meta.get("metavar"), help=help_text + "%(default).0s")
+            continue
         parse, _ = _parser_for(tp)
         parse = meta.get("parse") or parse
         if parse is None:
             raise TypeError(f"{cls.__name__}.{f.name}: no command-line parser for {hints[f.name]!r}; "
                             "give arg(parse=...)")
         help_text = help_text or ""
-        if isinstance(default, (list, tuple)):
+        if default is None:
+            help_text += "%(default).0s"   # the help says what None means
+        elif isinstance(default, (list, tuple)):
             # Comma-separated default in --help instead of a Python repr ("%(default).0s" prints
             # nothing and stops the formatter from appending the repr).
             help_text += f" (default: {','.join(map(str, default))})%(default).0s"
-        parser.add_argument(flag, dest=f.name, type=parse, default=default, choices=meta.get("choices"),
+        parser.add_argument(*flags, dest=f.name, type=parse, default=default, choices=meta.get("choices"),
                             metavar=meta.get("metavar"), help=help_text)
 
 
 def from_namespace(cls: type, ns: argparse.Namespace, **overrides: Any):
     """The dataclass ``cls`` built from parsed flags (fields absent from ``ns`` keep their default)."""
+    hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls) if f.init}
     values = {k: v for k, v in vars(ns).items() if k in names}
+    for name, value in values.items():
+        if typing.get_origin(_unwrap_optional(hints[name])[0]) is dict and isinstance(value, list):
+            values[name] = dict(value)   # repeated KEY=VALUE flags
     values.update(overrides)
     return cls(**values)

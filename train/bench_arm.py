@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -28,10 +29,12 @@ import numpy as np
 from tqdm import tqdm
 
 import gnn_mp_envs  # noqa: F401  (registers the environments)
+from gnn_mp_envs.registration import task_spec
+from gnn_mp_envs.rollout import rollout, run_steps
 from gnn_mp_envs.tasks.arm import ArmTask
-from train.args import OneLineParser
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
 
-ENV_ID = "GNNMP/ArmBiRRT-v0"
+ENV_ID = task_spec("arm").env_id
 
 
 def raw_checks_per_second(scene: str, num_checks: int, num_scenes: int = 5, seed: int = 0) -> dict[str, float]:
@@ -90,21 +93,13 @@ def uniform_birrt(scene: str, split: str, problems: int, max_nodes: int, seed: i
     try:
         low, high = env.action_space.low, env.action_space.high
         for i in tqdm(range(problems), desc=f"uniform BiRRT ({scene})", leave=False):
-            env.reset(options={"index": i})
             rng = np.random.default_rng([seed, i])
-            actions = rng.uniform(low, high, (base.max_steps, len(low))).astype(np.float32)
+            actions = iter(rng.uniform(low, high, (base.max_steps, len(low))).astype(np.float32))
             check_s0, calls0 = timer.seconds, timer.calls
-            step_time, steps, info = 0.0, 0, {}
-            for a in actions:
-                t0 = time.perf_counter()
-                _, _, terminated, truncated, info = env.step(a)
-                step_time += time.perf_counter() - t0
-                steps += 1
-                if terminated or truncated:
-                    break
-            records.append({"index": i, "solved": bool(info["is_success"]), "time": step_time, "steps": steps,
-                            "collision_checks": int(info["collision_checks"]), "nodes": int(info["nodes_expanded"]),
-                            "path_length": float(info["path_length"]) if info["is_success"] else None,
+            run = rollout(env, lambda _obs: next(actions), options={"index": i})
+            records.append({"index": i, "solved": run.success, "time": run.env_time_s, "steps": run.iterations,
+                            "collision_checks": run.collision_checks, "nodes": run.nodes_expanded,
+                            "path_length": run.path_length,
                             "check_time": timer.seconds - check_s0, "check_calls": timer.calls - calls0})
     finally:
         timer.restore()
@@ -136,28 +131,45 @@ def step_throughput(scene: str, window: int, seed: int, copy_observations: bool)
     kept on (episodes restart on the next problem when they end). The env keeps its registered
     ``max_nodes``: the padded observation it copies each step is part of its overhead."""
     env = gym.make(ENV_ID, split="test", task_kwargs={"scene": scene},
-                   copy_observations=copy_observations)
+                   copy_observations=copy_observations, disable_env_checker=not copy_observations)
     base = env.unwrapped
     timer = _CheckTimer(base.task.world)
     try:
         rng = np.random.default_rng(seed)
         low, high = env.action_space.low, env.action_space.high
-        actions = rng.uniform(low, high, (window, len(low))).astype(np.float32)
-        index = 0
-        env.reset(options={"index": index})
-        step_time = 0.0
-        for a in tqdm(actions, desc="env steps", leave=False):
-            t0 = time.perf_counter()
-            _, _, terminated, truncated, _ = env.step(a)
-            step_time += time.perf_counter() - t0
-            if terminated or truncated:
+        actions = iter(rng.uniform(low, high, (window, len(low))).astype(np.float32))
+        index, steps, step_time = 0, 0, 0.0
+        obs, _ = env.reset(options={"index": index})
+        while steps < window:
+            run = run_steps(env, lambda _obs: next(actions), obs, max_steps=window - steps)
+            steps += run.steps
+            step_time += run.env_time_s
+            obs = run.observation
+            if run.terminated or run.truncated:
                 index += 1
-                env.reset(options={"index": index})
+                obs, _ = env.reset(options={"index": index})
         return {"steps_per_second": window / step_time, "overhead_fraction": 1.0 - timer.seconds / step_time,
                 "checks_per_step": timer.calls / window, "us_per_step": 1e6 * step_time / window}
     finally:
         timer.restore()
         env.close()
+
+
+@dataclass
+class Args:
+    """Flags of ``gnn-mp bench-arm``."""
+
+    scene: str = arg("test", "scene family (held out: test)", choices=("train-a", "train-b", "train", "test"))
+    split: str = arg("test", "problem split", choices=("train", "val", "test"))
+    problems: int = arg(50, "problems 0..N-1 planned by uniform BiRRT and OMPL", parse=positive_int)
+    max_nodes: int = arg(20000, "node budget of the solve rows", parse=positive_int)
+    raw_checks: int = arg(20000, "configurations for the raw checker rate", parse=positive_int)
+    window: int = arg(3000, "env steps for the throughput measurement", parse=positive_int)
+    time_limit: float = arg(10.0, "OMPL time limit per problem (s)", parse=positive_float)
+    ompl: bool = arg(True, "skip OMPL RRTConnect")
+    seed: int = arg(0, "seed of the uniform samples")
+    json: str | None = arg(None, "write all figures and records here")
+    ompl_log: str | None = arg(None, "write both planners' runs as an OMPL benchmark log")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -168,19 +180,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def run(argv: list[str] | None = None) -> dict[str, Any]:
     """Measure and print everything; returns the report (also written with ``--json``)."""
-    ap = OneLineParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scene", default="test", help="scene family (held out: test)")
-    ap.add_argument("--split", default="test")
-    ap.add_argument("--problems", type=int, default=50)
-    ap.add_argument("--max-nodes", type=int, default=20000)
-    ap.add_argument("--raw-checks", type=int, default=20000, help="configurations for the raw checker rate")
-    ap.add_argument("--window", type=int, default=3000, help="env steps for the throughput measurement")
-    ap.add_argument("--time-limit", type=float, default=10.0, help="OMPL time limit per problem (s)")
-    ap.add_argument("--no-ompl", action="store_true", help="skip OMPL RRTConnect")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", default=None, help="write all figures and records here")
-    ap.add_argument("--ompl-log", default=None, help="write both planners' runs as an OMPL benchmark log")
-    args = ap.parse_args(argv)
+    ap = OneLineParser(prog="gnn-mp bench-arm", description=__doc__.split("\n\n")[0])
+    add_dataclass_arguments(ap, Args)
+    args = from_namespace(Args, ap.parse_args(argv))
 
     report: dict[str, Any] = {"scene": args.scene, "split": args.split, "max_nodes": args.max_nodes}
     raw = raw_checks_per_second(args.scene, args.raw_checks, seed=args.seed)
@@ -201,7 +203,7 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
           f"{uni['steps_per_second']:,.0f} steps/s, overhead {100 * uni['overhead_fraction']:.1f}%")
 
     ompl_results = None
-    if not args.no_ompl:
+    if args.ompl:
         from gnn_mp_envs.baselines.ompl_runner import OMPLUnavailableError, run_ompl
         try:
             ompl_results = run_ompl("arm", list(range(args.problems)), split=args.split,

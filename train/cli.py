@@ -16,10 +16,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from pathlib import Path
 from typing import Callable, Sequence
 
-from train.args import OneLineParser
+from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 
 PROG = "gnn-mp"
 
@@ -44,43 +43,10 @@ def fail(message: str, code: int = 2):
     return code
 
 
-# ---------------------------------------------------------------------------- argument types
-def _bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: str) -> Callable[[str], float]:
-    """An argparse type: ``cast(text)`` that must be ``> minimum`` (strict) or ``>= minimum``."""
-    def parse(text: str):
-        try:
-            value = cast(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
-        if not (value > minimum if strict else value >= minimum):  # also rejects NaN
-            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {minimum}, got {value}")
-        return value
-    parse.__name__ = noun
-    return parse
-
-
-positive_int = _bounded(int, 1, False, "a positive integer")
-non_negative_int = _bounded(int, 0, False, "a non-negative integer")
-positive_float = _bounded(float, 0, True, "a positive number")
-
-
-def checkpoint_pair(text: str) -> tuple[str, Path]:
-    name, sep, path = text.partition("=")
-    if not sep or not name or not path:
-        raise argparse.ArgumentTypeError(f"expected SAMPLER=PATH, got {text!r}")
-    return name.strip(), Path(path)
-
-
-def name_list(text: str) -> list[str]:
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    if not names:
-        raise argparse.ArgumentTypeError("expected a comma-separated list of sampler names")
-    return names
-
-
 # ---------------------------------------------------------------------------- parsers
 def build_parser() -> argparse.ArgumentParser:
-    from gnn_mp_envs.registration import TASK_ENV_IDS
+    from train.benchmark.args import BenchmarkArgs
+    from train.benchmark.suites import SuiteOptions
 
     parser = OneLineParser(prog=PROG, description="Sampling-based motion planning environments and "
                            "sampler benchmarks (Khan et al. 2020, 'Graph Neural Networks for Motion Planning').")
@@ -91,35 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("benchmark", help="run samplers on the same held-out problems and compare",
                            description="Run every sampler on the same held-out (split='test') problems "
                            "and seeds; print success rate and median [q25, q75] of the planner's counters.")
-    bench.add_argument("--task", choices=sorted(TASK_ENV_IDS), default="maze2d", help="task family")
-    bench.add_argument("--samplers", type=name_list, default=["uniform", "goal-bias"],
-                       help="comma-separated sampler names (see `gnn-mp samplers`; OMPL rows: "
-                       "ompl-rrtconnect for maze2d/arm, ompl-rrt / ompl-kpiece for the pendulum)")
-    bench.add_argument("--problems", type=positive_int, default=20, help="held-out problems 0..N-1")
-    bench.add_argument("--seed", type=non_negative_int, default=0,
-                       help="root seed; problem i's sampler seed is derived from (seed, i)")
-    bench.add_argument("--max-nodes", type=positive_int, default=None,
-                       help="tree node budget (default: the environment's)")
-    bench.add_argument("--scene", default=None, help="arm scene (task_kwargs scene=...), e.g. test")
-    bench.add_argument("--workers", type=positive_int, default=1, help="worker processes over problems")
-    bench.add_argument("--json", type=Path, default=None, help="write the results as JSON (docs/results.md)")
-    bench.add_argument("--plot", type=Path, default=None, help="write box plots (PNG)")
-    bench.add_argument("--render", type=Path, default=None, metavar="DIR",
-                       help="write tree-growth images of problem 0 for each sampler")
-    bench.add_argument("--ompl-log", type=Path, default=None, metavar="DIR",
-                       help="write an OMPL benchmark log (Planner Arena) to DIR/<task>.log")
-    bench.add_argument("--ompl-time-limit", type=positive_float, default=10.0,
-                       help="seconds per problem for OMPL rows")
-    bench.add_argument("--checkpoint", action="append", type=checkpoint_pair, default=[],
-                       metavar="SAMPLER=PATH", help="checkpoint of a learned sampler (repeatable)")
-    bench.add_argument("--sampler-module", action="append", default=[], metavar="MODULE",
-                       help="import MODULE first (it calls register_sampler); repeatable")
-    bench.add_argument("--suite", default=None, help="run a named suite instead (e.g. default, smoke); "
-                       "writes <task>.json/.png/.txt and summary.md to --out")
-    bench.add_argument("--out", type=Path, default=Path("results"), help="output directory of --suite")
-    bench.add_argument("--no-ompl", action="store_true", help="--suite: skip OMPL rows even if installed")
-    bench.add_argument("--no-render", action="store_true", help="--suite: skip tree-growth images")
-    bench.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_dataclass_arguments(bench, BenchmarkArgs)
+    add_dataclass_arguments(bench, SuiteOptions)
 
     for name, (module, help_text) in PASSTHROUGH.items():
         sub.add_parser(name, help=f"{help_text} ({module}.main; arguments are passed through)", add_help=False)
@@ -131,35 +70,34 @@ def build_parser() -> argparse.ArgumentParser:
 # ---------------------------------------------------------------------------- commands
 def cmd_samplers() -> int:
     from agents.samplers import DESCRIPTIONS, available_samplers
-    from train.benchmark import OMPL_PLANNERS, OMPL_PREFIX
+    from gnn_mp_envs.baselines.ompl_runner import ompl_available
+    from gnn_mp_envs.registration import TASK_SPECS
+    from train.benchmark.args import OMPL_PREFIX
     names = available_samplers()
     width = max(len(n) for n in names + ["ompl-rrtconnect"])
     for name in names:
         print(f"{name.ljust(width)}  {DESCRIPTIONS.get(name, '')}")
     planner_tasks: dict[str, list[str]] = {}
-    for task, planners in OMPL_PLANNERS.items():
-        for planner in planners:
+    for task, spec in TASK_SPECS.items():
+        for planner in spec.ompl_planners:
             planner_tasks.setdefault(planner, []).append(task)
+    status = "installed" if ompl_available() else "needs `pip install -e .[ompl]`"
     for planner, tasks in planner_tasks.items():
         print(f"{(OMPL_PREFIX + planner).ljust(width)}  OMPL {planner} baseline for {', '.join(tasks)} "
-              f"(isolated runner; needs `pip install -e .[ompl]`)")
+              f"(isolated runner; {status})")
     return 0
 
 
 def cmd_benchmark(ns: argparse.Namespace) -> int:
     from train import benchmark as bm
-    progress = not ns.no_progress
+    from train.benchmark.suites import SuiteOptions
+    args = from_namespace(bm.BenchmarkArgs, ns)
+    suite = from_namespace(SuiteOptions, ns)
     try:
-        if ns.suite is not None:
-            bm.run_suite(ns.suite, ns.out, seed=ns.seed, workers=ns.workers, progress=progress,
-                         with_ompl=False if ns.no_ompl else None, render=not ns.no_render)
+        if suite.suite is not None:
+            bm.run_suite(suite.suite, suite.out, seed=args.seed, workers=args.workers, progress=args.progress,
+                         with_ompl=None if suite.ompl else False, render=suite.render)
             return 0
-        args = bm.BenchmarkArgs(task=ns.task, samplers=ns.samplers, problems=ns.problems, seed=ns.seed,
-                                max_nodes=ns.max_nodes, scene=ns.scene, workers=ns.workers, json=ns.json,
-                                plot=ns.plot, render=ns.render, ompl_log=ns.ompl_log,
-                                ompl_time_limit=ns.ompl_time_limit, checkpoints=dict(ns.checkpoint),
-                                sampler_modules=ns.sampler_module,
-                                progress=progress)
         bm.benchmark(args)
     except bm.BenchmarkError as exc:
         return fail(f"benchmark: {exc}")

@@ -1,0 +1,199 @@
+"""The benchmark's flags (one dataclass, the single source of the command line) and their checks."""
+
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from train.args import arg, name_list, non_negative_int, positive_float, positive_int
+
+#: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
+OMPL_PREFIX = "ompl-"
+OMPL_INSTALL_HINT = "OMPL is not installed; install the optional extra with `pip install -e .[ompl]`"
+
+
+class BenchmarkError(Exception):
+    """A user-facing error (bad flags, unknown names, missing files): printed as one line."""
+
+
+def checkpoint_pair(text: str) -> tuple[str, Path]:
+    """``SAMPLER=PATH`` of ``--checkpoint``."""
+    import argparse
+    name, sep, path = text.partition("=")
+    if not sep or not name.strip() or not path:
+        raise argparse.ArgumentTypeError(f"expected SAMPLER=PATH, got {text!r}")
+    return name.strip(), Path(path)
+
+
+@dataclass
+class BenchmarkArgs:
+    """Flags of one benchmark run (one task, several samplers)."""
+
+    task: str = arg("maze2d", "task family (built in: maze2d, pendulum, arm; --import adds others)")
+    samplers: list[str] = arg(["uniform", "goal-bias"], "comma-separated sampler names (see `gnn-mp "
+                              "samplers`; OMPL rows: ompl-rrtconnect / ompl-rrt for maze2d and arm, "
+                              "ompl-rrt / ompl-kpiece for the pendulum)", parse=name_list)
+    problems: int = arg(20, "held-out (split='test') problems 0..N-1", parse=positive_int)
+    seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=non_negative_int)
+    max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
+    scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
+    workers: int = arg(1, "worker processes over problems", parse=positive_int)
+    json: Path | None = arg(None, "write the results as JSON (schema: docs/results.md)")
+    plot: Path | None = arg(None, "write box plots (PNG)")
+    render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")
+    ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
+                                metavar="DIR")
+    ompl_time_limit: float = arg(10.0, "seconds per problem for OMPL rows", parse=positive_float)
+    checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable)",
+                                       flag="--checkpoint", metavar="SAMPLER=PATH", parse=checkpoint_pair,
+                                       append=True)
+    modules: list[str] = arg([], "import MODULE first: it registers samplers or tasks (repeatable)",
+                             flag=("--import", "--sampler-module"), metavar="MODULE", append=True)
+    progress: bool = arg(True, "hide the progress bar")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The flags as a JSON-friendly dict (paths as strings)."""
+        return {k: (str(v) if isinstance(v, os.PathLike) else v) for k, v in asdict(self).items()}
+
+
+# ---------------------------------------------------------------------------- set-up
+def task_spec_for(task: str):
+    from gnn_mp_envs.registration import task_spec
+    try:
+        return task_spec(task)
+    except ValueError as exc:
+        raise BenchmarkError(str(exc)) from None
+
+
+def env_kwargs_for(args: BenchmarkArgs) -> dict[str, Any]:
+    """Keyword arguments of ``gym.make`` for the benchmark env (held-out split).
+
+    Observations are live views (``copy_observations=False``): a run reads each one before
+    the next step, and a per-step copy of a 20,000-row padded observation would otherwise
+    dominate the measured wall time.
+    """
+    kwargs: dict[str, Any] = {"split": "test", "copy_observations": False}
+    if args.max_nodes is not None:
+        kwargs["max_nodes"] = int(args.max_nodes)
+    if args.scene is not None:
+        kwargs["task_kwargs"] = {"scene": args.scene}
+    return kwargs
+
+
+def problem_seed(seed: int, index: int) -> int:
+    """Sampler seed of problem ``index``: the same for every sampler, distinct across problems."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
+
+
+def is_ompl(name: str) -> bool:
+    return name.startswith(OMPL_PREFIX)
+
+
+def ompl_rows_for(task: str) -> list[str]:
+    """The OMPL row names a task can run."""
+    return [OMPL_PREFIX + p for p in task_spec_for(task).ompl_planners]
+
+
+def known_sampler_names(task: str) -> list[str]:
+    from agents.samplers import available_samplers
+    return available_samplers() + ompl_rows_for(task)
+
+
+def import_modules(modules: list[str]) -> None:
+    """Import modules that call ``register_sampler`` / ``register_task`` (in the main process
+    and in every worker)."""
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise BenchmarkError(f"cannot import module {module!r}: {exc}") from None
+
+
+def validate_args(args: BenchmarkArgs) -> None:
+    """Reject bad flags before any planning starts (one-line messages); fills in the default scene."""
+    import_modules(args.modules)
+    spec = task_spec_for(args.task)
+    if args.scene is not None and not spec.scenes:
+        with_scenes = sorted(n for n, s in _specs().items() if s.scenes)
+        raise BenchmarkError(f"--scene applies to {', '.join(with_scenes)} only, not {args.task!r}")
+    if args.scene is not None and args.scene not in spec.scenes:
+        raise BenchmarkError(f"unknown scene {args.scene!r} for {args.task}; known: {', '.join(spec.scenes)}")
+    if args.scene is None:
+        args.scene = spec.benchmark_scene
+    if args.problems < 1:
+        raise BenchmarkError(f"--problems must be >= 1, got {args.problems}")
+    if args.seed < 0:
+        raise BenchmarkError(f"--seed must be >= 0, got {args.seed}")
+    if args.workers < 1:
+        raise BenchmarkError(f"--workers must be >= 1, got {args.workers}")
+    if args.max_nodes is not None and args.max_nodes < 2:
+        raise BenchmarkError(f"--max-nodes must be >= 2, got {args.max_nodes}")
+    if args.ompl_time_limit <= 0:
+        raise BenchmarkError(f"--ompl-time-limit must be > 0, got {args.ompl_time_limit}")
+    if not args.samplers:
+        raise BenchmarkError("--samplers is empty")
+    if len(set(args.samplers)) != len(args.samplers):
+        raise BenchmarkError(f"--samplers lists a name twice: {','.join(args.samplers)}")
+    known = known_sampler_names(args.task)
+    for name in args.samplers:
+        if is_ompl(name) and name not in known:
+            supported = ", ".join(ompl_rows_for(args.task)) or "none"
+            raise BenchmarkError(f"OMPL planner {name!r} is not available for task {args.task!r} "
+                                 f"(supported: {supported})")
+        if name not in known:
+            raise BenchmarkError(f"unknown sampler {name!r}; known: {', '.join(known)}")
+    for name, path in args.checkpoints.items():
+        if name not in args.samplers:
+            raise BenchmarkError(f"--checkpoint given for {name!r}, which is not in --samplers")
+        if not Path(path).is_file():
+            raise BenchmarkError(f"missing checkpoint for sampler {name!r}: {path} is not a file")
+        if not os.access(path, os.R_OK):
+            raise BenchmarkError(f"checkpoint of sampler {name!r} is not readable: {path}")
+    for flag, path, is_dir in (("--json", args.json, False), ("--plot", args.plot, False),
+                               ("--render", args.render, True), ("--ompl-log", args.ompl_log, True)):
+        if path is not None:
+            check_output_path(flag, Path(path), is_dir)
+    if any(is_ompl(n) for n in args.samplers):
+        check_ompl()
+
+
+def _specs():
+    from gnn_mp_envs.registration import TASK_SPECS
+    return TASK_SPECS
+
+
+def check_output_path(flag: str, path: Path, is_dir: bool) -> None:
+    """Fail before planning when an output cannot be written (wrong kind, parent is a file, no access)."""
+    if path.exists() and path.is_dir() != is_dir:
+        raise BenchmarkError(f"{flag} {path}: expected a {'directory' if is_dir else 'file'}")
+    parent = path if (is_dir and path.exists()) else path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise BenchmarkError(f"{flag} {path}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK):
+        raise BenchmarkError(f"{flag} {path}: {parent} is not writable")
+
+
+def check_ompl() -> None:
+    """Fail early (before any planning) when OMPL rows cannot run."""
+    try:
+        from gnn_mp_envs.baselines import ompl_runner
+    except ImportError as exc:
+        raise BenchmarkError(f"the OMPL runner is not available in this checkout ({exc})") from None
+    if not ompl_runner.ompl_available():
+        raise BenchmarkError(OMPL_INSTALL_HINT)
+
+
+def ompl_available() -> bool:
+    """Whether the OMPL runner exists and OMPL's Python bindings can be imported."""
+    try:
+        check_ompl()
+    except BenchmarkError:
+        return False
+    return True

@@ -1,0 +1,85 @@
+"""OMPL reference rows (through the isolated runner) and OMPL benchmark logs of every row."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from train.benchmark.args import OMPL_INSTALL_HINT, OMPL_PREFIX, BenchmarkArgs, BenchmarkError, is_ompl
+
+
+def _finite_or_none(x: Any) -> float | None:
+    import math
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]) -> dict[str, Any]:
+    """Map one result of the OMPL runner (see ``ompl_runner.solve_problem``) onto a benchmark record."""
+    def as_int(x: Any) -> int | None:
+        return None if x is None else int(x)
+
+    success = bool(result.get("solved"))
+    return {
+        "sampler": planner_row, "problem": int(index), "seed": seed, "success": success,
+        "nodes_expanded": as_int(result.get("nodes")),            # OMPL planner-data vertices
+        "edges": as_int(result.get("edges_checked")),
+        "collision_checks": as_int(result.get("collision_checks")),
+        "iterations": None,
+        "path_length": _finite_or_none(result.get("path_length")) if success else None,
+        "wall_time_s": _finite_or_none(result.get("time")),       # OMPL's solve() time
+        "ompl": {k: v for k, v in result.items() if isinstance(v, (int, float, str, bool))},
+    }
+
+
+def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> list[dict[str, Any]]:
+    """Plan ``indices`` with an OMPL planner through the isolated runner (one subprocess per call)."""
+    try:
+        from gnn_mp_envs.baselines import ompl_runner
+    except ImportError as exc:
+        raise BenchmarkError(f"the OMPL runner is not available in this checkout ({exc})") from None
+    planner = planner_row[len(OMPL_PREFIX):]
+    task_kwargs = {"scene": args.scene} if args.scene is not None else None
+    try:
+        results = ompl_runner.run_ompl(args.task, indices, split="test", task_kwargs=task_kwargs,
+                                       planner=planner, time_limit=args.ompl_time_limit, seed=args.seed)
+    except ompl_runner.OMPLUnavailableError:
+        raise BenchmarkError(OMPL_INSTALL_HINT) from None
+    except (ValueError, NotImplementedError, RuntimeError) as exc:
+        raise BenchmarkError(f"{planner_row} on {args.task}: {exc}".replace("\n", " ")) from None
+    # OMPL's RNG is seeded once per runner call (with --seed + 1), so the run's seed is --seed.
+    return [_ompl_record(planner_row, i, args.seed, r) for i, r in zip(indices, results)]
+
+
+def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path) -> Path | None:
+    """All rows in OMPL's benchmark log format (for Planner Arena), via the runner's log writer."""
+    try:
+        from gnn_mp_envs.baselines.ompl_log import write_ompl_log
+    except ImportError as exc:
+        raise BenchmarkError(f"the OMPL log writer is not available in this checkout ({exc})") from None
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{args.task}.log"
+    results_by_planner = {name: [_as_ompl_run(r) for r in report["runs"][name]] for name in args.samplers}
+    total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
+    settings = {name: {"max_nodes": report["max_nodes"]} for name in args.samplers if not is_ompl(name)}
+    experiment = f"gnn-mp {report['env_id']}" + (f" scene {args.scene}" if args.scene else "")
+    write_ompl_log(path, experiment, results_by_planner, time_limit=args.ompl_time_limit, seed=args.seed,
+                   total_time=total_time, planner_settings=settings)
+    return path
+
+
+def _as_ompl_run(record: dict[str, Any]) -> dict[str, Any]:
+    """A benchmark record in the OMPL runner's keys (which the log writer maps to OMPL property names)."""
+    run = dict(record.get("ompl", {}))   # OMPL rows: the runner's own fields (status, approximate, ...)
+    for key in ("task", "split", "index", "planner"):
+        run.pop(key, None)
+    run.update({
+        "solved": record["success"], "time": record["wall_time_s"], "path_length": record["path_length"],
+        "nodes": record["nodes_expanded"], "edges_checked": record["edges"],
+        "collision_checks": record["collision_checks"], "problem": record["problem"],
+    })
+    if record.get("iterations") is not None:
+        run["iterations"] = record["iterations"]
+    return run

@@ -1,0 +1,82 @@
+"""Figures: box plots per sampler and tree-growth strips rendered from the environment."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from train.benchmark.args import BenchmarkArgs, env_kwargs_for, is_ompl, task_spec_for
+from train.benchmark.runs import checkpoint_of, run_episode
+
+
+def plot_report(report: dict[str, Any], path: Path) -> None:
+    """Box plots per sampler in the style of the paper: nodes expanded, path length (+ checks for the arm)."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    panels = [("nodes_expanded", "nodes expanded", False), ("path_length", "path length (solved)", True)]
+    if report["task"] == "arm":
+        panels.append(("collision_checks", "collision checks", False))
+    names = list(report["results"])
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels) + 0.6, 3.6), squeeze=False)
+    for ax, (metric, label, success_only) in zip(axes[0], panels):
+        data = []
+        for name in names:
+            runs = report["runs"][name]
+            values = [r[metric] for r in runs if r[metric] is not None and (r["success"] or not success_only)]
+            data.append(values if values else [np.nan])
+        ax.boxplot(data, showfliers=True)
+        ax.set_xticks(range(1, len(names) + 1), names, rotation=30, ha="right")
+        ax.set_title(label)
+        ax.grid(axis="y", alpha=0.3)
+    rates = ", ".join(f"{n}: {100 * report['results'][n]['success_rate']:.0f}%" for n in names)
+    # Two lines: the success rates of four or more samplers overflow a one-line title.
+    fig.suptitle(f"{report['task']}: {report['problems']} held-out problems\nsuccess {rates}", fontsize=9)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def snapshot_schedule(max_nodes: int) -> list[int]:
+    """Iterations at which tree-growth snapshots are drawn (the final tree is always added)."""
+    return [i for i in (25, 100, 400, 1600, 6400) if i < 4 * max_nodes]
+
+
+def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.ndarray]]) -> None:
+    """A strip of env.render() images: the tree at a few iterations and at the end."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(snapshots), figsize=(2.6 * len(snapshots), 2.9), squeeze=False)
+    for ax, (iteration, nodes, image) in zip(axes[0], snapshots):
+        ax.imshow(image)
+        ax.set_title(f"iter {iteration}, {nodes} nodes", fontsize=8)
+        ax.axis("off")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def render_growth(args: BenchmarkArgs, directory: Path, index: int = 0) -> list[Path]:
+    """Tree-growth strips of problem ``index`` for every (non-OMPL) sampler; returns the files written."""
+    spec = task_spec_for(args.task)
+    env_id, env_kwargs = spec.env_id, env_kwargs_for(args)
+    max_nodes = args.max_nodes or spec.max_nodes
+    written = []
+    for name in args.samplers:
+        if is_ompl(name):
+            continue
+        record = run_episode(args.task, env_id, env_kwargs, name, index, args.seed,
+                             checkpoint_of(args, name), snapshot_schedule(max_nodes))
+        outcome = "solved" if record["success"] else "not solved"
+        path = directory / f"{args.task}_{name}_problem{index}.png"
+        save_tree_growth(path, f"{args.task}, {name}, test problem {index} ({outcome})", record["snapshots"])
+        written.append(path)
+    return written

@@ -1,0 +1,52 @@
+"""Statistics of runs and the report document (the ``--json`` schema of docs/results.md)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from train.benchmark.args import BenchmarkArgs, task_spec_for
+
+#: The counters every run reports, in table order.
+METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s")
+#: Metrics summarised over successful runs only (a failed run has no path).
+SUCCESS_ONLY_METRICS: frozenset[str] = frozenset({"path_length"})
+
+
+def summarize(values: list[float | None]) -> dict[str, float | None]:
+    """median, mean, q25, q75 of the finite values; all None when there are none."""
+    data = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=np.float64)
+    if data.size == 0:
+        return {"median": None, "mean": None, "q25": None, "q75": None}
+    q25, median, q75 = np.percentile(data, [25, 50, 75])
+    return {"median": float(median), "mean": float(data.mean()), "q25": float(q25), "q75": float(q75)}
+
+
+def sampler_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Success rate and per-metric statistics of one sampler's runs."""
+    summary: dict[str, Any] = {"success_rate": float(np.mean([r["success"] for r in records]))}
+    for metric in METRICS:
+        runs = [r for r in records if r["success"]] if metric in SUCCESS_ONLY_METRICS else records
+        summary[metric] = summarize([r[metric] for r in runs])
+    return summary
+
+
+def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """The ``--json`` document (schema in docs/results.md)."""
+    spec = task_spec_for(args.task)
+    max_nodes = args.max_nodes or spec.max_nodes
+    return {
+        "task": args.task,
+        "problems": int(args.problems),
+        "seed": int(args.seed),
+        "results": {name: sampler_summary(runs[name]) for name in args.samplers},
+        "env_id": spec.env_id,
+        "split": "test",
+        "max_nodes": int(max_nodes),
+        "scene": args.scene,
+        "samplers": list(args.samplers),
+        "runs": {name: [{k: v for k, v in r.items() if k != "snapshots"} for r in runs[name]]
+                 for name in args.samplers},
+    }

@@ -1,0 +1,86 @@
+"""Named suites: several tasks benchmarked in one go (``--suite default`` is ``make benchmark``)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from train.args import arg
+from train.benchmark.args import OMPL_PREFIX, BenchmarkArgs, BenchmarkError, ompl_available
+from train.benchmark.outputs import benchmark
+from train.benchmark.tables import format_table
+
+
+@dataclass
+class SuiteOptions:
+    """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
+
+    suite: str | None = arg(None, "run a named suite instead (default, smoke); writes "
+                            "<task>.json/.png/.txt and summary.md to --out")
+    out: Path = arg(Path("results"), "output directory of --suite")
+    ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
+    render: bool = arg(True, "--suite: skip tree-growth images")
+
+
+@dataclass
+class SuiteEntry:
+    """One task of a suite: its samplers, problems and the OMPL rows added when OMPL is installed."""
+
+    task: str
+    samplers: list[str]
+    problems: int
+    max_nodes: int | None = None
+    scene: str | None = None
+    ompl: tuple[str, ...] = ()
+
+#: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores.
+SUITES: dict[str, list[SuiteEntry]] = {
+    "default": [
+        SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=30, ompl=("rrt", "rrtconnect")),
+        SuiteEntry("pendulum", ["uniform", "goal-bias"], problems=30, ompl=("rrt", "kpiece")),
+        SuiteEntry("arm", ["uniform", "goal-bias"], problems=20, scene="test", ompl=("rrtconnect",)),
+    ],
+    "smoke": [
+        SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
+    ],
+}
+
+
+def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: bool = True,
+              with_ompl: bool | None = None, render: bool = True) -> dict[str, dict[str, Any]]:
+    """Run a named suite; writes ``{task}.json``, ``{task}.png``, ``{task}.txt`` and ``summary.md`` to ``out``."""
+    if name not in SUITES:
+        raise BenchmarkError(f"unknown suite {name!r}; known: {', '.join(sorted(SUITES))}")
+    if with_ompl is None:
+        with_ompl = ompl_available()
+    out.mkdir(parents=True, exist_ok=True)
+    reports: dict[str, dict[str, Any]] = {}
+    tables: list[str] = []
+    suite_start = time.perf_counter()
+    for entry in SUITES[name]:
+        samplers = list(entry.samplers)
+        if with_ompl:
+            samplers += [OMPL_PREFIX + p for p in entry.ompl]
+        args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
+                             max_nodes=entry.max_nodes, scene=entry.scene, workers=workers,
+                             json=out / f"{entry.task}.json", plot=out / f"{entry.task}.png",
+                             render=out / "renders" if render else None,
+                             ompl_log=out / "ompl" if with_ompl else None,
+                             progress=progress)
+        task_start = time.perf_counter()
+        report = benchmark(args)
+        elapsed = time.perf_counter() - task_start
+        table = format_table(report)
+        (out / f"{entry.task}.txt").write_text(table + "\n")
+        tables.append(f"{table}\n({elapsed:.0f} s)")
+        reports[entry.task] = report
+        print(f"({entry.task}: {elapsed:.0f} s)\n")
+    total = time.perf_counter() - suite_start
+    command = f"gnn-mp benchmark --suite {name} --out {out} --seed {seed} --workers {workers}"
+    summary = [f"# Benchmark suite `{name}`", "", f"Command: `{command}`  ",
+               f"Total wall time: {total:.0f} s", "", "```", "\n\n".join(tables), "```", ""]
+    (out / "summary.md").write_text("\n".join(summary))
+    print(f"suite {name!r}: {total:.0f} s; results in {out}/ (summary.md, <task>.json/.png/.txt)")
+    return reports

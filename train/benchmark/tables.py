@@ -1,0 +1,38 @@
+"""The fixed-width table the benchmark prints and writes to ``<task>.txt``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _fmt(x: float | None, digits: int) -> str:
+    if x is None:
+        return "-"
+    return f"{x:.{digits}f}"
+
+
+def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -> str:
+    if stats["median"] is None:
+        return "-"
+    m, lo, hi = (stats[k] * scale for k in ("median", "q25", "q75"))
+    return f"{_fmt(m, digits)} [{_fmt(lo, digits)}, {_fmt(hi, digits)}]"
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """A fixed-width table: success rate and median [q25, q75] per metric."""
+    header = ["sampler", "success", "nodes expanded", "edges", "collision checks", "path length*",
+              "wall time [ms]"]
+    rows = [header]
+    for name, s in report["results"].items():
+        rows.append([name, f"{100 * s['success_rate']:.0f}%", _cell(s["nodes_expanded"]), _cell(s["edges"]),
+                     _cell(s["collision_checks"]), _cell(s["path_length"], 2), _cell(s["wall_time_s"], 0, 1e3)])
+    widths = [max(len(r[c]) for r in rows) for c in range(len(header))]
+    lines = ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in enumerate(zip(r, widths)))
+             for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    title = (f"{report['task']} ({report['env_id']}, max_nodes={report['max_nodes']}"
+             + (f", scene={report['scene']}" if report.get("scene") else "")
+             + f"): {report['problems']} held-out problems, seed {report['seed']}")
+    note = ("median [q25, q75]; *path length over successful runs only; "
+            "wall time = planning loop incl. sampler inference (OMPL: solve time)")
+    return "\n".join([title, *lines, note])
