@@ -5,16 +5,10 @@ constructor, disconnected by :meth:`ArmTask.close`) holding the robot
 (``xarm/xarm6_robot.urdf`` from ``pybullet_data``, fixed base at the origin on the
 table top), the table and the obstacle bodies of the current scene.
 
-Validity of a configuration: within the joint limits, no contact between a robot link
-and the table or an obstacle, and no self-collision. Self-collision is loaded with
-``URDF_USE_SELF_COLLISION``, under which Bullet skips parent-child (adjacent) link pairs;
-every other link pair is checked. One check sets the six joints
-(``resetJointStatesMultiDof``), runs ``performCollisionDetection`` and scans
-``getContactPoints`` of the robot for a point at distance <= 0; this measured ~25 us,
-faster than per-pair ``getClosestPoints`` queries (~35 us for two bodies alone, plus
-~8 us per self-collision link pair). Each configuration checked counts one collision check;
-edges are interpolated every :data:`RESOLUTION` rad (joint-space L2) and stop at the
-first invalid configuration.
+Validity of a configuration (:mod:`~gnn_mp_envs.tasks.arm.world`): within the joint limits, no
+contact with the table or an obstacle, no self-collision (adjacent links excluded). Each
+configuration checked counts one collision check; edges are interpolated every
+:data:`RESOLUTION` rad (joint-space L2) and stop at the first invalid configuration.
 
 Problems come from the scene families of :mod:`gnn_mp_envs.tasks.arm.scenes`; goals are
 inverse-kinematics solutions that put the tool inside the crevice / shelf / cubby, starts
