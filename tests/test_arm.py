@@ -11,6 +11,7 @@ from gnn_mp_envs.core.planners import make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.tasks.arm import JOINT_HIGH, JOINT_LOW, ArmProblem, ArmTask
 from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, Obstacle, sample_scene
+from tests.helpers import run_uniform
 
 ENV_ID = "GNNMP/ArmBiRRT-v0"
 #: Forearm folded down so the wrist presses into the base and first link: self-collision only.
@@ -30,15 +31,7 @@ def make_env(max_nodes=200, scene="test", **kw):
 
 
 def run_episode(env, seed, rng_seed=0, max_steps=100_000):
-    obs, info = env.reset(seed=seed)
-    rng = np.random.default_rng(rng_seed)
-    low, high = env.action_space.low, env.action_space.high
-    terminated = False
-    for _ in range(max_steps):
-        obs, reward, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
-        if terminated or truncated:
-            break
-    return obs, info, terminated
+    return run_uniform(env, seed=seed, rng_seed=rng_seed, max_steps=max_steps)
 
 
 # ---------------------------------------------------------------------- API checkers

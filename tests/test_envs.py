@@ -8,19 +8,14 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from gnn_mp_envs.core.problem import InvalidProblemError
 from gnn_mp_envs.envs.tree_env import TreePlanningEnv
 from gnn_mp_envs.tasks.maze2d import Maze2DTask
+from gnn_mp_envs.rollout import rollout
+from tests.helpers import run_uniform, uniform_policy
 
 ENV_IDS = ["GNNMP/Maze2DRRT-v0", "GNNMP/Maze2DBiRRT-v0", "GNNMP/PendulumRRT-v0"]
 
 
 def run_episode(env, seed, rng_seed=0, max_steps=100_000):
-    obs, info = env.reset(seed=seed)
-    rng = np.random.default_rng(rng_seed)
-    low, high = env.action_space.low, env.action_space.high
-    for _ in range(max_steps):
-        obs, reward, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
-        if terminated or truncated:
-            break
-    return obs, info, terminated
+    return run_uniform(env, seed=seed, rng_seed=rng_seed, max_steps=max_steps)
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
@@ -137,13 +132,8 @@ def test_bad_constructor_arguments():
 
 def test_truncation_at_node_budget():
     env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=20)
-    obs, info = env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    for _ in range(10_000):
-        obs, r, terminated, truncated, info = env.step(rng.uniform(0, 1, 2).astype(np.float32))
-        if terminated or truncated:
-            break
-    assert truncated and not terminated
+    _, info, terminated = run_uniform(env, seed=0, max_steps=10_000)
+    assert not terminated and env.unwrapped.planner.tree.full
     assert info["nodes_expanded"] == 20 and not info["is_success"]
 
 
@@ -179,16 +169,7 @@ def test_test_split_is_fixed_and_disjoint_from_train():
 
 def _solve_rate(env_id, n, seed0=0):
     env = gym.make(env_id, split="test").unwrapped
-    solved = 0
-    for i in range(n):
-        env.reset(options={"index": i})
-        rng = np.random.default_rng(seed0 + i)
-        low, high = env.action_space.low, env.action_space.high
-        while True:
-            _, _, terminated, truncated, info = env.step(rng.uniform(low, high).astype(np.float32))
-            if terminated or truncated:
-                break
-        solved += bool(info["is_success"])
+    solved = sum(rollout(env, uniform_policy(env, seed0 + i), options={"index": i}).success for i in range(n))
     return solved / n
 
 

@@ -1,0 +1,24 @@
+"""Shared test helpers: uniform actions from a numpy seed, driven through the one rollout loop."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gnn_mp_envs.rollout import run_steps
+
+
+def uniform_policy(env: Any, seed: int = 0):
+    """A policy drawing uniform actions in the env's action box from ``default_rng(seed)``."""
+    rng = np.random.default_rng(seed)
+    low, high = env.action_space.low, env.action_space.high
+    return lambda _obs: rng.uniform(low, high).astype(np.float32)
+
+
+def run_uniform(env: Any, seed: int | None = None, rng_seed: int = 0, max_steps: int = 100_000,
+                options: dict | None = None) -> tuple[dict, dict, bool]:
+    """Reset with ``seed``/``options`` and step with uniform actions; (last obs, last info, terminated)."""
+    obs, info = env.reset(seed=seed, options=options)
+    result = run_steps(env, uniform_policy(env, rng_seed), obs, max_steps=max_steps, info=info)
+    return result.observation, result.info, result.terminated
