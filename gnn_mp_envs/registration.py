@@ -49,6 +49,15 @@ class TaskSpec:
         """The environment id the benchmark uses."""
         return self.benchmark_env or next(iter(self.envs))
 
+    def default_scene(self, split: str) -> str | None:
+        """The scene an environment of ``split`` plans when none is named: the held-out family
+        for ``split="test"``, the training families otherwise (``"train"`` when it is a scene)."""
+        if not self.scenes:
+            return None
+        if split == "test" and self.benchmark_scene is not None:
+            return self.benchmark_scene
+        return "train" if "train" in self.scenes else self.scenes[0]
+
     def task_class(self) -> Callable[..., Any]:
         if not isinstance(self.entry_point, str):
             return self.entry_point

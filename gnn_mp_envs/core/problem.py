@@ -165,6 +165,9 @@ class Problem:
                     f"{name} {x} lies outside the bounds [{self.low}, {self.high}]")
             if not bool(self.is_state_valid(x[None])[0]):
                 raise InvalidProblemError(f"{name} {x} is in collision / invalid")
+        if self.in_goal(self.start):
+            raise InvalidProblemError(f"start {self.start} already satisfies the goal {self.goal}: "
+                                      "nothing to plan")
 
     def reset_counters(self) -> None:
         self.collision_checks = 0

@@ -3,6 +3,7 @@ the next sample is the action."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -14,6 +15,38 @@ from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, observation_space
 from gnn_mp_envs.registration import make_task, task_spec
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
+
+#: Keys ``reset(options=...)`` understands (anything else is a typo and is refused).
+RESET_OPTIONS = frozenset({"problem", "index"})
+#: Largest node budget accepted: the padded observation and tree arrays of 2 million 6-D
+#: nodes already take ~0.5 GB; larger budgets are almost certainly a typo.
+MAX_NODES_LIMIT = 2_000_000
+
+
+def integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
+    """``value`` as an int in ``[minimum, maximum]``; a ValueError naming ``name`` otherwise
+    (floats with a fractional part, strings, bools and NaN are refused, not truncated)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if isinstance(value, (float, np.floating)) and not (math.isfinite(value) and float(value).is_integer()):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    value = int(value)
+    if value < minimum or (maximum is not None and value > maximum):
+        bound = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum:,}]"
+        raise ValueError(f"{name} must be {bound}, got {value:,}")
+    return value
+
+
+def real(name: str, value: Any) -> float:
+    """``value`` as a finite float; a ValueError naming ``name`` otherwise."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(out) or isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return out
+
 
 class TreePlanningEnv(gym.Env):
     """Sampling-based planning as an MDP: each step is one RRT/BiRRT iteration.
@@ -47,7 +80,9 @@ class TreePlanningEnv(gym.Env):
     A tree holding only its root(s). ``reset(seed=s)`` reproduces the problem and tree;
     ``reset(options={"problem": p})`` plans a given problem (a task ``Problem`` or a dict
     such as ``{"start": ..., "goal": ..., "walls": ...}``); ``reset(options={"index": i})``
-    plans the i-th problem of the env's ``split`` (``"test"``: the held-out problems).
+    plans the i-th problem of the env's ``split`` (``"test"``: the held-out problems); other
+    option keys are refused. Tasks with scene families (the arm) take ``scene=``; without
+    one, ``split="test"`` plans the held-out family and the other splits the training ones.
 
     ## Episode end
     ``terminated`` when a start-to-goal path is found. ``truncated`` when the tree holds
@@ -65,31 +100,42 @@ class TreePlanningEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, task: str = "maze2d", planner: str = "rrt", max_nodes: int | None = None,
-                 max_steps: int | None = None, split: str = "train",
+                 max_steps: int | None = None, split: str = "train", scene: str | None = None,
                  task_kwargs: dict[str, Any] | None = None, render_mode: str | None = None,
                  step_penalty: float = 1.0, success_reward: float = 10.0,
                  collision_check_cost: float = 0.0, copy_observations: bool = True) -> None:
+        spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
         if split not in SPLIT_SEEDS:
             raise ValueError(f"unknown split {split!r}; known: {sorted(SPLIT_SEEDS)}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.task = make_task(task, **(task_kwargs or {}))
+        self.max_nodes = spec.max_nodes if max_nodes is None else integer("max_nodes", max_nodes, 2, MAX_NODES_LIMIT)
+        self.max_steps = 4 * self.max_nodes if max_steps is None else integer("max_steps", max_steps, 1)
+        self.step_penalty = real("step_penalty", step_penalty)
+        self.success_reward = real("success_reward", success_reward)
+        self.collision_check_cost = real("collision_check_cost", collision_check_cost)
+        task_kwargs = dict(task_kwargs or {})
+        if spec.scenes:
+            if scene is not None and task_kwargs.get("scene", scene) != scene:
+                raise ValueError(f"scene={scene!r} and task_kwargs['scene']={task_kwargs['scene']!r} disagree")
+            # Held-out problems come from the held-out scene family, training and validation
+            # problems from the training families, unless a scene is named.
+            task_kwargs.setdefault("scene", scene or spec.default_scene(split))
+            if task_kwargs["scene"] not in spec.scenes:
+                raise ValueError(f"unknown scene {task_kwargs['scene']!r} for task {task!r}; "
+                                 f"known: {', '.join(spec.scenes)}")
+        elif scene is not None:
+            raise ValueError(f"task {task!r} has no scenes (scene={scene!r})")
+        self.scene = task_kwargs.get("scene")
+        self.task = make_task(task, **task_kwargs)
         if planner not in self.task.planners:
+            self.task.close()
             raise ValueError(f"task {task!r} supports planners {self.task.planners}, not {planner!r}")
-        self.max_nodes = task_spec(task).max_nodes if max_nodes is None else int(max_nodes)
-        if self.max_nodes < 2:
-            raise ValueError(f"max_nodes must be >= 2, got {self.max_nodes}")
-        self.max_steps = 4 * self.max_nodes if max_steps is None else int(max_steps)
-        if self.max_steps < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         self.planner_name = planner
         self.split = split
         self.render_mode = render_mode
-        self.step_penalty = float(step_penalty)
-        self.success_reward = float(success_reward)
-        self.collision_check_cost = float(collision_check_cost)
         self.copy_observations = bool(copy_observations)
         if self.copy_observations:
             keep_freed_heap()
@@ -107,7 +153,12 @@ class TreePlanningEnv(gym.Env):
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        options = options or {}
+        options = dict(options or {})
+        unknown = sorted(set(options) - RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; known: {sorted(RESET_OPTIONS)}")
+        if "problem" in options and "index" in options:
+            raise ValueError("reset options 'problem' and 'index' exclude each other")
         if "problem" in options:
             problem = self.task.make_problem(options["problem"])
             if problem.state_dim != self.state_dim:
@@ -117,7 +168,7 @@ class TreePlanningEnv(gym.Env):
             index = options.get("index")
             if index is None:
                 index = int(self.np_random.integers(2**31 - 1))
-            problem = self.task.problem(self.split, int(index))
+            problem = self.task.problem(self.split, integer("options['index']", index, 0))
         problem.reset_counters()
         self.problem = problem
         self.planner = make_planner(self.planner_name, problem, self.max_nodes)

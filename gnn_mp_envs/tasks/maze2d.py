@@ -27,6 +27,21 @@ STEP_SIZE = 0.05
 ENDPOINT_MARGIN = 0.04
 
 
+def _rows(name: str, value: Any, width: int) -> np.ndarray:
+    """``value`` as a finite (k, width) float array; InvalidProblemError naming ``name`` otherwise."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidProblemError(f"{name} must be numbers, got {value!r}") from None
+    if a.size % width or (a.ndim > 1 and a.shape[-1] != width):
+        raise InvalidProblemError(f"{name} must have rows of {width} numbers, got shape {a.shape}")
+    a = a.reshape(-1, width)
+    bad = np.flatnonzero(~np.isfinite(a).all(axis=1))
+    if bad.size:
+        raise InvalidProblemError(f"{name}[{bad[0]}] = {a[bad[0]].tolist()} is not finite")
+    return a
+
+
 @dataclass
 class MazeMap:
     """Obstacles of the unit square: ``walls`` (M, 4) as ``[xmin, ymin, xmax, ymax]`` and
@@ -36,8 +51,15 @@ class MazeMap:
     blobs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __post_init__(self) -> None:
-        self.walls = np.asarray(self.walls, dtype=np.float64).reshape(-1, 4)
-        self.blobs = np.asarray(self.blobs, dtype=np.float64).reshape(-1, 3)
+        self.walls = _rows("walls", self.walls, 4)
+        self.blobs = _rows("blobs", self.blobs, 3)
+        bad = np.flatnonzero((self.walls[:, 0] > self.walls[:, 2]) | (self.walls[:, 1] > self.walls[:, 3]))
+        if bad.size:
+            raise InvalidProblemError(f"walls[{bad[0]}] = {self.walls[bad[0]].tolist()} is inverted: "
+                                      "expected [xmin, ymin, xmax, ymax] with min <= max")
+        bad = np.flatnonzero(self.blobs[:, 2] <= 0)
+        if bad.size:
+            raise InvalidProblemError(f"blobs[{bad[0]}] has radius {self.blobs[bad[0], 2]}: must be > 0")
 
     def is_free(self, points: np.ndarray) -> np.ndarray:
         """Free-space test of each row of ``points`` (N, 2); outside the square is not free."""

@@ -14,16 +14,26 @@ obstacle types (cylinders, a thin wall, a closed cubby) and counts.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
+
+from gnn_mp_envs.core.problem import InvalidProblemError
 
 #: Table top: a box whose upper face is z = 0; [xmin, ymin, xmax, ymax] and thickness.
 TABLE_EXTENT = (-0.55, -0.8, 0.9, 0.8)
 TABLE_THICKNESS = 0.04
 #: Obstacles keep this distance from the robot's base axis (the base link is ~0.1 wide).
 BASE_CLEARANCE = 0.22
+
+
+def _floats(name: str, value: Any) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InvalidProblemError(f"obstacle {name} must be a sequence of numbers, got {value!r}") from None
 
 
 @dataclass(frozen=True)
@@ -35,6 +45,27 @@ class Obstacle:
     size: tuple[float, ...]
     position: tuple[float, float, float]
     yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Refuse shapes pybullet would silently accept or misreport (one message naming the field)."""
+        widths = {"box": 3, "cylinder": 2}
+        if self.kind not in widths:
+            raise InvalidProblemError(f"obstacle kind must be 'box' or 'cylinder', got {self.kind!r}")
+        size = _floats("size", self.size)
+        if len(size) != widths[self.kind]:
+            what = "half extents (x, y, z)" if self.kind == "box" else "(radius, height)"
+            raise InvalidProblemError(f"a {self.kind} obstacle's size is {what}: {widths[self.kind]} numbers, "
+                                      f"got {len(size)}")
+        if not all(math.isfinite(v) and v > 0 for v in size):
+            raise InvalidProblemError(f"obstacle size must be finite and > 0, got {list(size)}")
+        position = _floats("position", self.position)
+        if len(position) != 3 or not all(math.isfinite(v) for v in position):
+            raise InvalidProblemError(f"obstacle position must be 3 finite numbers, got {list(position)}")
+        if not math.isfinite(float(self.yaw)):
+            raise InvalidProblemError(f"obstacle yaw must be finite, got {self.yaw}")
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "position", position)
+        object.__setattr__(self, "yaw", float(self.yaw))
 
     def key(self) -> tuple:
         """Shape identity: bodies with the same key can be moved instead of rebuilt."""

@@ -81,8 +81,7 @@ class ArmTask(Task):
         if isinstance(spec, dict):
             try:
                 obstacles = tuple(o if isinstance(o, Obstacle) else
-                                  Obstacle(str(o["kind"]), tuple(map(float, o["size"])),
-                                           tuple(map(float, o["position"])), float(o.get("yaw", 0.0)))
+                                  Obstacle(str(o["kind"]), o["size"], o["position"], o.get("yaw", 0.0))
                                   for o in spec.get("obstacles", ()))
                 spec = ArmProblem(self.world, obstacles, spec["start"], spec["goal"], self.step_size,
                                   self.resolution)

