@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from typing import Callable, Sequence
 
@@ -36,6 +37,18 @@ TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
 
 class CLIError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
+
+
+def exit_now(code: int) -> None:
+    """Leave at once after Ctrl-C: outputs are already written (atomically) and workers
+    killed, and tearing down torch and friends can take seconds on a busy machine."""
+    import gc
+    from multiprocessing import util
+    gc.collect()                # drop the killed pool's queues ...
+    util._run_finalizers()      # ... and release their semaphores (else the resource tracker warns)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def fail(message: str, code: int = 2):
@@ -99,6 +112,11 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
                          with_ompl=None if suite.ompl else False, render=suite.render)
             return 0
         bm.benchmark(args)
+    except bm.BenchmarkIncomplete as exc:
+        code = fail(f"benchmark: {exc}", 130 if exc.interrupted else 1)
+        if exc.interrupted:
+            exit_now(code)
+        return code
     except bm.BenchmarkError as exc:
         return fail(f"benchmark: {exc}")
     return 0
@@ -155,7 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CLIError as exc:
         return fail(str(exc))
     except KeyboardInterrupt:
-        return fail("interrupted", 130)
+        exit_now(fail("interrupted", 130))
     except OSError as exc:   # unreadable / unwritable files from any subcommand
         return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
 

@@ -19,6 +19,8 @@ import socket
 from pathlib import Path
 from typing import Any
 
+from gnn_mp_envs.utils.io import atomic_write_text
+
 #: OMPL's ``PlannerStatus`` names in enum order (the ``status`` enum of the log).
 STATUS_NAMES = ("Unknown status", "Invalid start", "Invalid goal", "Unrecognized goal type", "Timeout",
                 "Approximate solution", "Exact solution", "Crash", "Abort", "Infeasible")
@@ -151,7 +153,7 @@ def write_ompl_log(path: str | Path, experiment_name: str, results_by_planner: d
         lines.append(".")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 

@@ -17,17 +17,26 @@ run through :func:`gnn_mp_envs.rollout.rollout`; all runs, serially or in worker
 :mod:`.suites`. The ``--json`` schema is documented in ``docs/results.md``.
 """
 
-from train.benchmark.args import (OMPL_PREFIX, BenchmarkArgs, BenchmarkError, check_ompl, is_ompl,
-                                  ompl_available, ompl_rows_for, problem_seed, validate_args)
+from train.benchmark.args import (
+                                  OMPL_PREFIX,
+                                  BenchmarkArgs,
+                                  BenchmarkError,
+                                  check_ompl,
+                                  is_ompl,
+                                  ompl_available,
+                                  ompl_rows_for,
+                                  problem_seed,
+                                  validate_args,
+)
 from train.benchmark.ompl_rows import _ompl_record, run_ompl_rows, write_ompl_logs
 from train.benchmark.outputs import benchmark, write_outputs
 from train.benchmark.plots import plot_report, render_growth
-from train.benchmark.runs import run_benchmark, run_episode
+from train.benchmark.runs import BenchmarkIncomplete, run_benchmark, run_episode
 from train.benchmark.stats import METRICS, build_report, sampler_summary, summarize
 from train.benchmark.suites import SUITES, SuiteEntry, run_suite
 from train.benchmark.tables import format_table
 
-__all__ = ["METRICS", "OMPL_PREFIX", "SUITES", "BenchmarkArgs", "BenchmarkError", "SuiteEntry", "_ompl_record",
+__all__ = ["METRICS", "OMPL_PREFIX", "SUITES", "BenchmarkArgs", "BenchmarkError", "BenchmarkIncomplete", "SuiteEntry", "_ompl_record",
            "benchmark", "build_report", "check_ompl", "format_table", "is_ompl", "ompl_available",
            "ompl_rows_for", "plot_report", "problem_seed", "render_growth", "run_benchmark", "run_episode",
            "run_ompl_rows", "run_suite", "sampler_summary", "summarize", "validate_args", "write_ompl_logs",

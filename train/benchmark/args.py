@@ -14,6 +14,8 @@ from train.args import arg, name_list, non_negative_int, positive_float, positiv
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
+#: Seeds are 32-bit (OMPL's RNG takes one; numpy's SeedSequence would take more).
+MAX_SEED = 2**32 - 1
 OMPL_INSTALL_HINT = "OMPL is not installed; install the optional extra with `pip install -e .[ompl]`"
 
 
@@ -127,8 +129,8 @@ def validate_args(args: BenchmarkArgs) -> None:
         args.scene = spec.benchmark_scene
     if args.problems < 1:
         raise BenchmarkError(f"--problems must be >= 1, got {args.problems}")
-    if args.seed < 0:
-        raise BenchmarkError(f"--seed must be >= 0, got {args.seed}")
+    if not 0 <= args.seed < MAX_SEED:
+        raise BenchmarkError(f"--seed must be in [0, {MAX_SEED - 1}], got {args.seed}")
     if args.workers < 1:
         raise BenchmarkError(f"--workers must be >= 1, got {args.workers}")
     if args.max_nodes is not None and args.max_nodes < 2:

@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 from typing import Any
 
-from train.benchmark.args import OMPL_INSTALL_HINT, OMPL_PREFIX, BenchmarkArgs, BenchmarkError, is_ompl
+from train.benchmark.args import (
+    OMPL_INSTALL_HINT,
+    OMPL_PREFIX,
+    BenchmarkArgs,
+    BenchmarkError,
+    is_ompl,
+)
 
 
 def _finite_or_none(x: Any) -> float | None:
@@ -47,6 +54,9 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
                                        planner=planner, time_limit=args.ompl_time_limit, seed=args.seed)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
+    except subprocess.TimeoutExpired as exc:
+        raise BenchmarkError(f"{planner_row} on {args.task}: the OMPL runner did not finish within "
+                             f"{exc.timeout:.0f} s for {len(indices)} problems") from None
     except (ValueError, NotImplementedError, RuntimeError) as exc:
         raise BenchmarkError(f"{planner_row} on {args.task}: {exc}".replace("\n", " ")) from None
     # OMPL's RNG is seeded once per runner call (with --seed + 1), so the run's seed is --seed.

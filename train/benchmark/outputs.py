@@ -7,10 +7,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gnn_mp_envs.utils.io import atomic_write_text
 from train.benchmark.args import BenchmarkArgs
 from train.benchmark.ompl_rows import write_ompl_logs
 from train.benchmark.plots import plot_report, render_growth
-from train.benchmark.runs import run_benchmark
+from train.benchmark.runs import BenchmarkIncomplete, run_benchmark
 from train.benchmark.tables import format_table
 
 
@@ -18,8 +19,7 @@ def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path
     """Write the requested --json / --plot / --render / --ompl-log outputs."""
     written: dict[str, Path] = {}
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
+        write_json(args.json, report)
         written["json"] = args.json
     if args.plot is not None:
         plot_report(report, args.plot)
@@ -34,9 +34,21 @@ def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path
     return written
 
 
+def write_json(path: Path, report: dict[str, Any]) -> Path:
+    """The report as JSON, written atomically (an old file stays whole if the write fails)."""
+    return atomic_write_text(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
+
+
 def benchmark(args: BenchmarkArgs) -> dict[str, Any]:
-    """Run, print the table, write outputs."""
-    report = run_benchmark(args)
+    """Run, print the table, write outputs. When the run stops early, the finished runs go to
+    ``--json`` (marked ``"partial": true``) before the error is raised."""
+    try:
+        report = run_benchmark(args)
+    except BenchmarkIncomplete as exc:
+        if args.json is not None:
+            write_json(args.json, exc.report)
+            print(f"wrote {args.json} (partial)", file=sys.stderr)
+        raise
     print(format_table(report))
     for kind, path in write_outputs(args, report).items():
         print(f"wrote {path}", file=sys.stderr)

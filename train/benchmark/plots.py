@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from gnn_mp_envs.utils.io import atomic_path
 from train.benchmark.args import BenchmarkArgs, env_kwargs_for, is_ompl, task_spec_for
 from train.benchmark.runs import checkpoint_of, run_episode
 
@@ -36,8 +37,8 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
     # Two lines: the success rates of four or more samplers overflow a one-line title.
     fig.suptitle(f"{report['task']}: {report['problems']} held-out problems\nsuccess {rates}", fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
 
 
@@ -59,8 +60,8 @@ def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.
         ax.axis("off")
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
 
 

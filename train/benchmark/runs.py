@@ -5,14 +5,25 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
+import signal
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Iterable
 
 import numpy as np
 
-from train.benchmark.args import (BenchmarkArgs, BenchmarkError, env_kwargs_for, import_modules, is_ompl,
-                                  problem_seed, task_spec_for, validate_args)
+from train.benchmark.args import (
+    BenchmarkArgs,
+    BenchmarkError,
+    env_kwargs_for,
+    import_modules,
+    is_ompl,
+    problem_seed,
+    task_spec_for,
+    validate_args,
+)
 
 _ENVS: dict[str, Any] = {}
 _SAMPLERS: dict[tuple, Any] = {}
@@ -21,6 +32,7 @@ _SAMPLERS: dict[tuple, Any] = {}
 def cached_env(env_id: str, env_kwargs: dict[str, Any], render: bool = False):
     """One env per (id, kwargs) and process: building the arm's simulator is not free."""
     import gymnasium as gym
+
     import gnn_mp_envs  # noqa: F401  (registers the ids)
     key = json.dumps([env_id, env_kwargs, render], sort_keys=True)
     if key not in _ENVS:
@@ -57,8 +69,12 @@ def run_episode(task: str, env_id: str, env_kwargs: dict[str, Any], sampler_name
             snapshots.append((info["iterations"], info["nodes_expanded"], env.render()))
 
     sampler.reset(sample_seed)
-    run = rollout(env, sampler.act, seed=sample_seed, options={"index": index},
-                  on_step=snapshot if snapshots_at else None)
+    try:
+        run = rollout(env, sampler.act, seed=sample_seed, options={"index": index},
+                      on_step=snapshot if snapshots_at else None)
+    except (ValueError, TypeError, RuntimeError, IndexError) as exc:   # e.g. a NaN action
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {message}") from None
     record = {"sampler": sampler_name, "problem": int(index), "seed": sample_seed, **run.counters()}
     record.pop("env_time_s")   # the JSON schema (docs/results.md) reports planning wall time only
     if snapshots_at:
@@ -71,11 +87,27 @@ def _run_episode_job(job: tuple) -> dict[str, Any]:
     return run_episode(*job)
 
 
+def _die_with_parent() -> None:
+    """Ask Linux to SIGKILL this worker when the benchmark process dies (SIGTERM, SIGKILL,
+    a crash), so no worker, and hence no resource tracker, outlives it; and leave Ctrl-C to
+    the parent, which stops the workers itself (one line instead of a traceback per worker)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        import ctypes
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):   # not Linux/glibc: workers still end with the pool
+        return
+    if os.getppid() == 1:   # the parent died before the request took effect
+        os._exit(1)
+
+
 def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
                     samplers: list[tuple[str, str | None]], modules: list[str]) -> None:
-    """Worker initializer: import plugin modules, build the env and samplers and run one
-    inference each, so that lazy imports and first-call costs stay out of the measured wall
-    time (as in a serial run)."""
+    """Worker initializer: die with the parent, import plugin modules, build the env and
+    samplers and run one inference each, so that lazy imports and first-call costs stay out
+    of the measured wall time (as in a serial run)."""
+    _die_with_parent()
     import_modules(modules)
     env = cached_env(env_id, env_kwargs)
     obs, _ = env.reset(seed=0, options={"index": 0})
@@ -131,22 +163,64 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     jobs = [(args.task, env_id, env_kwargs, name, i, args.seed, checkpoint)
             for name, checkpoint in learned for i in indices]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
-    if args.workers == 1:
-        for job in jobs:
-            record = _run_episode_job(job)
-            runs[record["sampler"]].append(record)
-            bar.update(1)
-    else:
-        context = multiprocessing.get_context("spawn")   # torch + fork can deadlock
-        with ProcessPoolExecutor(max_workers=args.workers, mp_context=context, initializer=_warm_up_worker,
-                                 initargs=(args.task, env_id, env_kwargs, learned, args.modules)) as pool:
-            futures = [pool.submit(_run_episode_job, job) for job in jobs]
-            for future in as_completed(futures):
-                record = future.result()
-                runs[record["sampler"]].append(record)
-                bar.update(1)
-    bar.close()
+
+    def finished(record: dict[str, Any]) -> None:
+        runs[record["sampler"]].append(record)
+        bar.update(1)
+
+    reason = None
+    try:
+        if args.workers == 1:
+            for job in jobs:
+                finished(_run_episode_job(job))
+        else:
+            _run_in_workers(args, env_id, env_kwargs, learned, jobs, finished)
+    except KeyboardInterrupt:
+        reason = "interrupted"
+    except BrokenProcessPool:
+        reason = "a worker process died (killed by a signal or out of memory)"
+    except BenchmarkError as exc:
+        reason = str(exc)
+    finally:
+        bar.close()
 
     for name in runs:
         runs[name].sort(key=lambda r: r["problem"])
-    return build_report(args, runs)
+    report = build_report(args, runs)
+    if reason is not None:
+        done = sum(len(r) for r in runs.values())
+        raise BenchmarkIncomplete(f"{reason}; {done} of {len(jobs) + len(indices) * sum(map(is_ompl, args.samplers))} "
+                                  "runs finished", {**report, "partial": True}, interrupted=reason == "interrupted")
+    return report
+
+
+class BenchmarkIncomplete(BenchmarkError):
+    """The benchmark stopped early (Ctrl-C, a dead worker, a failing sampler); ``report``
+    holds the runs that finished, marked ``"partial": true``."""
+
+    def __init__(self, message: str, report: dict[str, Any], interrupted: bool = False) -> None:
+        super().__init__(message)
+        self.report = report
+        self.interrupted = interrupted
+
+
+def _run_in_workers(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
+                    learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
+    """Run ``jobs`` in ``args.workers`` spawned processes; on any error or Ctrl-C the workers
+    are killed at once instead of finishing the queue."""
+    context = multiprocessing.get_context("spawn")   # torch + fork can deadlock
+    pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=context, initializer=_warm_up_worker,
+                               initargs=(args.task, env_id, env_kwargs, learned, args.modules))
+    try:
+        futures = [pool.submit(_run_episode_job, job) for job in jobs]
+        for future in as_completed(futures):
+            finished(future.result())
+    except BaseException:
+        processes = list((pool._processes or {}).values())   # the pool has no public kill
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.kill()
+        for process in processes:
+            process.join(timeout=5)
+        raise
+    pool.shutdown()

@@ -26,7 +26,7 @@ def summarize(values: list[float | None]) -> dict[str, float | None]:
 
 def sampler_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Success rate and per-metric statistics of one sampler's runs."""
-    summary: dict[str, Any] = {"success_rate": float(np.mean([r["success"] for r in records]))}
+    summary: dict[str, Any] = {"success_rate": float(np.mean([r["success"] for r in records])) if records else None}
     for metric in METRICS:
         runs = [r for r in records if r["success"]] if metric in SUCCESS_ONLY_METRICS else records
         summary[metric] = summarize([r[metric] for r in runs])

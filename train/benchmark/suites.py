@@ -7,8 +7,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import arg
-from train.benchmark.args import OMPL_PREFIX, BenchmarkArgs, BenchmarkError, ompl_available
+from train.benchmark.args import (
+    OMPL_PREFIX,
+    BenchmarkArgs,
+    BenchmarkError,
+    ompl_available,
+)
 from train.benchmark.outputs import benchmark
 from train.benchmark.tables import format_table
 
@@ -73,7 +79,7 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
         report = benchmark(args)
         elapsed = time.perf_counter() - task_start
         table = format_table(report)
-        (out / f"{entry.task}.txt").write_text(table + "\n")
+        atomic_write_text(out / f"{entry.task}.txt", table + "\n")
         tables.append(f"{table}\n({elapsed:.0f} s)")
         reports[entry.task] = report
         print(f"({entry.task}: {elapsed:.0f} s)\n")
@@ -81,6 +87,6 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
     command = f"gnn-mp benchmark --suite {name} --out {out} --seed {seed} --workers {workers}"
     summary = [f"# Benchmark suite `{name}`", "", f"Command: `{command}`  ",
                f"Total wall time: {total:.0f} s", "", "```", "\n\n".join(tables), "```", ""]
-    (out / "summary.md").write_text("\n".join(summary))
+    atomic_write_text(out / "summary.md", "\n".join(summary))
     print(f"suite {name!r}: {total:.0f} s; results in {out}/ (summary.md, <task>.json/.png/.txt)")
     return reports
