@@ -114,3 +114,72 @@ def test_dataset_is_deterministic_and_round_trips(tmp_path):
     other = generate_all(DatasetConfig(seed=4, num_maps=2, pairs_per_map=2, eval_problems=2),
                          tmp_path / "c", progress=False)
     assert _digest(other["labelled"]) != _digest(a["labelled"])
+
+
+def _truncate(path):
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def _empty(path):
+    path.write_bytes(b"")
+
+
+def _break_crc(path):
+    """Flip bytes inside a compressed member: the zip directory stays valid, the CRC does not."""
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + 16] = bytes(b ^ 0xFF for b in data[mid:mid + 16])
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("corrupt", [_truncate, _empty, _break_crc], ids=["truncated", "empty", "crc"])
+def test_damaged_cache_is_regenerated_with_a_one_line_warning(tmp_path, corrupt, caplog):
+    """Issue #11 item 8: no BadZipFile / EOFError / TypeError traceback; byte-identical regeneration."""
+    from gnn_mp_envs.critical.dataset import DatasetCacheError, load_or_generate
+    fresh = generate_all(TINY, tmp_path / "fresh", progress=False)
+    cache = generate_all(TINY, tmp_path / "cache", progress=False)
+    for key in ("labelled", "blob"):
+        path = cache[key]
+        corrupt(path)
+        with pytest.raises(DatasetCacheError) as info:
+            load_problems(path)
+        assert str(path) in str(info.value) and "\n" not in str(info.value)
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="gnn_mp_envs.critical.dataset"):
+            problems = load_or_generate(TINY, cache[key].parent, key, progress=False)
+        warnings = [r.getMessage() for r in caplog.records]
+        assert len(warnings) == 1 and str(path) in warnings[0] and "\n" not in warnings[0]
+        assert "regenerat" in warnings[0]
+        assert _digest(path) == _digest(fresh[key])
+        assert len(problems) == len(load_problems(fresh[key]))
+    corrupt(cache["test"])                                  # generate_all repairs too
+    with caplog.at_level("WARNING", logger="gnn_mp_envs.critical.dataset"):
+        generate_all(TINY, tmp_path / "cache", progress=False)
+    assert _digest(cache["test"]) == _digest(fresh["test"])
+
+
+def test_cache_writers_use_unique_temporary_names(tmp_path):
+    """Two writers of one cache never share a temporary file (the old code used <name>.tmp)."""
+    import threading
+    from gnn_mp_envs.critical.dataset import generate_eval, save_problems
+    problems = generate_eval(TINY, "test", progress=False)
+    path = tmp_path / "eval_test.npz"
+    path.with_suffix(".tmp").mkdir()                        # a fixed temp name is taken: must not matter
+    save_problems(problems, path)
+    reference = path.read_bytes()
+    errors = []
+
+    def writer():
+        try:
+            for _ in range(10):
+                save_problems(problems, path)
+        except Exception as exc:   # noqa: BLE001 - collected for the assertion
+            errors.append(exc)
+
+    threads = [threading.Thread(target=writer) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == [] and path.read_bytes() == reference
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval_test.npz", "eval_test.tmp"]

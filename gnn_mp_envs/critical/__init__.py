@@ -6,9 +6,10 @@ and training live in ``agents/models/critical.py`` and ``train/critical.py``.
 """
 
 from gnn_mp_envs.critical.bottleneck import BottleneckResult, bottleneck_nodes, problem_graph, valid_edges
-from gnn_mp_envs.critical.dataset import DatasetConfig, CriticalProblems, load_problems, save_problems
+from gnn_mp_envs.critical.dataset import (CriticalProblems, DatasetCacheError, DatasetConfig, load_problems,
+                                          save_problems)
 from gnn_mp_envs.critical.halton import HaltonGraph, halton_graph, halton_points
 
 __all__ = ["BottleneckResult", "bottleneck_nodes", "problem_graph", "valid_edges",
-           "DatasetConfig", "CriticalProblems", "load_problems", "save_problems",
+           "DatasetConfig", "DatasetCacheError", "CriticalProblems", "load_problems", "save_problems",
            "HaltonGraph", "halton_graph", "halton_points"]

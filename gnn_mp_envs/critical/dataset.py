@@ -17,13 +17,23 @@ Problem ``i`` of a stream draws everything from ``default_rng([seed, stream, i])
 same seed gives identical arrays; files are written with fixed zip timestamps so they are
 byte-identical too. Node/edge validity is stored bit-packed; features are derived at load
 time (``agents/critical_data.py``), keeping this module numpy-only.
+
+Caches are written to a unique temporary file beside the target and renamed into place
+(:func:`gnn_mp_envs.utils.io.atomic_path`), so concurrent generators never share a file and
+readers never see half a file. A cache that cannot be read (empty, truncated, CRC errors,
+not an npz, missing arrays, another format version) raises :class:`DatasetCacheError` from
+:func:`load_problems`; :func:`load_or_generate` and :func:`generate_all` then log a one-line
+warning naming the file and regenerate it.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import logging
+import pickle
 import zipfile
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -34,6 +44,9 @@ from gnn_mp_envs.critical.bottleneck import bottleneck_nodes, problem_graph
 from gnn_mp_envs.critical.halton import DENSE_NODES, HaltonGraph, halton_graph
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
 from gnn_mp_envs.tasks.maze2d import MazeMap, random_maze, sample_endpoints
+from gnn_mp_envs.utils.io import atomic_path
+
+log = logging.getLogger(__name__)
 
 #: Bump when the stored arrays change meaning; loaders refuse other versions.
 FORMAT_VERSION = 1
@@ -41,6 +54,10 @@ FORMAT_VERSION = 1
 BLOB_STREAM = 3
 #: Split codes of the labelled set.
 SPLIT_CODES = {"train": 0, "val": 1, "test": 2}
+
+
+class DatasetCacheError(ValueError):
+    """A dataset file that cannot be used; the message is one line naming the file."""
 
 
 @dataclass
@@ -197,25 +214,25 @@ def save_problems(problems: CriticalProblems, path: str | Path) -> None:
         "label_ptr": problems.label_ptr, "label_nodes": problems.label_nodes,
         "path_cost": problems.path_cost, "map_index": problems.map_index, "split": problems.split,
     }
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, arr in arrays.items():
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=False)
             info = zipfile.ZipInfo(name + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = zipfile.ZIP_DEFLATED
             zf.writestr(info, buf.getvalue())
-    tmp.replace(path)
 
 
-def load_problems(path: str | Path) -> CriticalProblems:
-    """Read an npz written by :func:`save_problems`; refuses other format versions."""
+#: What numpy / zipfile raise on a damaged npz (checked by tests/test_critical_graph.py).
+_DAMAGED = (zipfile.BadZipFile, zlib.error, EOFError, ValueError, KeyError, TypeError, IndexError,
+            AttributeError, pickle.UnpicklingError, UnicodeDecodeError, OverflowError)
+
+
+def _read_problems(path: Path) -> CriticalProblems:
     with np.load(path, allow_pickle=False) as z:
         version = int(z["format_version"])
         if version != FORMAT_VERSION:
-            raise ValueError(f"{path}: format version {version}, expected {FORMAT_VERSION}; regenerate it")
+            raise DatasetCacheError(f"{path}: format version {version}, expected {FORMAT_VERSION}")
         cfg_dict = json.loads(str(z["config_json"]))
         cfg_dict["num_walls"] = tuple(cfg_dict["num_walls"])
         cfg = DatasetConfig(**cfg_dict)
@@ -227,6 +244,37 @@ def load_problems(path: str | Path) -> CriticalProblems:
             np.unpackbits(z["node_free_bits"], axis=1, count=n).astype(bool),
             np.unpackbits(z["edge_free_bits"], axis=1, count=e).astype(bool),
             z["label_ptr"], z["label_nodes"], z["path_cost"], z["map_index"], z["split"], cfg)
+
+
+def load_problems(path: str | Path) -> CriticalProblems:
+    """Read an npz written by :func:`save_problems`.
+
+    Raises :class:`DatasetCacheError` (one line naming the file) for other format versions
+    and for damaged files (empty, truncated, CRC errors, not an npz, missing arrays), and
+    ``FileNotFoundError`` for a missing one.
+    """
+    path = Path(path)
+    try:
+        return _read_problems(path)
+    except DatasetCacheError:
+        raise
+    except _DAMAGED as exc:
+        lines = str(exc).strip().splitlines()
+        detail = f"{type(exc).__name__}: {lines[0][:100]}" if lines else type(exc).__name__
+        raise DatasetCacheError(f"{path}: unreadable dataset file ({detail})") from None
+
+
+def _cached(path: Path, cfg: DatasetConfig) -> CriticalProblems | None:
+    """The problems cached at ``path`` if it holds ``cfg``'s; None (after a one-line warning
+    for a damaged or outdated file) if it must be (re)generated."""
+    if not path.exists():
+        return None
+    try:
+        problems = load_problems(path)
+    except DatasetCacheError as exc:
+        log.warning("%s; regenerating it", exc)
+        return None
+    return problems if problems.config == cfg else None
 
 
 FILES = {"labelled": "labelled.npz", "test": "eval_test.npz", "blob": "eval_blob.npz"}
@@ -241,12 +289,8 @@ def generate_all(cfg: DatasetConfig, out_dir: str | Path, progress: bool = True,
     for key, name in FILES.items():
         path = out_dir / name
         paths[key] = path
-        if path.exists() and not overwrite:
-            try:
-                if load_problems(path).config == cfg:
-                    continue
-            except (ValueError, KeyError):
-                pass
+        if not overwrite and _cached(path, cfg) is not None:
+            continue
         if key == "labelled":
             problems = generate_labelled(cfg, graph, progress)
         else:
@@ -257,15 +301,11 @@ def generate_all(cfg: DatasetConfig, out_dir: str | Path, progress: bool = True,
 
 def load_or_generate(cfg: DatasetConfig, out_dir: str | Path, key: str,
                      progress: bool = True) -> CriticalProblems:
-    """One cached file, generated first if missing or generated with another config."""
+    """One cached file, generated first if missing, damaged or generated with another config."""
     path = Path(out_dir) / FILES[key]
-    if path.exists():
-        try:
-            problems = load_problems(path)
-            if problems.config == cfg:
-                return problems
-        except (ValueError, KeyError):
-            pass
+    problems = _cached(path, cfg)
+    if problems is not None:
+        return problems
     graph = halton_graph(cfg.graph_nodes)
     problems = (generate_labelled(cfg, graph, progress) if key == "labelled"
                 else generate_eval(cfg, key, graph, progress=progress))

@@ -1,0 +1,77 @@
+"""Atomic file output: write to a unique temporary file beside the target, then rename.
+
+Readers never see a half-written file (a crash leaves the old file or none, plus at most a
+hidden ``.<name>.*.tmp<suffix>`` file), and two processes writing the same target never
+share a temporary name: each writer gets its own from :func:`tempfile.mkstemp`, and the
+last :func:`os.replace` wins with a complete file.
+
+    with atomic_path("results/run.png") as tmp:   # tmp keeps the suffix: ".png"
+        fig.savefig(tmp)
+    atomic_write_text("results/run.json", json.dumps(report))
+
+Errors are ``OSError`` subclasses whose ``filename`` is the *target* path, so a caller's
+one-line message names the file the user asked for, not the temporary one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+# The process umask, read once: mkstemp creates 0600 files, renamed outputs get the mode
+# a plain open() would have given them.
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """The same kind of error, naming the target file."""
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, mkdir: bool = True) -> Iterator[Path]:
+    """Yield a fresh temporary path in ``path``'s directory; on success rename it to ``path``.
+
+    The temporary name ends with ``path``'s suffix, so writers that infer the format from
+    the extension (matplotlib) behave as for ``path``. On an exception the temporary file
+    is removed and the target is left untouched. ``mkdir`` creates missing parent directories.
+    """
+    path = Path(path)
+    try:
+        if mkdir:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{path.suffix}")
+    except OSError as exc:
+        raise _named(exc, path) from None
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        with open(tmp, "rb") as f:   # flush the data before the rename makes it visible
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename in (None, name, str(tmp)):
+            raise _named(exc, path) from None
+        raise
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically; returns ``path``."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically; returns ``path``."""
+    return atomic_write_bytes(path, text.encode(encoding))
