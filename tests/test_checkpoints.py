@@ -144,6 +144,8 @@ BAD_FILES = {
     "weights do not fit": lambda d, good: _torch_file(d / "w.pt", {**good, "ctor_args": {**good["ctor_args"],
                                                                                            "hidden_channels": 16}}),
     "missing weights": lambda d, good: _torch_file(d / "m.pt", {**good, "state_dict": {}}),
+    "non-tensor weights": lambda d, good: _torch_file(d / "x.pt", {**good, "state_dict": {
+        k: 1 for k in good["state_dict"]}}),
     "ctor args do not fit": lambda d, good: _torch_file(d / "c.pt", {**good, "ctor_args": {"bogus": 1}}),
     "old format": lambda d, good: _torch_file(d / "o.pt", {"model": "gnn", "hparams": {"model": SMALL},
                                                            "state_dict": good["state_dict"], "meta": {}}),
@@ -152,7 +154,8 @@ EXPECTED = {"missing": "no such checkpoint", "empty": "empty", "truncated": "tru
             "zeros": "not a", "a directory": "directory", "plain tensor": "not a checkpoint",
             "no format version": "no format_version", "missing keys": "missing keys",
             "newer format": "newer", "bad format": "unknown format version", "unknown kind": "unknown model kind",
-            "weights do not fit": "shape mismatch", "missing weights": "missing", "ctor args do not fit":
+            "weights do not fit": "shape mismatch", "missing weights": "missing",
+            "non-tensor weights": "shape mismatch", "ctor args do not fit":
             "constructor arguments", "old format": "old-format"}
 
 

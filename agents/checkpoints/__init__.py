@@ -266,7 +266,10 @@ def _state_mismatch(model: nn.Module, state: Mapping[str, Any]) -> str | None:
     own = model.state_dict()
     missing = [k for k in own if k not in state]
     unexpected = [k for k in state if k not in own]
-    shapes = [f"{k} {tuple(state[k].shape)} vs {tuple(own[k].shape)}" for k in own
+    def shape(v: Any) -> str:
+        return str(tuple(v.shape)) if isinstance(v, torch.Tensor) else type(v).__name__
+
+    shapes = [f"{k} {shape(state[k])} vs {shape(own[k])}" for k in own
               if k in state and (not isinstance(state[k], torch.Tensor) or state[k].shape != own[k].shape)]
     parts = []
     for label, items in (("missing", missing), ("unexpected", unexpected), ("shape mismatch", shapes)):
@@ -289,7 +292,7 @@ def load_checkpoint(path: str | Path, expected_kind: str | Collection[str] | Non
     kind = record["kind"]
     try:
         model = _KINDS[kind](**record["ctor_args"])
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, KeyError, RuntimeError, AssertionError) as exc:
         raise CheckpointError(f"{path}: constructor arguments do not fit {kind}: {_one_line(exc)}") from None
     problem = _state_mismatch(model, record["state_dict"])
     if problem:

@@ -22,6 +22,7 @@ One file per job:
 Checkpoints are read and written by :mod:`agents.checkpoints` (``weights_only=True``).
 """
 
+from agents.models.critical import MODELS
 from train.critical.cli import main
 from train.critical.config import (CHECKPOINT_DIR, DEFAULT_DATA_DIR, DEFAULTS, EVAL_SAMPLES, RUNS_DIR,
                                    VAL_PROBLEMS, EvaluateArgs, GenerateArgs, ModelDefaults, Optim, TrainArgs)
@@ -31,7 +32,6 @@ from train.critical.evaluate import (accuracy, evaluate, format_table, load_mode
 from train.critical.losses import label_log_likelihood, loss, nearest_label_loss, one_label_each
 from train.critical.plots import plot_predictions
 from train.critical.training import RunPaths, TrainError, run_paths, ship, train
-from agents.models.critical import MODELS
 
 __all__ = ["main", "CHECKPOINT_DIR", "DEFAULT_DATA_DIR", "DEFAULTS", "EVAL_SAMPLES", "RUNS_DIR", "VAL_PROBLEMS",
            "EvaluateArgs", "GenerateArgs", "ModelDefaults", "Optim", "TrainArgs", "Inputs", "inputs_for",
