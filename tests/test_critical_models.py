@@ -172,7 +172,7 @@ def test_tagconv_csr_propagation_matches_message_passing():
 
 def test_attention_log_attention_and_label_likelihood():
     """Log attention normalises per graph; the label term rewards attention on label nodes."""
-    from train.critical import _label_log_likelihood
+    from train.critical.losses import label_log_likelihood
     torch.manual_seed(0)
     g, x, ei = _graph_inputs()
     pos = torch.from_numpy(g.nodes).float()
@@ -185,7 +185,7 @@ def test_attention_log_attention_and_label_likelihood():
     sums = torch.zeros(2).index_add(0, batch, log_a.exp())
     assert torch.allclose(sums, torch.ones(2), atol=1e-5)
     label_index, owner = torch.tensor([3, 7, len(x) + 5]), torch.tensor([0, 0, 1])
-    ll = _label_log_likelihood(log_a, label_index, owner, 2)
+    ll = label_log_likelihood(log_a, label_index, owner, 2)
     want = (torch.log(log_a[[3, 7]].exp().sum()) + log_a[len(x) + 5]) / 2
     assert torch.allclose(ll, want, atol=1e-5)
 
@@ -204,3 +204,48 @@ def test_graph_batch_all_edges_and_position():
     assert torch.allclose(b.x[:, 5:], torch.from_numpy(g.nodes).float())
     with pytest.raises(ValueError):
         CriticalGNN(edges="some")
+
+
+def _random_graph(n, width, dim, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    x, pos = torch.rand(n, width, generator=g), torch.rand(n, dim, generator=g)
+    ei = torch.randint(0, n, (2, 6 * n), generator=g)
+    return x, pos, torch.cat([ei, ei.flip(0)], 1)
+
+
+@pytest.mark.parametrize("cls", [CriticalGNN, CriticalGAT])
+def test_generic_regressors_take_any_state_dimension(cls):
+    """The arm's trees: 13 node features, 6-D states; the centre is a constructor argument."""
+    torch.manual_seed(0)
+    x, pos, ei = _random_graph(40, 13, 6)
+    centre = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
+    att = cls(13, 16, 2, 6, readout="attention").eval()
+    mx = cls(13, 16, 2, 6, readout="max", centre=centre).eval()
+    with torch.no_grad():
+        out = att(x, ei, None, pos)
+        assert out.shape == (1, 6)
+        assert bool(((out >= 0) & (out <= 1)).all())          # a mean of node positions at init
+        pooled = mx.pool(x, ei)
+        assert torch.allclose(mx(x, ei), mx.head(pooled) + torch.tensor(centre), atol=1e-6)
+    assert "_centre" not in mx.state_dict()                   # not a weight: old checkpoints load unchanged
+    with pytest.raises(ValueError, match="pos has 2 columns"):
+        att(x, ei, None, pos[:, :2])
+
+
+def test_generic_cvae_and_image_models_take_any_state_dimension():
+    torch.manual_seed(0)
+    x, pos, ei = _random_graph(40, 13, 6)
+    cvae = CriticalGNNCVAE(13, 16, 2, 6, latent_channels=3, readout="attention").eval()
+    with torch.no_grad():
+        assert cvae.sample(x, ei, None, 4, torch.Generator().manual_seed(0), pos).shape == (1, 4, 6)
+        mu, _ = cvae.encode(x, ei, torch.rand(1, 6), pos)
+        assert mu.shape == (1, 3)
+    cvae_max = CriticalGNNCVAE(13, 16, 2, 6, latent_channels=3, centre=[1.0] * 6).eval()
+    with torch.no_grad():
+        cond = cvae_max.condition(x, ei)
+        z = torch.zeros(1, 2, 3)
+        want = cvae_max.decoder.head(torch.cat([cond[:, None].expand(-1, 2, -1), z], -1)) + 1.0
+        assert torch.allclose(cvae_max.decode_pooled(cond, z), want, atol=1e-6)
+    img = torch.rand(2, 3, 64, 64)
+    assert torch.allclose(CriticalCNN(out_channels=4, centre=2.0).eval()(img).mean(), torch.tensor(2.0), atol=0.5)
+    assert CriticalCVAE(out_channels=4, centre=(0.0, 1.0, 2.0, 3.0)).sample(img, 3).shape == (2, 3, 4)

@@ -15,15 +15,28 @@ Node-level outputs are permutation equivariant and the pooled prediction invaria
 
 The CVAEs follow PyG's ``VGAE`` layout: ``encode`` -> ``(mu, logstd)``, ``reparametrize``,
 ``decode``, ``recon_loss`` and ``kl_loss``; ``sample`` draws critical states from N(0, I).
+
+The generic pieces (:class:`GraphPoolRegressor`, :class:`CNNTrunk`, the Gaussian latent)
+know nothing of the 2-D unit square: the state dimension is ``out_channels`` (for the
+attention readout, the width of ``pos``) and the offset added to the max-readout head is the
+constructor argument ``centre`` (a number or one value per state dimension, e.g. the middle
+of the joint limits). :data:`STATE_DIM` and :data:`CENTRE` are only the defaults of the
+critical-sample task, so its checkpoints load unchanged.
+
+Each model is registered with :mod:`agents.checkpoints` as kind ``critical/<name>``.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor, nn
 from torch_geometric.nn import GATv2Conv, TAGConv, global_max_pool
 from torch_geometric.nn.conv.gcn_conv import gcn_norm
 from torch_geometric.utils import scatter, softmax, to_torch_csr_tensor
+
+from agents.checkpoints import register_model_kind
 
 #: Node feature width of eq. featurestate in 2-D: two relative vectors and an indicator.
 NODE_FEATURES = 5
@@ -35,14 +48,26 @@ READOUTS = ("max", "attention")
 #: edge of the fixed r-disc graph (then the obstacle indicator reaches free nodes). The
 #: models only record the choice; :mod:`agents.critical_data` builds the edges.
 EDGE_MODES = ("valid", "all")
-#: Predicted critical state dimension (x, y).
+#: Default predicted state dimension: (x, y) of the critical-sample task.
 STATE_DIM = 2
 #: Occupancy, start and goal channels of the CNN baselines.
 IMAGE_CHANNELS = 3
 #: VGAE's clamp on log standard deviations, for numerical safety.
 MAX_LOGSTD = 10.0
-#: Outputs are offset to the centre of the unit square so a zero-initialised head is sensible.
+#: Default output offset: the centre of the unit square, so a zero-initialised head is
+#: sensible. A constructor argument (``centre``) of every model.
 CENTRE = 0.5
+#: Prefix of the checkpoint kinds of these models: ``critical/gnn``, ``critical/gat``, ...
+KIND_PREFIX = "critical/"
+
+Centre = float | Sequence[float]
+
+
+def _centre_buffer(module: nn.Module, centre: Centre) -> None:
+    """Keep ``centre`` as a non-persistent buffer: it follows ``.to(device)`` but is not in
+    the state dict (it is a constructor argument, stored with the checkpoint's ctor_args)."""
+    module.centre = centre if isinstance(centre, (int, float)) else tuple(float(c) for c in centre)
+    module.register_buffer("_centre", torch.as_tensor(module.centre, dtype=torch.float32), persistent=False)
 
 
 def _mlp(in_channels: int, hidden_channels: int, out_channels: int) -> nn.Sequential:
@@ -53,23 +78,25 @@ def _mlp(in_channels: int, hidden_channels: int, out_channels: int) -> nn.Sequen
 class GraphPoolRegressor(nn.Module):
     """``num_layers`` graph convolutions -> readout (global max pool + FC, or attention).
 
-    Subclasses choose the convolution in :meth:`init_conv` and may pre-process the edges
-    once per forward pass in :meth:`propagation`.
+    Any state dimension: ``out_channels`` is the predicted state's width (the attention
+    readout predicts a mean of node positions, so there it must equal ``pos``'s width), and
+    the max readout's head output is offset by ``centre``. Subclasses choose the convolution
+    in :meth:`init_conv` and may pre-process the edges once per forward pass in
+    :meth:`propagation`.
     """
 
     def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
                  out_channels: int, head_in_extra: int = 0, readout: str = "max",
-                 edges: str = "valid") -> None:
+                 edges: str = "valid", centre: Centre = CENTRE) -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
         self.edges = edges
         if readout not in READOUTS:
             raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
-        if readout == "attention" and out_channels != STATE_DIM:
-            raise ValueError("the attention readout predicts a position: out_channels must be 2")
         self.in_channels, self.hidden_channels = in_channels, hidden_channels
         self.num_layers, self.out_channels, self.readout = num_layers, out_channels, readout
+        _centre_buffer(self, centre)
         self.convs = nn.ModuleList(
             self.init_conv(in_channels if i == 0 else hidden_channels, hidden_channels)
             for i in range(num_layers))
@@ -105,6 +132,9 @@ class GraphPoolRegressor(nn.Module):
         (the GNN-CVAE's latent); the result is (B, 2) or (B, k, 2), and with
         ``return_log_attention`` also the per-node log attention (N,) or (N, k).
         """
+        if pos.shape[-1] != self.out_channels:
+            raise ValueError(f"the attention readout predicts a position: pos has {pos.shape[-1]} "
+                             f"columns, out_channels is {self.out_channels}")
         if batch is None:
             batch = torch.zeros(h.shape[0], dtype=torch.long, device=h.device)
         num_graphs = int(batch.max()) + 1 if batch.numel() else 1
@@ -132,7 +162,7 @@ class GraphPoolRegressor(nn.Module):
                 raise ValueError("the attention readout needs the node positions pos")
             return self.attend(self.node_embeddings(x, edge_index), pos, batch,
                                return_log_attention=return_log_attention)
-        return self.head(self.pool(x, edge_index, batch)) + CENTRE
+        return self.head(self.pool(x, edge_index, batch)) + self._centre
 
 
 class CriticalGNN(GraphPoolRegressor):
@@ -140,10 +170,11 @@ class CriticalGNN(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, K: int = 3,
-                 head_in_extra: int = 0, readout: str = "max", edges: str = "valid") -> None:
+                 head_in_extra: int = 0, readout: str = "max", edges: str = "valid",
+                 centre: Centre = CENTRE) -> None:
         self.K = K
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra, readout,
-                         edges)
+                         edges, centre)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         # Normalisation is done once per pass in propagation() (same result as normalize=True).
@@ -164,10 +195,10 @@ class CriticalGAT(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, heads: int = 1,
-                 readout: str = "max", edges: str = "valid") -> None:
+                 readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
         self.heads = heads
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, readout=readout,
-                         edges=edges)
+                         edges=edges, centre=centre)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         return GATv2Conv(in_channels, out_channels, heads=self.heads, concat=False)
@@ -211,7 +242,7 @@ class CriticalGNNCVAE(_GaussianLatent):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, latent_channels: int = 2,
-                 K: int = 3, readout: str = "max", edges: str = "valid") -> None:
+                 K: int = 3, readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
@@ -220,7 +251,7 @@ class CriticalGNNCVAE(_GaussianLatent):
         self.encoder = CriticalGNN(in_channels + out_channels, hidden_channels, num_layers,
                                    2 * latent_channels, K=K)
         self.decoder = CriticalGNN(in_channels, hidden_channels, num_layers, out_channels, K=K,
-                                   head_in_extra=latent_channels, readout=readout)
+                                   head_in_extra=latent_channels, readout=readout, centre=centre)
 
     def encode(self, x: Tensor, edge_index: Tensor, y: Tensor, pos: Tensor,
                batch: Tensor | None = None) -> tuple[Tensor, Tensor]:
@@ -249,7 +280,7 @@ class CriticalGNNCVAE(_GaussianLatent):
             return self.decoder.attend(h, pos, batch, zn, return_log_attention)
         if z.dim() == 3:
             pooled = pooled[:, None, :].expand(-1, z.shape[1], -1)
-        return self.decoder.head(torch.cat([pooled, z], -1)) + CENTRE
+        return self.decoder.head(torch.cat([pooled, z], -1)) + self.decoder._centre
 
     def decode(self, z: Tensor, x: Tensor, edge_index: Tensor, batch: Tensor | None = None,
                pos: Tensor | None = None, return_log_attention: bool = False):
@@ -257,7 +288,7 @@ class CriticalGNNCVAE(_GaussianLatent):
 
     def sample(self, x: Tensor, edge_index: Tensor, batch: Tensor | None, num_samples: int,
                generator: torch.Generator | None = None, pos: Tensor | None = None) -> Tensor:
-        """``num_samples`` critical states per graph (B, k, 2) from z ~ N(0, I)."""
+        """``num_samples`` critical states per graph (B, k, out_channels) from z ~ N(0, I)."""
         cond = self.condition(x, edge_index, batch, pos)
         num_graphs = 1 if batch is None else int(batch.max()) + 1
         return self.decode_pooled(cond, self.prior(num_graphs, num_samples, generator))
@@ -286,13 +317,15 @@ class CriticalCNN(nn.Module):
     """Baseline: the GNN layers replaced by CNN layers on an occupancy image."""
 
     def __init__(self, in_channels: int = IMAGE_CHANNELS, hidden_channels: int = 16,
-                 num_layers: int = 4, out_channels: int = STATE_DIM, image_size: int = 64) -> None:
+                 num_layers: int = 4, out_channels: int = STATE_DIM, image_size: int = 64,
+                 centre: Centre = CENTRE) -> None:
         super().__init__()
         self.trunk = CNNTrunk(in_channels, hidden_channels, num_layers, image_size)
         self.head = _mlp(self.trunk.out_features, 128, out_channels)
+        _centre_buffer(self, centre)
 
     def forward(self, image: Tensor) -> Tensor:
-        return self.head(self.trunk(image)) + CENTRE
+        return self.head(self.trunk(image)) + self._centre
 
 
 class CriticalCVAE(_GaussianLatent):
@@ -300,9 +333,10 @@ class CriticalCVAE(_GaussianLatent):
 
     def __init__(self, in_channels: int = IMAGE_CHANNELS, hidden_channels: int = 16,
                  num_layers: int = 4, out_channels: int = STATE_DIM, latent_channels: int = 2,
-                 image_size: int = 64, embed_channels: int = 128) -> None:
+                 image_size: int = 64, embed_channels: int = 128, centre: Centre = CENTRE) -> None:
         super().__init__()
         self.latent_channels = latent_channels
+        _centre_buffer(self, centre)
         self.trunk = nn.Sequential(CNNTrunk(in_channels, hidden_channels, num_layers, image_size))
         self.embed = nn.Sequential(nn.Linear(self.trunk[0].out_features, embed_channels), nn.ReLU())
         self.encoder = _mlp(embed_channels + out_channels, embed_channels, 2 * latent_channels)
@@ -318,7 +352,7 @@ class CriticalCVAE(_GaussianLatent):
     def decode_pooled(self, cond: Tensor, z: Tensor) -> Tensor:
         if z.dim() == 3:
             cond = cond[:, None, :].expand(-1, z.shape[1], -1)
-        return self.decoder(torch.cat([cond, z], -1)) + CENTRE
+        return self.decoder(torch.cat([cond, z], -1)) + self._centre
 
     def decode(self, z: Tensor, image: Tensor) -> Tensor:
         return self.decode_pooled(self.condition(image), z)
@@ -343,3 +377,22 @@ def build_model(name: str, **kwargs) -> nn.Module:
     if name not in MODELS:
         raise ValueError(f"unknown critical model {name!r}; known: {sorted(MODELS)}")
     return MODELS[name][0](**kwargs)
+
+
+def kind_of(name: str) -> str:
+    """The checkpoint kind of a critical model name: ``"gnn"`` -> ``"critical/gnn"``."""
+    if name not in MODELS:
+        raise ValueError(f"unknown critical model {name!r}; known: {sorted(MODELS)}")
+    return KIND_PREFIX + name
+
+
+def name_of(kind: str) -> str:
+    """The critical model name of a checkpoint kind: ``"critical/gnn"`` -> ``"gnn"``."""
+    name = kind[len(KIND_PREFIX):] if kind.startswith(KIND_PREFIX) else None
+    if name not in MODELS:
+        raise ValueError(f"{kind!r} is not a critical-sample model kind")
+    return name
+
+
+for _name, (_cls, _, _) in MODELS.items():
+    register_model_kind(kind_of(_name), _cls)

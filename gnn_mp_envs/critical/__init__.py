@@ -2,7 +2,7 @@
 
 numpy/scipy only: graph (:mod:`.halton`), ground truth (:mod:`.bottleneck`), seeded cached
 datasets (:mod:`.dataset`) and planning with predicted samples (:mod:`.planning`). Models
-and training live in ``agents/models/critical.py`` and ``train/critical.py``.
+and training live in ``agents/models/critical.py`` and ``train/critical/``.
 """
 
 from gnn_mp_envs.critical.bottleneck import BottleneckResult, bottleneck_nodes, problem_graph, valid_edges

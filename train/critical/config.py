@@ -1,0 +1,192 @@
+"""Hyper-parameters and command-line arguments of the critical-sample models, in one place.
+
+* :data:`DEFAULTS`: per model, the constructor arguments (:class:`ModelDefaults.ctor`) and
+  the optimisation settings (:class:`Optim`). The shipped checkpoints were trained with
+  these plus the flags recorded in their ``.json`` sidecars.
+* :class:`GenerateArgs`, :class:`TrainArgs`, :class:`EvaluateArgs`: one dataclass per
+  sub-command; each field is one flag (``train/args.py`` turns them into argparse flags), so
+  a default and its help text are written once.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from agents.checkpoints import SHIPPED_DIR
+from agents.models.critical import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
+from gnn_mp_envs.critical.dataset import DatasetConfig
+from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
+
+#: Where cached datasets go (git-ignored).
+DEFAULT_DATA_DIR = Path("data/critical")
+#: Where training runs go by default, one directory per run (git-ignored).
+RUNS_DIR = Path("runs/critical")
+#: Shipped checkpoints (``critical_<model>.pt`` + ``.json``); ``train --ship`` writes here.
+CHECKPOINT_DIR = SHIPPED_DIR
+#: Problems of the validation split scored after each epoch (kept small for speed).
+VAL_PROBLEMS = 200
+#: Latent samples per problem when scoring CVAEs.
+EVAL_SAMPLES = 16
+
+
+def checkpoint_name(model: str) -> str:
+    """File name of a model's checkpoint: ``critical_<model>.pt``."""
+    return f"critical_{model}.pt"
+
+
+@dataclass(frozen=True)
+class Optim:
+    """How one model is trained."""
+
+    lr: float
+    batch_size: int
+    epochs: int
+    #: CVAEs: weight of KL(q(z | x, y) || N(0, I)) in the loss.
+    kl_weight: float = 0.0
+    #: Attention readout: weight of the label-node log-likelihood term.
+    node_loss_weight: float = 0.0
+    #: With a time budget: cosine learning-rate decay over the wall-clock budget (to 5% of lr).
+    cosine: bool = False
+
+
+@dataclass(frozen=True)
+class ModelDefaults:
+    """A model's default constructor arguments and optimisation settings."""
+
+    ctor: dict[str, Any]
+    optim: Optim
+
+
+_GRAPH = {"in_channels": NODE_FEATURES_WITH_POSITION, "hidden_channels": 32, "num_layers": 3,
+          "readout": "attention", "edges": "all"}
+DEFAULTS: dict[str, ModelDefaults] = {
+    "gnn": ModelDefaults({**_GRAPH, "K": 3},
+                         Optim(lr=3e-3, batch_size=16, epochs=3, node_loss_weight=0.05)),
+    "gat": ModelDefaults({**_GRAPH, "heads": 1},
+                         Optim(lr=3e-3, batch_size=16, epochs=2, node_loss_weight=0.05)),
+    "gnn-cvae": ModelDefaults({**_GRAPH, "K": 3, "latent_channels": 2},
+                              Optim(lr=3e-3, batch_size=16, epochs=2, kl_weight=0.005, node_loss_weight=0.05)),
+    "cnn": ModelDefaults({"hidden_channels": 16, "num_layers": 4},
+                         Optim(lr=1e-3, batch_size=64, epochs=30)),
+    "cvae": ModelDefaults({"hidden_channels": 16, "num_layers": 4, "latent_channels": 2},
+                          Optim(lr=1e-3, batch_size=64, epochs=30, kl_weight=0.005)),
+}
+assert set(DEFAULTS) == set(MODELS)
+
+
+def _shown(help_text: str, default: str) -> str:
+    """Help text stating a default that is not the field's value (None: "the model's")."""
+    return f"{help_text} (default: {default})%(default).0s"
+
+
+def model_list(text: str) -> list[str]:
+    """argparse type: comma-separated critical model names."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in MODELS]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(f"expected comma-separated names from {', '.join(MODELS)}, "
+                                         f"got {text!r}")
+    return names
+
+
+# ----------------------------------------------------------------------------- flags
+
+
+@dataclass
+class DataArgs:
+    """Flags of every sub-command: the dataset (cache directory, seed) and torch threads."""
+
+    data: Path = arg(DEFAULT_DATA_DIR, "dataset cache directory")
+    data_seed: int = arg(0, "seed of the generated dataset", parse=non_negative_int)
+    threads: int = arg(2, "torch threads", parse=positive_int)
+
+    def dataset(self) -> DatasetConfig:
+        return DatasetConfig(seed=self.data_seed)
+
+
+@dataclass
+class GenerateArgs(DataArgs):
+    """Generate and cache the three dataset files (labelled, eval_test, eval_blob)."""
+
+    num_maps: int = arg(DatasetConfig.num_maps, "maps of the labelled set", parse=positive_int)
+    pairs_per_map: int = arg(DatasetConfig.pairs_per_map, "start/goal pairs per map", parse=positive_int)
+    eval_problems: int = arg(DatasetConfig.eval_problems, "problems of each evaluation set", parse=positive_int)
+    overwrite: bool = arg(False, "regenerate even if the cached files match")
+
+    def dataset(self) -> DatasetConfig:
+        return DatasetConfig(seed=self.data_seed, num_maps=self.num_maps, pairs_per_map=self.pairs_per_map,
+                             eval_problems=self.eval_problems)
+
+
+@dataclass
+class TrainArgs(DataArgs):
+    """Train one model; flags left unset take the model's defaults (train/critical/config.py)."""
+
+    model: str | None = arg(None, "model to train (required)%(default).0s", choices=sorted(MODELS))
+    epochs: int | None = arg(None, _shown("passes over the training set", "the model's"), parse=positive_int)
+    seed: int = arg(0, "seed of initialisation and shuffling", parse=non_negative_int)
+    out: Path | None = arg(None, _shown("checkpoint file; its .json and resume state go beside it",
+                                           "runs/critical/<model>-seed<S>-<time>/critical_<model>.pt"))
+    ship: bool = arg(False, "when done, also copy the best checkpoint and its .json into "
+                     "agents/checkpoints/ (replaces the shipped weights)")
+    resume: bool = arg(False, "continue the run of --out, or without --out the latest run of this model and seed")
+    time_budget: float | None = arg(None, _shown("stop after this many minutes", "no limit"), parse=positive_float)
+    max_train_problems: int | None = arg(None, _shown("use only the first N training problems", "all"), parse=positive_int)
+    lr: float | None = arg(None, _shown("learning rate", "the model's"), parse=positive_float)
+    batch_size: int | None = arg(None, _shown("problems per step", "the model's"), parse=positive_int)
+    hidden: int | None = arg(None, _shown("hidden_channels", "the model's"), parse=positive_int)
+    readout: str | None = arg(None, _shown("graph models: the paper's max pool + FC, or attention over node "
+                                     "positions", "attention"), choices=["max", "attention"])
+    features: str | None = arg(None, _shown("graph models: eq. featurestate (5) or with x_n appended (7)",
+                                      "position"), choices=["paper", "position"])
+    edges: str | None = arg(None, _shown("graph models: collision-free edges only, or the whole fixed graph",
+                                   "all"), choices=["valid", "all"])
+    node_loss: float | None = arg(None, _shown("attention readout: weight of the label-node log-likelihood term",
+                                         "the model's, 0.05 for graph models"), parse=non_negative_float)
+    cosine: bool = arg(False, "with --time-budget: cosine learning-rate decay over the wall-clock budget")
+
+    def resolve(self) -> tuple[dict[str, Any], Optim]:
+        """The model's constructor arguments and optimisation settings with the flags applied."""
+        if self.model not in MODELS:
+            raise ValueError(f"unknown model {self.model!r}; known: {', '.join(sorted(MODELS))}")
+        defaults = DEFAULTS[self.model]
+        ctor = dict(defaults.ctor)
+        graph_only = {"readout": self.readout, "features": self.features, "edges": self.edges}
+        if MODELS[self.model][1] != "graph":
+            given = [f"--{k}" for k, v in graph_only.items() if v is not None]
+            if given:
+                raise ValueError(f"{', '.join(given)}: only for graph models, not {self.model}")
+        if self.hidden is not None:
+            ctor["hidden_channels"] = self.hidden
+        if self.readout is not None:
+            ctor["readout"] = self.readout
+        if self.features is not None:
+            ctor["in_channels"] = NODE_FEATURES_WITH_POSITION if self.features == "position" else NODE_FEATURES
+        if self.edges is not None:
+            ctor["edges"] = self.edges
+        optim = defaults.optim
+        changes: dict[str, Any] = {"cosine": optim.cosine or self.cosine}
+        for name, value in (("lr", self.lr), ("batch_size", self.batch_size), ("epochs", self.epochs),
+                            ("node_loss_weight", self.node_loss)):
+            if value is not None:
+                changes[name] = value
+        return ctor, replace(optim, **changes)
+
+
+@dataclass
+class EvaluateArgs(DataArgs):
+    """Accuracy table, prediction figure and planning comparison of saved checkpoints."""
+
+    models: list[str] = arg(list(MODELS), "comma-separated models to score", parse=model_list)
+    checkpoints: Path = arg(CHECKPOINT_DIR, "directory with critical_<model>.pt files")
+    json: Path | None = arg(None, _shown("write the report as JSON to this file", "none"))
+    plot: Path | None = arg(None, _shown("write the prediction figure (PNG) to this file", "none"))
+    problems: int | None = arg(None, _shown("first N of the 300 problems per set", "all"), parse=positive_int)
+    samples: int = arg(EVAL_SAMPLES, "CVAE samples per problem", parse=positive_int)
+    plan_samples: int = arg(10, "CVAE samples / uniform points added to the sparse planning graph",
+                            parse=positive_int)
+    seed: int = arg(0, "seed of CVAE samples and random reference points", parse=non_negative_int)
+    progress: bool = arg(True, "hide the progress bars")

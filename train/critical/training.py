@@ -1,0 +1,224 @@
+"""The training loop: best-validation checkpoint, per-epoch resume state, run directories.
+
+Where a run writes (:func:`run_paths`):
+
+* default: a fresh run directory ``runs/critical/<model>-seed<S>-<YYYYmmdd-HHMMSS>/`` with
+  ``critical_<model>.pt`` (best-validation weights), ``critical_<model>.json`` (the flags,
+  hyper-parameters, dataset config, per-epoch history; written before the first epoch) and
+  ``critical_<model>.resume.pt`` (optimizer, epoch, history; after every epoch);
+* ``--out FILE``: the same three files named after ``FILE``;
+* ``--resume``: continues the run of ``--out``, or the latest run of the model and seed;
+* ``--ship``: when done, the checkpoint and its ``.json`` are also copied into
+  ``agents/checkpoints/`` (the shipped weights). Nothing else writes into the package.
+
+Everything is written atomically and read back with ``torch.load(weights_only=True)``
+(:mod:`agents.checkpoints`). Shuffles derive from ``[seed, epoch]``, so a resumed run sees
+the same batches as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from agents.checkpoints import (CheckpointError, count_parameters, load_checkpoint, load_training_state, plain,
+                                save_checkpoint, save_training_state)
+from agents.models.critical import MODELS, build_model, kind_of
+from gnn_mp_envs.critical.dataset import DatasetConfig, load_or_generate
+from gnn_mp_envs.critical.halton import halton_graph
+from gnn_mp_envs.utils.io import atomic_write_bytes, atomic_write_text
+from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
+from train.critical.data import inputs_for
+from train.critical.evaluate import accuracy, predict
+from train.critical.losses import loss as loss_fn
+
+
+class TrainError(ValueError):
+    """A training request that cannot be carried out (one line)."""
+
+
+@dataclass(frozen=True)
+class RunPaths:
+    """The files of one training run."""
+
+    checkpoint: Path   # best-validation weights (agents.checkpoints format)
+    meta: Path         # .json: flags, hyper-parameters, dataset, history
+    resume: Path       # resume state after the last finished epoch
+
+
+def paths_for(checkpoint: Path) -> RunPaths:
+    checkpoint = Path(checkpoint)
+    return RunPaths(checkpoint, checkpoint.with_suffix(".json"),
+                    checkpoint.with_name(checkpoint.stem + ".resume.pt"))
+
+
+def _inside(path: Path, directory: Path) -> bool:
+    try:
+        path.resolve().relative_to(directory.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def run_paths(args: TrainArgs, runs_dir: Path = RUNS_DIR, now: float | None = None) -> RunPaths:
+    """Where ``args`` trains to (see the module docstring)."""
+    name = checkpoint_name(args.model)
+    if args.out is not None:
+        if _inside(Path(args.out), CHECKPOINT_DIR):
+            raise TrainError(f"--out {args.out} is inside the shipped checkpoint directory {CHECKPOINT_DIR}; "
+                             "train elsewhere and pass --ship to copy the result there")
+        return paths_for(Path(args.out))
+    prefix = f"{args.model}-seed{args.seed}-"
+    if args.resume:
+        runs = sorted(d for d in Path(runs_dir).glob(prefix + "*") if paths_for(d / name).resume.exists())
+        if not runs:
+            raise TrainError(f"--resume: no run of {args.model} with seed {args.seed} under {runs_dir} "
+                             "has a resume state; pass --out to name the checkpoint of the run")
+        return paths_for(runs[-1] / name)
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    run, k = Path(runs_dir) / (prefix + stamp), 1
+    while run.exists():
+        k += 1
+        run = Path(runs_dir) / f"{prefix}{stamp}-{k}"
+    return paths_for(run / name)
+
+
+def _hparams(ctor: dict, optim: Optim, args: TrainArgs) -> dict[str, Any]:
+    return {"model": ctor, **asdict(optim), "time_budget_min": args.time_budget,
+            "max_train_problems": args.max_train_problems}
+
+
+def _write_meta(path: Path, meta: dict) -> None:
+    atomic_write_text(path, json.dumps(plain(meta, "meta"), indent=2))
+
+
+def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool = True,
+          runs_dir: Path = RUNS_DIR) -> dict[str, Any]:
+    """Train ``args.model``; keeps the best-validation weights (see :func:`run_paths`).
+
+    ``dataset`` defaults to ``args.dataset()``. Returns the checkpoint path, the best epoch
+    and the history.
+    """
+    if args.model not in MODELS:
+        raise TrainError(f"unknown model {args.model!r}; known: {', '.join(sorted(MODELS))}")
+    try:
+        ctor, optim = args.resolve()
+    except ValueError as exc:
+        raise TrainError(str(exc)) from None
+    cfg = dataset or args.dataset()
+    paths = run_paths(args, runs_dir)
+    name, kind = args.model, kind_of(args.model)
+    hp = _hparams(ctor, optim, args)
+    meta = {"model": name, "kind": kind, "hparams": hp, "seed": args.seed, "dataset": asdict(cfg),
+            "args": asdict(args), "best": None, "history": [], "train_wall_seconds": 0.0}
+
+    torch.manual_seed(args.seed)
+    model = build_model(name, **ctor)
+    opt = torch.optim.Adam(model.parameters(), lr=optim.lr)
+    start_epoch, history, best, best_state, wall = 0, [], {"val_accuracy": -math.inf, "epoch": -1}, None, 0.0
+    if args.resume:
+        state = _load_resume(paths.resume, kind, ctor, args.seed, cfg)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        start_epoch, history, best, wall = state["epoch"], state["history"], state["best"], state["wall"]
+        best_state = state["best_state"]
+        print(f"[{name}] resuming {paths.resume} after epoch {start_epoch}", flush=True)
+    elif paths.checkpoint.exists():
+        raise TrainError(f"{paths.checkpoint} exists; pass --resume to continue that run or choose another --out")
+    _write_meta(paths.meta, {**meta, "best": best if history else None, "history": history})
+
+    graph = halton_graph(cfg.graph_nodes)
+    labelled = load_or_generate(cfg, args.data, "labelled", progress)
+    train_set, val_set = labelled.split_subset("train"), labelled.split_subset("val")
+    if args.max_train_problems is not None and args.max_train_problems < len(train_set):
+        train_set = train_set.subset(np.arange(args.max_train_problems))
+    val_set = val_set.subset(np.arange(min(VAL_PROBLEMS, len(val_set))))
+    inputs = inputs_for(model, name, train_set, graph)
+
+    gen = torch.Generator().manual_seed(args.seed)
+    budget_s = None if args.time_budget is None else 60.0 * args.time_budget
+    t_start = time.perf_counter() - wall
+    steps_per_epoch = math.ceil(len(train_set) / optim.batch_size)
+    for epoch in range(start_epoch, optim.epochs):
+        model.train()
+        order = np.random.default_rng([args.seed, epoch]).permutation(len(train_set))
+        gen.manual_seed(args.seed * 100003 + epoch)
+        losses = []
+        bar = tqdm(range(steps_per_epoch), desc=f"{name} epoch {epoch + 1}/{optim.epochs}", disable=not progress)
+        out_of_time = False
+        for step in bar:
+            idx = order[step * optim.batch_size:(step + 1) * optim.batch_size]
+            if optim.cosine and budget_s is not None:
+                # learning rate on a cosine over the wall-clock budget (anneals to 5% of lr)
+                frac = min(1.0, (time.perf_counter() - t_start) / budget_s)
+                for group in opt.param_groups:
+                    group["lr"] = optim.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * frac)))
+            loss = loss_fn(model, name, inputs(idx), optim, gen)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            losses.append(loss.item())
+            bar.set_postfix(loss=f"{np.mean(losses[-20:]):.4f}")
+            if budget_s is not None and time.perf_counter() - t_start > budget_s:
+                out_of_time = True
+                break
+        pred, _ = predict(model, name, val_set, graph, seed=args.seed)
+        val_acc = accuracy(pred, val_set, graph)
+        wall = time.perf_counter() - t_start
+        history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), "val_accuracy": val_acc,
+                        "steps": len(losses), "wall_seconds": wall})
+        print(f"[{name}] epoch {epoch + 1}: loss {np.mean(losses):.4f}  val accuracy {val_acc:.4f}"
+              f"  ({wall / 60:.1f} min)", flush=True)
+        if val_acc > best["val_accuracy"]:
+            best = {"val_accuracy": val_acc, "epoch": epoch + 1}
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        save_training_state(paths.resume, {
+            "kind": kind, "ctor_args": ctor, "seed": args.seed, "dataset": asdict(cfg),
+            "model": model.state_dict(), "optimizer": opt.state_dict(), "epoch": epoch + 1,
+            "history": history, "best": best, "best_state": best_state, "wall": wall})
+        meta.update(best=best, history=history, train_wall_seconds=wall)
+        if best_state is not None:
+            meta["parameters"] = count_parameters(best_state)
+            save_checkpoint(paths.checkpoint, best_state, kind, ctor, meta=plain(meta, "meta"))
+        _write_meta(paths.meta, meta)
+        if out_of_time:
+            print(f"[{name}] time budget reached", flush=True)
+            break
+    result = {"checkpoint": str(paths.checkpoint), "best": best, "history": history}
+    if args.ship:
+        result["shipped"] = str(ship(paths, name))
+    return result
+
+
+def _load_resume(path: Path, kind: str, ctor: dict, seed: int, cfg: DatasetConfig) -> dict:
+    if not path.exists():
+        raise TrainError(f"--resume: no resume state at {path}")
+    state = load_training_state(path)
+    want = {"kind": kind, "ctor_args": ctor, "seed": seed, "dataset": asdict(cfg)}
+    for key, value in want.items():
+        have = state.get(key)
+        if key == "dataset" and isinstance(have, dict):   # tuples come back as tuples, json-like lists differ
+            have, value = json.loads(json.dumps(have)), json.loads(json.dumps(value))
+        if have != value:
+            raise CheckpointError(f"{path}: resume state of another run ({key} {have!r}, this run {value!r})")
+    return state
+
+
+def ship(paths: RunPaths, model: str) -> Path:
+    """Copy a run's checkpoint and ``.json`` into the shipped directory as ``critical_<model>.pt``."""
+    if not paths.checkpoint.exists():
+        raise TrainError(f"--ship: no checkpoint was written at {paths.checkpoint}")
+    load_checkpoint(paths.checkpoint, expected_kind=kind_of(model))   # refuse to ship a bad file
+    target = CHECKPOINT_DIR / checkpoint_name(model)
+    atomic_write_bytes(target, paths.checkpoint.read_bytes())
+    atomic_write_bytes(target.with_suffix(".json"), paths.meta.read_bytes())
+    print(f"shipped {paths.checkpoint} -> {target}", flush=True)
+    return target
