@@ -93,17 +93,18 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
     goal = _as_tensor(obs["goal"], torch.float32).reshape(B, d)
     active_tree = _as_index(obs["active_tree"]).reshape(B)
 
-    ptr = torch.zeros(B + 1, dtype=torch.long)
+    dev = feats.device
+    ptr = torch.zeros(B + 1, dtype=torch.long, device=dev)
     torch.cumsum(counts, 0, out=ptr[1:])
     total = int(ptr[-1])
-    graph = torch.arange(B)
+    graph = torch.arange(B, device=dev)
     batch = torch.repeat_interleave(graph, counts, output_size=total)
     # Row of each real node in the flattened (B * N) padded block: graph b's nodes are rows
     # b*N .. b*N + counts[b] - 1. index_select is several times faster than boolean indexing.
     if total == B * N:                                              # every element full
         x, pos, par = feats.reshape(-1, F), nodes.reshape(B * N, -1), parent.reshape(-1)
     else:
-        rows = torch.arange(total) + (graph * N - ptr[:-1])[batch]
+        rows = torch.arange(total, device=dev) + (graph * N - ptr[:-1])[batch]
         x = feats.reshape(-1, F).index_select(0, rows)
         pos = nodes.reshape(B * N, -1).index_select(0, rows)
         par = parent.reshape(-1).index_select(0, rows)
@@ -126,8 +127,8 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
     out = Batch(_base_cls=Data, x=x, edge_index=edge_index, pos=pos, start=start, goal=goal,
                 active_tree=active_tree, num_nodes=total, batch=batch, ptr=ptr)
     # Bookkeeping that Batch.from_data_list writes, so get_example / to_data_list work.
-    graph_ptr = torch.arange(B + 1)
-    zeros = torch.zeros(B, dtype=torch.long)
+    graph_ptr = torch.arange(B + 1, device=dev)
+    zeros = torch.zeros(B, dtype=torch.long, device=dev)
     out._slice_dict = {"x": ptr, "edge_index": edge_ptr, "pos": ptr,
                        "start": graph_ptr, "goal": graph_ptr, "active_tree": graph_ptr}
     out._inc_dict = {"x": zeros, "edge_index": ptr[:-1], "pos": zeros,
