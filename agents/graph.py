@@ -100,23 +100,33 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
     graph = torch.arange(B, device=dev)
     batch = torch.repeat_interleave(graph, counts, output_size=total)
     # Row of each real node in the flattened (B * N) padded block: graph b's nodes are rows
-    # b*N .. b*N + counts[b] - 1. index_select is several times faster than boolean indexing.
-    if total == B * N:                                              # every element full
+    # b*N .. b*N + counts[b] - 1. Per-node values of per-graph quantities come from
+    # repeat_interleave, and rows are gathered with index_select: both several times faster
+    # than advanced or boolean indexing.
+    first = ptr[:-1]                                                # first node id of each graph
+    if total == B * N:                                              # every element full: views
         x, pos, par = feats.reshape(-1, F), nodes.reshape(B * N, -1), parent.reshape(-1)
+        is_child = (par >= 0) & (par < N)
     else:
-        rows = torch.arange(total, device=dev) + (graph * N - ptr[:-1])[batch]
+        rows = torch.arange(total, device=dev) + torch.repeat_interleave(graph * N - first, counts,
+                                                                         output_size=total)
         x = feats.reshape(-1, F).index_select(0, rows)
         pos = nodes.reshape(B * N, -1).index_select(0, rows)
         par = parent.reshape(-1).index_select(0, rows)
+        is_child = (par >= 0) & (par < torch.repeat_interleave(counts, counts, output_size=total))
 
     # Tree edges: real nodes whose parent is a real node of the same graph, sorted by graph,
     # each edge in both directions next to each other (the order of tree_edge_index), so
     # graph b's edges are the slice edge_ptr[b]:edge_ptr[b+1].
-    is_child = (par >= 0) & (par < counts.index_select(0, batch))
     child = torch.nonzero(is_child).squeeze(1)                     # global node ids, sorted
-    src = par.index_select(0, child) + ptr.index_select(0, batch.index_select(0, child))
-    edge_index = torch.stack([torch.stack([src, child], 1).view(-1),
-                              torch.stack([child, src], 1).view(-1)])
+    src = (par + torch.repeat_interleave(first, counts, output_size=total)).index_select(0, child)
+    m = child.numel()
+    pairs = torch.empty(2, m, 2, dtype=torch.long, device=dev)
+    pairs[0, :, 0] = src
+    pairs[0, :, 1] = child
+    pairs[1, :, 0] = child
+    pairs[1, :, 1] = src
+    edge_index = pairs.view(2, 2 * m)
     edge_ptr = 2 * torch.searchsorted(child, ptr)
 
     if len(batch_shape) == 0:
