@@ -54,6 +54,8 @@ class Args:
     sampler_module: list[str] = arg([], "comma-separated modules to import first (they call register_sampler)")
     seed: int = arg(0, "seed of the problems, tree-growing actions and samplers")
     threads: int = arg(1, "torch threads", parse=positive_int)
+    clock: str = arg("wall", "wall: elapsed time; cpu: this process's CPU time (steadier on a shared machine)",
+                     choices=("wall", "cpu"))
 
 
 # ---------------------------------------------------------------------------- observations
@@ -97,15 +99,18 @@ def stack(observations: list[dict[str, np.ndarray]]) -> dict[str, torch.Tensor]:
 
 
 # ---------------------------------------------------------------------------- measurements
-def best_time(fn, repeats: int, rounds: int) -> float:
-    """Best (over ``rounds``) mean wall seconds per call of ``fn`` over ``repeats`` calls."""
+CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
+def best_time(fn, repeats: int, rounds: int, clock=time.perf_counter) -> float:
+    """Best (over ``rounds``) mean seconds per call of ``fn`` over ``repeats`` calls."""
     fn()
     best = float("inf")
     for _ in range(rounds):
-        t0 = time.perf_counter()
+        t0 = clock()
         for _ in range(repeats):
             fn()
-        best = min(best, (time.perf_counter() - t0) / repeats)
+        best = min(best, (clock() - t0) / repeats)
     return best
 
 
@@ -114,15 +119,16 @@ def measure_to_pyg(args: Args) -> dict[str, dict[str, float]]:
     from agents.graph import to_pyg, to_pyg_per_graph
 
     trees = [grow("maze2d", args.nodes, i, args.seed, max_nodes=args.nodes) for i in range(args.trees)]
+    clock = CLOCKS[args.clock]
     rng = np.random.default_rng(args.seed)
     full = [trees[i % len(trees)] for i in range(args.batch)]
     mixed = [cut(o, int(rng.integers((args.nodes + 1) // 2, args.nodes + 1))) for o in full]
     out: dict[str, dict[str, float]] = {}
     for name, batch in (("full", stack(full)), ("mixed", stack(mixed))):
-        out[name] = {"vectorised": best_time(lambda: to_pyg(batch), args.conversions, args.rounds)}
+        out[name] = {"vectorised": best_time(lambda: to_pyg(batch), args.conversions, args.rounds, clock)}
         if args.reference:
             out[name]["per-graph"] = best_time(lambda: to_pyg_per_graph(batch), max(1, args.conversions // 10),
-                                               args.rounds)
+                                               args.rounds, clock)
     return out
 
 
@@ -136,7 +142,7 @@ def time_act(sampler, obs: dict[str, np.ndarray], args: Args) -> float:
         warm += 1
     per_call = (time.perf_counter() - t0) / warm
     calls = max(1, min(args.calls, int(args.round_seconds / max(per_call, 1e-9))))
-    return best_time(lambda: sampler.act(obs), calls, args.rounds)
+    return best_time(lambda: sampler.act(obs), calls, args.rounds, CLOCKS[args.clock])
 
 
 def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float | None]:
@@ -171,7 +177,7 @@ def _checkpoint_pair(text: str) -> tuple[str, Path]:
 # ---------------------------------------------------------------------------- report
 def report_to_pyg(args: Args, result: dict[str, dict[str, float]]) -> None:
     print(f"to_pyg: {args.batch} maze2d observations x {args.nodes} nodes ({args.trees} distinct trees), "
-          f"torch threads {torch.get_num_threads()}, best of {args.rounds}")
+          f"torch threads {torch.get_num_threads()}, {args.clock} clock, best of {args.rounds}")
     for name, times in result.items():
         line = f"  {name + ' trees' if name == 'full' else 'mixed sizes':<12}"
         vec = times["vectorised"]
@@ -184,7 +190,8 @@ def report_to_pyg(args: Args, result: dict[str, dict[str, float]]) -> None:
 
 
 def report_act(args: Args, samplers: list[str], result: dict[tuple[str, str], float | None]) -> None:
-    print(f"act(): microseconds per call, one observation of {args.act_nodes} nodes, best of {args.rounds}")
+    print(f"act(): microseconds per call, one observation of {args.act_nodes} nodes, {args.clock} clock, "
+          f"best of {args.rounds}")
     width = max(len(s) for s in samplers + ["sampler"])
     print(f"  {'sampler':<{width}} " + " ".join(f"{t:>10}" for t in args.tasks))
     for name in samplers:
