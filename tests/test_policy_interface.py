@@ -21,7 +21,7 @@ def random_tree_obs(space, sizes, rng, bidirectional=True):
     ``sizes[i]`` real nodes; ``None`` gives an all-zero element (what a TorchRL reset may hold),
     a negative size -n gives n real nodes whose ``num_nodes`` entry is zeroed (mask only).
     """
-    N, d = space["nodes"].shape
+    d = space["nodes"].shape[1]
     low, high = space["start"].low, space["start"].high
     elements = []
     for size in sizes:
@@ -340,3 +340,19 @@ def test_torchrl_actor_rollout_and_shared_value_head():
     # A separate value head builds its own encoder of the same class.
     other = make_value(space.observation_space, hidden_channels=8, out_channels=8)
     assert isinstance(other[0], EncoderModule) and other[0] is not encoder
+
+
+# ---------------------------------------------------------------------------- gnn-mp bench-sampler
+def test_bench_sampler_reports_both_measurements(capsys):
+    from train.cli import main
+    code = main(["bench-sampler", "--batch", "6", "--nodes", "40", "--trees", "2", "--conversions", "2",
+                 "--rounds", "1", "--act-nodes", "30", "--calls", "50", "--tasks", "maze2d",
+                 "--samplers", "uniform,goal-bias", "--clock", "cpu"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "to_pyg: 6 maze2d observations x 40 nodes" in out and "per-graph reference" in out
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.startswith("  ")}
+    assert float(rows["uniform"][0]) > 0 and float(rows["goal-bias"][0]) > 0
+    with pytest.raises(SystemExit) as exc:
+        main(["bench-sampler", "--samplers", "nope"])
+    assert exc.value.code == 2 and "unknown sampler" in capsys.readouterr().err

@@ -125,9 +125,11 @@ def measure_to_pyg(args: Args) -> dict[str, dict[str, float]]:
     mixed = [cut(o, int(rng.integers((args.nodes + 1) // 2, args.nodes + 1))) for o in full]
     out: dict[str, dict[str, float]] = {}
     for name, batch in (("full", stack(full)), ("mixed", stack(mixed))):
-        out[name] = {"vectorised": best_time(lambda: to_pyg(batch), args.conversions, args.rounds, clock)}
+        def convert(fn, batch=batch):
+            return lambda: fn(batch)
+        out[name] = {"vectorised": best_time(convert(to_pyg), args.conversions, args.rounds, clock)}
         if args.reference:
-            out[name]["per-graph"] = best_time(lambda: to_pyg_per_graph(batch), max(1, args.conversions // 10),
+            out[name]["per-graph"] = best_time(convert(to_pyg_per_graph), max(1, args.conversions // 10),
                                                args.rounds, clock)
     return out
 

@@ -20,14 +20,12 @@ writes ``"embed"``, ``"loc"``, ``"scale"`` and ``"sample_log_prob"``.
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
-from torch import nn
 
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
