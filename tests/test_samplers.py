@@ -84,3 +84,127 @@ def test_pyg_converter_matches_tree():
     batch = to_pyg({k: np.stack([obs[k], obs[k]]) for k in obs})
     assert batch.num_graphs == 2 and batch.num_nodes == 2 * n
     assert batch.start.shape == (2, 2)
+
+
+# ---------------------------------------------------------------------------- pinned random streams
+# The benchmark's counters depend on the exact samples: uniform = one torch.rand(*batch, d) per
+# call, goal-bias = that, then one torch.rand(*batch, 1). These references re-implement the
+# streams with a bare torch.Generator, so any change in draws, order, shape or dtype fails here.
+def _reference_uniform(g, low, high, batch=()):
+    lo, hi = torch.as_tensor(low), torch.as_tensor(high)
+    return lo + torch.rand(*batch, lo.shape[0], generator=g) * (hi - lo)
+
+
+def _reference_goal_bias(g, low, high, obs, goal_bias, batch=()):
+    sample = _reference_uniform(g, low, high, batch)
+    start, goal = torch.as_tensor(obs["start"]), torch.as_tensor(obs["goal"])
+    target = torch.where(torch.as_tensor(obs["active_tree"]).reshape(*batch, 1) == 1, start, goal)
+    pick = torch.rand(*batch, 1, generator=g) < goal_bias
+    return torch.where(pick, target, sample)
+
+
+def test_uniform_stream_is_pinned():
+    env, low, high = _bounds("GNNMP/PendulumRRT-v0")
+    obs, _ = env.reset(seed=0)
+    sampler = load_sampler("uniform", low, high, seed=7)
+    first = np.array([sampler.act(obs) for _ in range(3)])
+    # Literal values (torch's CPU Mersenne Twister): a torch upgrade that changed them would
+    # change every benchmark table too.
+    np.testing.assert_array_equal(first, np.array([[0.21942472457885742, -4.819149017333984],
+                                                   [1.0003564357757568, 2.510244369506836],
+                                                   [-1.6791086196899414, -1.1990175247192383]], np.float32))
+    g = torch.Generator().manual_seed(7)
+    sampler.reset(7)
+    for _ in range(200):
+        a = sampler.act(obs)
+        assert isinstance(a, np.ndarray) and a.dtype == np.float32 and a.shape == (2,)
+        np.testing.assert_array_equal(a, _reference_uniform(g, low, high).numpy())
+    # Batched through the TensorDict path: one rand(*batch, d) per call.
+    for batch in [(4,), (2, 3)]:
+        sampler.reset(11)
+        g = torch.Generator().manual_seed(11)
+        td = TensorDict({k: torch.as_tensor(np.broadcast_to(obs[k], (*batch, *obs[k].shape)).copy())
+                         for k in SAMPLER_IN_KEYS}, batch_size=list(batch))
+        for _ in range(3):
+            np.testing.assert_array_equal(sampler(td)["action"].numpy(), _reference_uniform(g, low, high, batch).numpy())
+
+
+@pytest.mark.parametrize("goal_bias", [0.05, 0.7])
+def test_goal_bias_stream_is_pinned(goal_bias):
+    env, low, high = _bounds("GNNMP/Maze2DBiRRT-v0")
+    obs, _ = env.reset(seed=0)
+    sampler = load_sampler("goal-bias", low, high, seed=5, goal_bias=goal_bias)
+    g = torch.Generator().manual_seed(5)
+    hits = {0: 0, 1: 0}
+    for _ in range(300):
+        a = sampler.act(obs)
+        ref = _reference_goal_bias(g, low, high, obs, goal_bias).numpy()
+        assert a.dtype == np.float32
+        np.testing.assert_array_equal(a, ref)
+        tree = int(obs["active_tree"][0])
+        hits[tree] += bool(np.array_equal(a, obs["start" if tree else "goal"]))
+        obs, _, terminated, truncated, _ = env.step(a)
+        if terminated or truncated:
+            obs, _ = env.reset(seed=1)
+    assert hits[0] > 0 and hits[1] > 0          # both targets were drawn, so both branches are pinned
+    sampler.reset(9)
+    g = torch.Generator().manual_seed(9)
+    batch = (5,)
+    td = TensorDict({k: torch.as_tensor(np.stack([obs[k]] * 5)) for k in SAMPLER_IN_KEYS}, batch_size=list(batch))
+    td["active_tree"] = torch.tensor([[0], [1], [0], [1], [1]])
+    for _ in range(20):
+        ref = _reference_goal_bias(g, low, high, td, goal_bias, batch)
+        np.testing.assert_array_equal(sampler(td)["action"].numpy(), ref.numpy())
+
+
+def test_act_returns_a_fresh_array_not_a_view_of_the_observation():
+    env, low, high = _bounds("GNNMP/Maze2DRRT-v0")
+    obs, _ = env.reset(seed=0)
+    goal = obs["goal"].copy()
+    sampler = load_sampler("goal-bias", low, high, seed=0, goal_bias=1.0)
+    a = sampler.act(obs)
+    a += 1.0
+    np.testing.assert_array_equal(obs["goal"], goal)
+
+
+def test_samplers_are_tensordict_modules_reading_only_what_they_need():
+    from tensordict.nn import TensorDictModuleBase
+    env, low, high = _bounds()
+    obs, _ = env.reset(seed=0)
+    for name in ["uniform", "goal-bias"]:
+        sampler = load_sampler(name, low, high, seed=0)
+        assert isinstance(sampler, TensorDictModuleBase)
+        assert list(sampler.in_keys) == list(SAMPLER_IN_KEYS) and list(sampler.out_keys) == ["action"]
+        assert sampler.as_module() is sampler
+        # propose() needs only the keys in `reads` (any batch shape)
+        needed = {k: torch.as_tensor(np.stack([obs[k]] * 3)) for k in sampler.reads}
+        assert set(needed) <= {"start", "goal", "active_tree"}
+        assert sampler.propose(needed).shape == (3, 2)
+        # act() with only those keys works too: nothing else is converted
+        assert sampler.act({k: obs[k] for k in sampler.reads}).shape == (2,)
+
+
+# ---------------------------------------------------------------------------- docs
+def docs_python_blocks(path):
+    import re
+    import textwrap
+    text = path.read_text()
+    return [textwrap.dedent(m.group(2)) for m in re.finditer(r"^( *)```python\n(.*?)^\1```", text, re.M | re.S)]
+
+
+def test_docs_python_blocks_run(tmp_path):
+    """Every python block of docs/samplers.md, in order, in one fresh interpreter."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    blocks = docs_python_blocks(root / "docs" / "samplers.md")
+    assert len(blocks) >= 7           # gym loop, TorchRL module, encoder, actor/value, SB3, learned, registry, adding
+    script = tmp_path / "samplers_docs.py"
+    script.write_text("\n\n".join(blocks))
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    result = subprocess.run([sys.executable, str(script)], cwd=root, env=env, capture_output=True, text=True,
+                            timeout=900)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "torch.Size([4, 2])" in result.stdout and "sample_log_prob" in result.stdout

@@ -27,6 +27,7 @@ PROG = "gnn-mp"
 PASSTHROUGH: dict[str, tuple[str, str]] = {
     "bench-env": ("train.bench_env", "environment steps/s at several tree sizes"),
     "bench-arm": ("train.bench_arm", "arm planning benchmark"),
+    "bench-sampler": ("train.bench_sampler", "sampler speed: to_pyg conversions/s, act() us per call"),
     "critical": ("train.critical", "critical samples: train / evaluate / generate-data"),
 }
 #: ``gnn-mp train NAME ...`` -> (module, argv prefix).

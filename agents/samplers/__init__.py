@@ -1,7 +1,10 @@
 """Sampler registry: every sampler is built by name through :func:`load_sampler`.
 
 Learned samplers register themselves here too, so the benchmark and the training
-scripts never need an if/elif chain over sampler names.
+scripts never need an if/elif chain over sampler names. Their base class,
+:class:`agents.samplers.learned.LearnedSampler`, is importable from here too
+(``from agents.samplers import LearnedSampler``); it is loaded on first use because it
+pulls in PyTorch Geometric and TorchRL, which the classical samplers do not need.
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from agents.samplers.base import SAMPLER_IN_KEYS, SAMPLER_OUT_KEYS, Sampler
+from agents.samplers.base import SAMPLER_IN_KEYS, SAMPLER_OUT_KEYS, Sampler, batch_shape_of
 from agents.samplers.baselines import GoalBiasSampler, UniformSampler
 
 #: name -> factory(low, high, task, seed, **kwargs) -> Sampler
@@ -47,5 +50,15 @@ register_sampler("goal-bias", lambda low, high, task=None, seed=None, goal_bias=
                  GoalBiasSampler(low, high, seed, goal_bias),
                  "uniform with 5% samples at the active tree's target")
 
-__all__ = ["SAMPLERS", "SAMPLER_IN_KEYS", "SAMPLER_OUT_KEYS", "Sampler", "UniformSampler",
-           "GoalBiasSampler", "available_samplers", "load_sampler", "register_sampler"]
+
+
+def __getattr__(name: str):
+    if name == "LearnedSampler":
+        from agents.samplers.learned import LearnedSampler
+        return LearnedSampler
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["DESCRIPTIONS", "SAMPLERS", "SAMPLER_IN_KEYS", "SAMPLER_OUT_KEYS", "Sampler", "UniformSampler",
+           "GoalBiasSampler", "LearnedSampler", "available_samplers", "batch_shape_of", "load_sampler",
+           "register_sampler"]

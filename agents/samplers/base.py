@@ -1,10 +1,21 @@
 """The sampler interface: observation in, next sample out.
 
 Every sampler (uniform, goal-biased, GNN, GAT, CVAE, GNN-CVAE, RL policy) is a
-``torch.nn.Module`` whose ``forward`` takes the observation keys in
-:data:`SAMPLER_IN_KEYS` order and returns the action. :meth:`Sampler.as_module` wraps
-it as a TorchRL ``TensorDictModule`` (``in_keys`` = observation keys, ``out_keys`` =
-``["action"]``); :meth:`Sampler.act` serves plain Gymnasium loops with numpy dicts.
+``tensordict.nn.TensorDictModuleBase``: ``in_keys`` are the observation keys
+(:data:`SAMPLER_IN_KEYS`), ``out_keys`` start with ``"action"``. The one method a sampler
+implements is :meth:`Sampler.propose`, ``Mapping[str, Tensor] -> Tensor`` over any leading
+batch shape, reading only the keys it needs (listed in :attr:`Sampler.reads`):
+
+* ``sampler(td)`` (``forward``) writes ``td["action"]``, so a sampler drops into TorchRL
+  (``env.rollout(n, sampler)``, collectors) as it is;
+* ``sampler.act(obs)`` serves plain Gymnasium loops: one numpy observation in, a float32
+  numpy action out, converting only the keys in :attr:`Sampler.reads`;
+* ``sampler.reset(seed)`` reseeds the sampler's own ``torch.Generator`` (the benchmark
+  calls it before every problem); all randomness is drawn from it.
+
+Learned samplers derive from :class:`LearnedSampler` (encoder -> ``"embed"`` -> head ->
+``"loc"``/``"scale"`` -> bounded distribution, mixed with uniform samples), which also
+writes ``"embed"``, ``"loc"``, ``"scale"`` and ``"sample_log_prob"``.
 """
 
 from __future__ import annotations
@@ -13,8 +24,8 @@ from typing import Mapping
 
 import numpy as np
 import torch
-from tensordict.nn import TensorDictModule
-from torch import nn
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
@@ -22,20 +33,28 @@ SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
 
 
-class Sampler(nn.Module):
-    """Base class: holds the sampling bounds and a seeded torch generator."""
+class Sampler(TensorDictModuleBase):
+    """Base class: holds the sampling bounds and a seeded ``torch.Generator``.
 
-    in_keys = list(SAMPLER_IN_KEYS)
-    out_keys = list(SAMPLER_OUT_KEYS)
+    Subclasses implement :meth:`propose` and set :attr:`reads` to the observation keys it
+    reads. Randomness must come from ``self.generator`` (``self.uniform(shape)``,
+    ``torch.rand(..., generator=self.generator)``) so that runs are reproducible.
+    """
+
+    #: Observation keys :meth:`propose` reads; :meth:`act` converts only these.
+    reads: tuple[str, ...] = SAMPLER_IN_KEYS
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
         super().__init__()
+        self.in_keys = list(SAMPLER_IN_KEYS)
+        self.out_keys = list(SAMPLER_OUT_KEYS)
         low = torch.as_tensor(np.asarray(low, dtype=np.float32))
         high = torch.as_tensor(np.asarray(high, dtype=np.float32))
         if low.shape != high.shape or low.dim() != 1 or not torch.all(high > low):
             raise ValueError(f"sampler bounds must be 1-D with high > low, got {low} and {high}")
         self.register_buffer("low", low)
         self.register_buffer("high", high)
+        self.register_buffer("span", high - low, persistent=False)
         self.generator = torch.Generator()
         self.reset(seed)
 
@@ -50,25 +69,33 @@ class Sampler(nn.Module):
         else:
             self.generator.manual_seed(int(seed))
 
-    def uniform(self, batch_shape: torch.Size) -> torch.Tensor:
+    def uniform(self, batch_shape: torch.Size | tuple = ()) -> torch.Tensor:
+        """``(*batch_shape, d)`` uniform samples in the bounds: one ``torch.rand`` call."""
         u = torch.rand(*batch_shape, self.state_dim, generator=self.generator)
-        return self.low + u * (self.high - self.low)
+        return self.low + u * self.span
 
-    def forward(self, nodes, node_features, parent, mask, num_nodes, start, goal, active_tree):
+    # ------------------------------------------------------------------ the core
+    def propose(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """Next samples ``(*batch, d)`` for observations with leading batch shape ``batch``."""
         raise NotImplementedError
 
-    # ------------------------------------------------------------------ adapters
-    def as_module(self) -> TensorDictModule:
-        """This sampler as a TorchRL policy reading the observation keys, writing ``action``."""
-        return TensorDictModule(self, in_keys=list(self.in_keys), out_keys=list(self.out_keys))
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """TensorDict in (observation keys), the same TensorDict out with ``"action"`` set."""
+        tensordict.set("action", self.propose(tensordict))
+        return tensordict
 
-    @torch.no_grad()
+    # ------------------------------------------------------------------ adapters
+    def as_module(self) -> TensorDictModuleBase:
+        """The sampler as a TorchRL policy (it already is one; kept for older callers)."""
+        return self
+
     def act(self, obs: Mapping) -> np.ndarray:
         """Next sample for one (unbatched) numpy observation, for plain Gymnasium loops."""
-        args = [torch.as_tensor(np.asarray(obs[k])) for k in self.in_keys]
-        return self(*args).detach().cpu().numpy().astype(np.float32)
+        with torch.no_grad():
+            out = self.propose({k: torch.as_tensor(obs[k]) for k in self.reads})
+        return np.asarray(out.cpu().numpy(), dtype=np.float32)
 
 
-def batch_shape_of(start: torch.Tensor) -> torch.Size:
+def batch_shape_of(start: torch.Tensor | np.ndarray) -> torch.Size:
     """Leading batch dimensions of an observation, read off its ``start`` entry."""
-    return start.shape[:-1]
+    return torch.Size(start.shape[:-1])

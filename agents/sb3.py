@@ -1,0 +1,35 @@
+"""Stable-Baselines3 features extractor: the same :class:`agents.encoders.TreeEncoder`.
+
+    from stable_baselines3 import PPO
+    from agents.sb3 import TreeFeaturesExtractor
+    model = PPO("MultiInputPolicy", env, policy_kwargs={
+        "features_extractor_class": TreeFeaturesExtractor,
+        "features_extractor_kwargs": {"hidden_channels": 64, "num_layers": 3, "out_channels": 128}})
+
+SB3 hands over the observation as a dict of float tensors with a leading batch dimension
+(every Box, ``mask`` included, is cast to float); :func:`agents.graph.to_pyg` accepts that.
+"""
+
+from __future__ import annotations
+
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+from agents.encoders import TreeEncoder
+
+
+class TreeFeaturesExtractor(BaseFeaturesExtractor):
+    """Observation dict -> the :class:`TreeEncoder` graph embedding ``(batch, out_channels)``.
+
+    ``features_extractor_kwargs`` go to ``TreeEncoder.from_space`` (``hidden_channels``,
+    ``num_layers``, ``out_channels``, ``conv``, ``knn``, ...).
+    """
+
+    def __init__(self, observation_space: spaces.Dict, **encoder_kw) -> None:
+        encoder = TreeEncoder.from_space(observation_space, **encoder_kw)
+        super().__init__(observation_space, features_dim=encoder.out_channels)
+        self.encoder = encoder
+
+    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.encoder(observations)[1]

@@ -1,0 +1,71 @@
+"""TorchRL actor and value head over the shared :class:`agents.encoders.TreeEncoder`.
+
+    from torchrl.envs import GymEnv
+    env = GymEnv("GNNMP/Maze2DRRT-v0", max_nodes=200)
+    encoder = EncoderModule.from_space(gym_env.observation_space)      # optional, to share it
+    actor = make_actor(gym_env.observation_space, gym_env.action_space, encoder=encoder)
+    value = make_value(gym_env.observation_space, encoder=encoder)
+    rollout = env.rollout(256, actor)          # "embed", "loc", "scale", "action", log-prob
+    value(rollout)                             # "state_value" (T, 1)
+
+This module is ``agents.torchrl``; it imports the TorchRL package absolutely (``import
+torchrl`` anywhere resolves to the installed package, never to this file).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+
+from agents.encoders import EncoderModule
+
+
+def _encoder(observation_space: spaces.Dict, encoder: EncoderModule | None, encoder_kw: dict) -> EncoderModule:
+    if encoder is not None:
+        if encoder_kw:
+            raise ValueError("pass either an encoder or encoder keyword arguments, not both")
+        return encoder
+    return EncoderModule.from_space(observation_space, **encoder_kw)
+
+
+def make_gaussian_head(embed_dim: int, action_dim: int, hidden: int = 64, num_cells: int = 2,
+                       in_key: str = "embed") -> TensorDictModule:
+    """``"embed"`` -> ``"loc"``, ``"scale"`` (pre-squash Normal parameters), an MLP."""
+    net = nn.Sequential(MLP(in_features=embed_dim, out_features=2 * action_dim, num_cells=[hidden] * num_cells,
+                            activation_class=nn.ReLU),
+                        NormalParamExtractor())
+    return TensorDictModule(net, in_keys=[in_key], out_keys=["loc", "scale"])
+
+
+def make_actor(observation_space: spaces.Dict, action_space: spaces.Box, *, encoder: EncoderModule | None = None,
+               head_hidden: int = 64, **encoder_kw) -> ProbabilisticActor:
+    """encoder -> ``"embed"`` -> Gaussian head -> ``"loc"``/``"scale"`` -> ``TanhNormal`` on the box.
+
+    ``return_log_prob=True``: the actor writes the action's log-probability under TorchRL's
+    default key (``actor.log_prob_key``; ``"action_log_prob"`` in TorchRL 0.14, what
+    ``ClipPPOLoss`` reads). ``encoder_kw`` go to ``TreeEncoder.from_space`` (or pass a built
+    ``encoder`` to share it with :func:`make_value`).
+    """
+    enc = _encoder(observation_space, encoder, encoder_kw)
+    low = torch.as_tensor(np.asarray(action_space.low, np.float32))
+    high = torch.as_tensor(np.asarray(action_space.high, np.float32))
+    head = make_gaussian_head(enc.out_channels, int(low.shape[-1]), head_hidden, in_key=enc.out_keys[0])
+    return ProbabilisticActor(TensorDictSequential(enc, head), in_keys=["loc", "scale"], out_keys=["action"],
+                              distribution_class=TanhNormal, distribution_kwargs={"low": low, "high": high},
+                              return_log_prob=True)
+
+
+def make_value(observation_space: spaces.Dict, encoder: EncoderModule | None = None, *, hidden: int = 64,
+               **encoder_kw) -> TensorDictSequential:
+    """encoder -> ``"embed"`` -> MLP -> ``"state_value"`` ``(*batch, 1)``.
+
+    Pass the actor's ``encoder`` to share it (one set of GNN weights for actor and critic);
+    otherwise a new encoder of the same class is built from ``encoder_kw``.
+    """
+    enc = _encoder(observation_space, encoder, encoder_kw)
+    net = MLP(in_features=enc.out_channels, out_features=1, num_cells=[hidden, hidden], activation_class=nn.ReLU)
+    return TensorDictSequential(enc, ValueOperator(net, in_keys=[enc.out_keys[0]]))
