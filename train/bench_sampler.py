@@ -29,7 +29,7 @@ import torch
 
 import gnn_mp_envs  # noqa: F401  (registers the environments)
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
-from gnn_mp_envs.registration import TASK_ENV_IDS
+from gnn_mp_envs.registration import TASK_SPECS, task_spec
 from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
 
 SPLIT = "val"   # problems the trees are grown on (timing only; never the held-out split)
@@ -65,7 +65,7 @@ def grow(task: str, nodes: int, index: int, seed: int, max_nodes: int | None = N
     kwargs = {"split": SPLIT}
     if max_nodes is not None:
         kwargs["max_nodes"] = max_nodes
-    env = gym.make(TASK_ENV_IDS[task], **kwargs).unwrapped
+    env = gym.make(task_spec(task).env_id, **kwargs).unwrapped
     capacity = env.observation_space["nodes"].shape[0]
     if nodes > capacity:
         raise ValueError(f"{nodes} nodes do not fit the {task} env's max_nodes={capacity}")
@@ -155,7 +155,7 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
     out: dict[tuple[str, str], float | None] = {}
     for task in args.tasks:
         obs = grow(task, args.act_nodes, 0, args.seed)
-        space = gym.make(TASK_ENV_IDS[task]).action_space
+        space = gym.make(task_spec(task).env_id).action_space
         for name in samplers:
             kwargs = {"checkpoint": checkpoints[name]} if name in checkpoints else {}
             try:
@@ -228,9 +228,9 @@ def main(argv: list[str] | None = None) -> int:
             importlib.import_module(module)
         except ImportError as exc:
             parser.error(f"--sampler-module {module}: {exc}")
-    unknown = [t for t in args.tasks if t not in TASK_ENV_IDS]
+    unknown = [t for t in args.tasks if t not in TASK_SPECS]
     if unknown:
-        parser.error(f"unknown task(s) {unknown}; known: {sorted(TASK_ENV_IDS)}")
+        parser.error(f"unknown task(s) {unknown}; known: {sorted(TASK_SPECS)}")
     unknown = [s for s in args.samplers if s not in available_samplers()]
     if unknown:
         parser.error(f"unknown sampler(s) {unknown}; known: {', '.join(available_samplers())}")
