@@ -28,12 +28,8 @@ warning naming the file and regenerate it.
 
 from __future__ import annotations
 
-import io
 import json
 import logging
-import pickle
-import zipfile
-import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -44,7 +40,7 @@ from gnn_mp_envs.critical.bottleneck import bottleneck_nodes, problem_graph
 from gnn_mp_envs.critical.halton import DENSE_NODES, HaltonGraph, halton_graph
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
 from gnn_mp_envs.tasks.maze2d import MazeMap, random_maze, sample_endpoints
-from gnn_mp_envs.utils.io import atomic_path
+from gnn_mp_envs.utils.npz import DAMAGED, DatasetCacheError, read_npz, write_npz
 
 log = logging.getLogger(__name__)
 
@@ -54,10 +50,6 @@ FORMAT_VERSION = 1
 BLOB_STREAM = 3
 #: Split codes of the labelled set.
 SPLIT_CODES = {"train": 0, "val": 1, "test": 2}
-
-
-class DatasetCacheError(ValueError):
-    """A dataset file that cannot be used; the message is one line naming the file."""
 
 
 @dataclass
@@ -201,7 +193,7 @@ def _pad(arrays: list[np.ndarray], width: int) -> np.ndarray:
 
 def save_problems(problems: CriticalProblems, path: str | Path) -> None:
     """Write an npz with a format version and the generating config (byte-reproducible)."""
-    arrays = {
+    write_npz(path, {
         "format_version": np.array(FORMAT_VERSION),
         "seed": np.array(problems.config.seed),
         "config_json": np.array(problems.config.to_json()),
@@ -213,26 +205,19 @@ def save_problems(problems: CriticalProblems, path: str | Path) -> None:
         "edge_free_bits": np.packbits(problems.edge_free, axis=1),
         "label_ptr": problems.label_ptr, "label_nodes": problems.label_nodes,
         "path_cost": problems.path_cost, "map_index": problems.map_index, "split": problems.split,
-    }
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for name, arr in arrays.items():
-            buf = io.BytesIO()
-            np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=False)
-            info = zipfile.ZipInfo(name + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
-            zf.writestr(info, buf.getvalue())
+    })
 
 
-#: What numpy / zipfile raise on a damaged npz (checked by tests/test_critical_graph.py).
-_DAMAGED = (zipfile.BadZipFile, zlib.error, EOFError, ValueError, KeyError, TypeError, IndexError,
-            AttributeError, pickle.UnpicklingError, UnicodeDecodeError, OverflowError)
+def load_problems(path: str | Path) -> CriticalProblems:
+    """Read an npz written by :func:`save_problems`.
 
-
-def _read_problems(path: Path) -> CriticalProblems:
-    with np.load(path, allow_pickle=False) as z:
-        version = int(z["format_version"])
-        if version != FORMAT_VERSION:
-            raise DatasetCacheError(f"{path}: format version {version}, expected {FORMAT_VERSION}")
+    Raises :class:`DatasetCacheError` (one line naming the file) for other format versions
+    and for damaged files (empty, truncated, CRC errors, not an npz, missing arrays), and
+    ``FileNotFoundError`` for a missing one.
+    """
+    path = Path(path)
+    z = read_npz(path, FORMAT_VERSION)
+    try:
         cfg_dict = json.loads(str(z["config_json"]))
         cfg_dict["num_walls"] = tuple(cfg_dict["num_walls"])
         cfg = DatasetConfig(**cfg_dict)
@@ -244,24 +229,8 @@ def _read_problems(path: Path) -> CriticalProblems:
             np.unpackbits(z["node_free_bits"], axis=1, count=n).astype(bool),
             np.unpackbits(z["edge_free_bits"], axis=1, count=e).astype(bool),
             z["label_ptr"], z["label_nodes"], z["path_cost"], z["map_index"], z["split"], cfg)
-
-
-def load_problems(path: str | Path) -> CriticalProblems:
-    """Read an npz written by :func:`save_problems`.
-
-    Raises :class:`DatasetCacheError` (one line naming the file) for other format versions
-    and for damaged files (empty, truncated, CRC errors, not an npz, missing arrays), and
-    ``FileNotFoundError`` for a missing one.
-    """
-    path = Path(path)
-    try:
-        return _read_problems(path)
-    except DatasetCacheError:
-        raise
-    except _DAMAGED as exc:
-        lines = str(exc).strip().splitlines()
-        detail = f"{type(exc).__name__}: {lines[0][:100]}" if lines else type(exc).__name__
-        raise DatasetCacheError(f"{path}: unreadable dataset file ({detail})") from None
+    except DAMAGED as exc:
+        raise DatasetCacheError(f"{path}: unreadable dataset file ({type(exc).__name__}: {exc})") from None
 
 
 def _cached(path: Path, cfg: DatasetConfig) -> CriticalProblems | None:
