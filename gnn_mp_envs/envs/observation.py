@@ -16,6 +16,10 @@ key                shape / dtype       meaning
 ``start``          (d,) float32        start state
 ``goal``           (d,) float32        goal state
 ``active_tree``    (1,) int64          the tree the next action extends (always 0 for RRT)
+``obstacles``      (M, 1+w) float32    the problem's obstacles, one row each: ``[1, features]``
+                                       (task-specific ``w`` features; padding rows are zero;
+                                       ``(1, 1)`` zeros for tasks without obstacles). What
+                                       conditional samplers (CVAE) condition on.
 =================  ==================  =========================================================
 
 ``spaces.Dict`` rather than ``spaces.Graph``: SB3 and TorchRL accept padded boxes, and
@@ -61,11 +65,18 @@ def keep_freed_heap(trim_threshold: int = 64 << 20, mmap_threshold: int = 32 << 
 
 
 OBSERVATION_KEYS = ("nodes", "node_features", "parent", "mask", "num_nodes", "start", "goal",
-                    "active_tree")
+                    "active_tree", "obstacles")
 
 
-def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int) -> spaces.Dict:
-    """The padded-graph observation space for a state box ``[low, high]``."""
+def obstacle_shape(max_obstacles: int, obstacle_width: int) -> tuple[int, int]:
+    """Shape of the ``obstacles`` entry: one row per obstacle, a presence flag + features."""
+    return (max(1, int(max_obstacles)), 1 + int(obstacle_width) if max_obstacles else 1)
+
+
+def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int,
+                      obstacles: tuple[int, int] = (1, 1)) -> spaces.Dict:
+    """The padded-graph observation space for a state box ``[low, high]`` (``obstacles``: the
+    shape of the obstacle rows, see :func:`obstacle_shape`)."""
     low = np.asarray(low, dtype=np.float32)
     high = np.asarray(high, dtype=np.float32)
     span = high - low
@@ -84,13 +95,14 @@ def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int) -> spac
         "start": spaces.Box(low, high, dtype=np.float32),
         "goal": spaces.Box(low, high, dtype=np.float32),
         "active_tree": spaces.Box(0, 1, shape=(1,), dtype=np.int64),
+        "obstacles": spaces.Box(-np.inf, np.inf, shape=tuple(obstacles), dtype=np.float32),
     })
 
 
 class GraphObservation:
     """Preallocated observation arrays; :meth:`add` writes one row per new node."""
 
-    def __init__(self, state_dim: int, max_nodes: int) -> None:
+    def __init__(self, state_dim: int, max_nodes: int, obstacles: tuple[int, int] = (1, 1)) -> None:
         self.max_nodes = int(max_nodes)
         self.state_dim = int(state_dim)
         self.nodes = np.zeros((max_nodes, state_dim), dtype=np.float32)
@@ -101,10 +113,12 @@ class GraphObservation:
         self.start = np.zeros(state_dim, dtype=np.float32)
         self.goal = np.zeros(state_dim, dtype=np.float32)
         self.active_tree = np.zeros(1, dtype=np.int64)
+        self.obstacles = np.zeros(obstacles, dtype=np.float32)
         self._problem: Problem | None = None
 
-    def reset(self, problem: Problem, tree: TreeStore) -> None:
-        """Clear the rows used by the previous episode and write the roots of ``tree``."""
+    def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
+        """Clear the rows used by the previous episode and write the roots of ``tree`` and the
+        problem's ``obstacle_rows`` (k, w)."""
         n = int(self.num_nodes[0])
         self.nodes[:n] = 0.0
         self.node_features[:n] = 0.0
@@ -114,6 +128,14 @@ class GraphObservation:
         self.start[:] = problem.start
         self.goal[:] = problem.goal
         self.active_tree[0] = 0
+        self.obstacles[:] = 0.0
+        if obstacle_rows is not None and len(obstacle_rows):
+            k, w = obstacle_rows.shape
+            if k > self.obstacles.shape[0] or w + 1 != self.obstacles.shape[1]:
+                raise ValueError(f"{k} obstacle rows of width {w} do not fit the observation's "
+                                 f"{self.obstacles.shape} (presence flag + features)")
+            self.obstacles[:k, 0] = 1.0
+            self.obstacles[:k, 1:] = obstacle_rows
         self._problem = problem
         for i in range(len(tree)):
             self.add(tree, i)
@@ -143,4 +165,5 @@ class GraphObservation:
             "start": c(self.start),
             "goal": c(self.goal),
             "active_tree": c(self.active_tree),
+            "obstacles": c(self.obstacles),
         }

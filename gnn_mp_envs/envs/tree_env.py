@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from gnn_mp_envs.core.planners import PLANNERS, make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, observation_space
+from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, obstacle_shape, observation_space
 from gnn_mp_envs.registration import make_task, task_spec
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
 
@@ -69,7 +69,8 @@ class TreePlanningEnv(gym.Env):
     ## Observation space
     The tree as a graph padded to ``max_nodes`` (see :mod:`gnn_mp_envs.envs.observation`):
     ``nodes``, ``node_features`` = ``[x_init - x_n, x_goal - x_n, tree_id]``, ``parent``,
-    ``mask``, ``num_nodes``, ``start``, ``goal``, ``active_tree``. Rows are written in
+    ``mask``, ``num_nodes``, ``start``, ``goal``, ``active_tree``, ``obstacles`` (the problem's
+    obstacles, a row each, for conditional samplers). Rows are written in
     place as nodes are added; by default each step returns a copy.
 
     ## Rewards
@@ -145,8 +146,9 @@ class TreePlanningEnv(gym.Env):
         self._low = np.asarray(low, dtype=np.float32)
         self._high = np.asarray(high, dtype=np.float32)
         self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
-        self.observation_space = observation_space(self._low, self._high, self.max_nodes)
-        self._obs = GraphObservation(self.state_dim, self.max_nodes)
+        obstacles = obstacle_shape(self.task.max_obstacles, self.task.obstacle_width)
+        self.observation_space = observation_space(self._low, self._high, self.max_nodes, obstacles)
+        self._obs = GraphObservation(self.state_dim, self.max_nodes, obstacles)
         self.problem: Problem | None = None
         self.planner = None
 
@@ -172,7 +174,7 @@ class TreePlanningEnv(gym.Env):
         problem.reset_counters()
         self.problem = problem
         self.planner = make_planner(self.planner_name, problem, self.max_nodes)
-        self._obs.reset(problem, self.planner.tree)
+        self._obs.reset(problem, self.planner.tree, self.task.obstacle_rows(problem))
         return self._observation(), self._info()
 
     def step(self, action):

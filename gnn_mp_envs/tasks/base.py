@@ -23,6 +23,9 @@ class Task:
     name = "task"
     #: Which planners make sense for the task (kinodynamic tasks cannot run BiRRT).
     planners: tuple[str, ...] = ("rrt", "birrt")
+    #: Features per obstacle row and the most rows a problem has (0: the task has no obstacles).
+    obstacle_width: int = 0
+    max_obstacles: int = 0
 
     def sample_problem(self, rng: np.random.Generator) -> Problem:
         """Draw a problem from the family's distribution."""
@@ -52,6 +55,11 @@ class Task:
             return spec
         raise TypeError(f"options['problem'] must be a Problem for task {self.name!r}, "
                         f"got {type(spec).__name__}")
+
+    def obstacle_rows(self, problem: Problem) -> np.ndarray:
+        """The problem's obstacles as rows of ``obstacle_width`` numbers (at most
+        ``max_obstacles``); what the observation's ``obstacles`` entry shows."""
+        return np.zeros((0, self.obstacle_width))
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
         """An RGB image of the problem, tree and path."""

@@ -205,6 +205,9 @@ class Maze2DTask(Task):
     """Seeded Maze2D problems: 1-3 walls with narrow gaps, start and goal across them."""
 
     name = "maze2d"
+    #: ``[xmin, ymin, xmax, ymax, is_blob]``: walls as boxes, blobs as their bounding boxes.
+    obstacle_width = 5
+    max_obstacles = 16
 
     def __init__(self, num_walls: tuple[int, int] = (1, 3), num_blobs: int = 0,
                  step_size: float = STEP_SIZE) -> None:
@@ -225,6 +228,17 @@ class Maze2DTask(Task):
             except KeyError as e:
                 raise InvalidProblemError(f"a maze2d problem dict needs 'start' and 'goal' (missing {e})") from None
         return super().make_problem(spec)
+
+    def obstacle_rows(self, problem: Problem) -> np.ndarray:
+        maze = problem.maze
+        b = maze.blobs
+        rows = np.vstack([np.column_stack([maze.walls, np.zeros(len(maze.walls))]),
+                          np.column_stack([b[:, 0] - b[:, 2], b[:, 1] - b[:, 2], b[:, 0] + b[:, 2],
+                                           b[:, 1] + b[:, 2], np.ones(len(b))])])
+        if len(rows) > self.max_obstacles:
+            raise InvalidProblemError(f"a maze2d problem has at most {self.max_obstacles} walls and blobs, "
+                                      f"got {len(rows)}")
+        return rows
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
         return render_maze2d(problem, tree, path)

@@ -26,6 +26,9 @@ class ArmTask(Task):
     either training family per problem, or the held-out ``test`` family)."""
 
     name = "arm"
+    #: ``[is_box, is_cylinder, size (3; a cylinder's radius, height, 0), position (3), cos yaw, sin yaw]``.
+    obstacle_width = 10
+    max_obstacles = 12
     planners = ("birrt", "rrt")
 
     def __init__(self, scene: str = "train-a", step_size: float = STEP_SIZE,
@@ -91,6 +94,13 @@ class ArmTask(Task):
         elif isinstance(spec, ArmProblem) and spec.world is not self.world:
             raise InvalidProblemError("the arm problem belongs to another ArmTask (pybullet client)")
         return super().make_problem(spec)
+
+    def obstacle_rows(self, problem: Problem) -> np.ndarray:
+        rows = [[ob.kind == "box", ob.kind == "cylinder", *ob.size, *([0.0] * (3 - len(ob.size))),
+                 *ob.position, np.cos(ob.yaw), np.sin(ob.yaw)] for ob in problem.obstacles]
+        if len(rows) > self.max_obstacles:
+            raise InvalidProblemError(f"an arm problem has at most {self.max_obstacles} obstacles, got {len(rows)}")
+        return np.asarray(rows, dtype=np.float64).reshape(-1, self.obstacle_width)
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
         """TinyRenderer image: the arm at the start (and, faded, at the goal), the scene, the
