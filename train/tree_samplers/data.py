@@ -1,0 +1,212 @@
+"""Datasets of the paper's Algorithm 1 (offline part): uniform-sampler solutions, cut into examples.
+
+Seeded training problems (split ``train``; for the arm the two training scene families) are
+solved with the uniform sampler through :func:`gnn_mp_envs.rollout.rollout`. For each solved
+problem the file keeps the whole final tree (states, parents, tree ids), the solution path's
+node indices, start, goal and the observation's obstacle rows. Examples are cut from that at
+load time, in one of two views:
+
+* ``"prefix"`` (the paper's): the graph is ``x_init`` (and, for BiRRT, ``x_goal``) plus the
+  path nodes inserted before path node ``j``; the label is path node ``j``.
+* ``"grown"`` (the remedy for the train/online mismatch): the graph is the tree the uniform
+  planner had actually grown when path node ``j`` was inserted (its rows ``0..j-1``); the
+  label is path node ``j``, which the tree reached next on its way to the goal.
+
+Both views use every non-root path node ``j`` (for BiRRT both trees' path nodes, each with
+the tree it extends as ``active_tree``). Files are byte-reproducible for a seed and config,
+written atomically, and carry a format version (:mod:`gnn_mp_envs.utils.npz`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from gnn_mp_envs.utils.npz import DatasetCacheError, read_npz, write_npz
+
+log = logging.getLogger(__name__)
+
+#: Bump when the stored arrays change meaning; loaders refuse other versions.
+FORMAT_VERSION = 1
+VIEWS = ("prefix", "grown")
+
+
+@dataclass(frozen=True)
+class TreeDataConfig:
+    """Everything that determines a dataset file (stored in it as JSON)."""
+
+    task: str = "pendulum"
+    split: str = "train"
+    scene: str | None = None          # tasks with scenes: default "train" (both training families)
+    problems: int = 300               # problem indices 0..problems-1 of the split
+    seed: int = 0                     # uniform sampler seed of problem i: problem_seed(seed, i)
+    max_nodes: int | None = None      # node budget (default: the task's)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    def file_name(self) -> str:
+        scene = f"-{self.scene}" if self.scene else ""
+        return f"{self.task}{scene}-{self.split}-{self.problems}p-seed{self.seed}.npz"
+
+
+@dataclass
+class TreeDataset:
+    """Solved problems: concatenated trees and paths with per-problem offsets."""
+
+    config: TreeDataConfig
+    node_ptr: np.ndarray     # (P+1,) offsets into states/parent/tree_id
+    states: np.ndarray       # (N, d) float32
+    parent: np.ndarray       # (N,) int32, local to its problem (-1 for roots)
+    tree_id: np.ndarray      # (N,) int8
+    path_ptr: np.ndarray     # (P+1,) offsets into path_nodes
+    path_nodes: np.ndarray   # (L,) int32, local node indices, start to goal
+    start: np.ndarray        # (P, d)
+    goal: np.ndarray         # (P, d)
+    obstacles: np.ndarray    # (P, M, 1+w) observation rows
+    problem_index: np.ndarray  # (P,) index of each problem in its split
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def tree(self, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a, b = self.node_ptr[p], self.node_ptr[p + 1]
+        return self.states[a:b], self.parent[a:b], self.tree_id[a:b]
+
+    def path(self, p: int) -> np.ndarray:
+        return self.path_nodes[self.path_ptr[p]:self.path_ptr[p + 1]]
+
+    def examples(self) -> np.ndarray:
+        """(E, 2) pairs ``(problem, node j)``: every non-root path node of every problem."""
+        pairs = [(p, int(j)) for p in range(len(self)) for j in self.path(p)
+                 if self.parent[self.node_ptr[p] + j] >= 0]
+        return np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+
+    def graph(self, p: int, j: int, view: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The example's tree as (states, parent, tree_id) and its ``active_tree``.
+
+        ``grown``: rows ``0..j-1`` as the planner had them; ``prefix``: the roots and the path
+        nodes inserted before ``j``, parents re-indexed into that subset.
+        """
+        states, parent, tree_id = self.tree(p)
+        active = int(tree_id[j])
+        if view == "grown":
+            return states[:j], parent[:j], tree_id[:j], active
+        if view != "prefix":
+            raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
+        keep = np.union1d(np.flatnonzero(parent[:j] < 0), self.path(p)[self.path(p) < j])
+        remap = np.full(len(states), -1, dtype=np.int64)
+        remap[keep] = np.arange(len(keep))
+        sub_parent = np.where(parent[keep] >= 0, remap[np.maximum(parent[keep], 0)], -1)
+        return states[keep], sub_parent.astype(np.int32), tree_id[keep], active
+
+    def label(self, p: int, j: int) -> np.ndarray:
+        return self.states[self.node_ptr[p] + j]
+
+
+def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
+    """Solve problems ``0..problems-1`` of the split with the uniform sampler; keep the solved ones."""
+    import gymnasium as gym
+
+    import gnn_mp_envs  # noqa: F401  (registers the environments)
+    from agents.samplers import load_sampler
+    from gnn_mp_envs.registration import task_spec
+    from gnn_mp_envs.rollout import rollout
+    from train.benchmark.args import problem_seed
+
+    spec = task_spec(config.task)
+    kwargs = {"split": config.split, "copy_observations": False}
+    if config.max_nodes is not None:
+        kwargs["max_nodes"] = config.max_nodes
+    if config.scene is not None:
+        kwargs["scene"] = config.scene
+    env = gym.make(spec.env_id, disable_env_checker=True, **kwargs)
+    base = env.unwrapped
+    sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
+    trees, paths, starts, goals, obstacles, indices = [], [], [], [], [], []
+    try:
+        for i in tqdm(range(config.problems), desc=f"{config.task} uniform solutions", unit="problem",
+                      disable=not progress):
+            seed = problem_seed(config.seed, i)
+            sampler.reset(seed)
+            observations = {}
+
+            def keep_obstacles(obs, _info, _done, store=observations) -> None:
+                store.setdefault("obstacles", np.array(obs["obstacles"]))
+
+            record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_obstacles)
+            if not record.success:
+                continue
+            tree = base.planner.tree
+            n = len(tree)
+            trees.append((tree.states[:n].astype(np.float32), tree.parent[:n].astype(np.int32),
+                          tree.tree_id[:n].astype(np.int8)))
+            paths.append(np.asarray(record.path_nodes, dtype=np.int32))
+            starts.append(base.problem.start)
+            goals.append(base.problem.goal)
+            obstacles.append(observations["obstacles"])
+            indices.append(i)
+    finally:
+        env.close()
+    if not trees:
+        raise RuntimeError(f"no {config.task} problem of {config.problems} was solved")
+    sizes = [len(t[0]) for t in trees]
+    return TreeDataset(
+        config=config,
+        node_ptr=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        states=np.concatenate([t[0] for t in trees]), parent=np.concatenate([t[1] for t in trees]),
+        tree_id=np.concatenate([t[2] for t in trees]),
+        path_ptr=np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64),
+        path_nodes=np.concatenate(paths), start=np.stack(starts).astype(np.float32),
+        goal=np.stack(goals).astype(np.float32), obstacles=np.stack(obstacles).astype(np.float32),
+        problem_index=np.asarray(indices, dtype=np.int64))
+
+
+FIELDS = ("node_ptr", "states", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal", "obstacles",
+          "problem_index")
+
+
+def save(dataset: TreeDataset, path: str | Path) -> Path:
+    """Write ``dataset`` (byte-reproducible, atomic)."""
+    arrays = {"format_version": np.array(FORMAT_VERSION), "config_json": np.array(dataset.config.to_json())}
+    arrays.update({name: getattr(dataset, name) for name in FIELDS})
+    return write_npz(path, arrays)
+
+
+def load(path: str | Path) -> TreeDataset:
+    """Read a file written by :func:`save`; :class:`DatasetCacheError` names a damaged file."""
+    z = read_npz(path, FORMAT_VERSION)
+    try:
+        config = TreeDataConfig(**json.loads(str(z["config_json"])))
+        return TreeDataset(config=config, **{name: z[name] for name in FIELDS})
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DatasetCacheError(f"{path}: unreadable dataset file ({type(exc).__name__}: {exc})") from None
+
+
+def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bool = True) -> TreeDataset:
+    """The cached dataset of ``config`` in ``directory``, generated first when missing or damaged."""
+    path = Path(directory) / config.file_name()
+    if path.exists():
+        try:
+            dataset = load(path)
+            if dataset.config == config:
+                return dataset
+            log.warning("%s: generated with another config; regenerating it", path)
+        except DatasetCacheError as exc:
+            log.warning("%s; regenerating it", exc)
+    dataset = generate(config, progress)
+    save(dataset, path)
+    return dataset
+
+
+def batches(pairs: np.ndarray, batch_size: int, rng: np.random.Generator | None = None) -> Iterator[np.ndarray]:
+    """Example pairs in batches (shuffled when ``rng`` is given)."""
+    order = rng.permutation(len(pairs)) if rng is not None else np.arange(len(pairs))
+    for k in range(0, len(order), batch_size):
+        yield pairs[order[k:k + batch_size]]
