@@ -7,6 +7,7 @@
     gnn-mp bench-arm [args]               # arm planning benchmark      (train.bench_arm)
     gnn-mp critical {train,evaluate,generate-data} [args]              (train.critical)
     gnn-mp train critical [args]          # = gnn-mp critical train [args]
+    gnn-mp train rl --algo ppo --lib sb3 --task maze2d   # RL sampler          (train.rl)
 
 Bad input exits with status 2 and one line on stderr (no traceback).
 """
@@ -33,6 +34,7 @@ PASSTHROUGH: dict[str, tuple[str, str]] = {
 #: ``gnn-mp train NAME ...`` -> (module, argv prefix).
 TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
     "critical": ("train.critical", ["train"]),
+    "rl": ("train.rl", []),   # RL samplers (issue #10): gnn-mp train rl --algo ppo|sac --lib sb3|torchrl
 }
 
 

@@ -51,7 +51,7 @@ RECORD_KEYS = ("format_version", "kind", "ctor_args", "obs_spec", "state_dict", 
 #: Where the shipped weights live (this package's directory).
 SHIPPED_DIR = Path(__file__).resolve().parent
 #: Modules imported before a kind is looked up; each registers its kinds on import.
-BUILTIN_KIND_MODULES = ("agents.models",)
+BUILTIN_KIND_MODULES = ("agents.models", "agents.models.rl")   # agents.models.rl: RL policies (issue #10)
 
 _KINDS: dict[str, Callable[..., nn.Module]] = {}
 

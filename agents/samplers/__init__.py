@@ -9,6 +9,7 @@ pulls in PyTorch Geometric and TorchRL, which the classical samplers do not need
 
 from __future__ import annotations
 
+import importlib
 from typing import Callable
 
 import numpy as np
@@ -49,6 +50,14 @@ register_sampler("uniform", lambda low, high, task=None, seed=None, **kw: Unifor
 register_sampler("goal-bias", lambda low, high, task=None, seed=None, goal_bias=0.05, **kw:
                  GoalBiasSampler(low, high, seed, goal_bias),
                  "uniform with 5% samples at the active tree's target")
+
+# RL policies (issue #10, agents/samplers/rl.py; imported on first use: it needs torch_geometric)
+def _rl_factory(name: str) -> SamplerFactory:
+    return lambda **kw: importlib.import_module("agents.samplers.rl").load_rl_sampler(name, **kw)
+
+
+for _name, _what in (("rl-ppo", "SB3 PPO"), ("rl-sac", "SB3 SAC"), ("rl-ppo-torchrl", "TorchRL PPO")):
+    register_sampler(_name, _rl_factory(_name), f"{_what} policy over the tree view (gnn-mp train rl; per-task weights)")
 
 
 

@@ -1,0 +1,177 @@
+"""RL-sized environments: a bounded view of the tree, actions in ``[-1, 1]``, one helper.
+
+The planning envs pad the tree to ``max_nodes`` rows (5,000 for maze2d, 20,000 for the
+pendulum), which is what a sampler wants but not what an RL buffer should store: SB3's SAC
+asks for 93 GiB for its default replay buffer on maze2d. :class:`TreeViewWrapper` presents
+the same keys and layout padded to ``K`` rows instead:
+
+* the view holds the roots (the start; for BiRRT also the goal root) and the ``K - r`` most
+  recently added nodes, in increasing index order, as rows ``0..n_view-1`` (the layout of
+  :mod:`gnn_mp_envs.envs.observation`: real rows first, padding zero);
+* ``parent`` is remapped to view rows; a parent outside the view becomes ``-1`` (the node is
+  then the root of a fragment: its edge is cut, nothing else changes);
+* ``num_nodes`` and ``mask`` describe the view; ``node_features`` (``[x_init - x_n,
+  x_goal - x_n, tree_id]``), ``start``, ``goal``, ``active_tree`` and ``obstacles`` are
+  copied unchanged.
+
+So :class:`agents.encoders.TreeEncoder` reads a view exactly like a full observation, and a
+sampler trained on views reuses :func:`tree_view` on the full observation the benchmark
+gives it. Everything here is numpy; no torch.
+
+    env = make_rl_env("maze2d", view_nodes=64, split="train")   # view + actions in [-1, 1]
+    obs, info = env.reset(seed=0)                                # obs["nodes"].shape == (64, 2)
+    a = env.action_space.sample()                                # in [-1, 1]^d
+    low, high = env.unwrapped.action_space.low, ...              # what a = +-1 means: the state box
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.wrappers import RescaleAction
+
+#: Default number of rows of the view (roots + most recent nodes).
+DEFAULT_VIEW_NODES = 64
+#: The action box the RL policies act in (:func:`make_rl_env` rescales it to the state box).
+ACTION_LOW, ACTION_HIGH = -1.0, 1.0
+
+
+def view_rows(parent: np.ndarray, num_nodes: int, view_nodes: int) -> np.ndarray:
+    """Indices (increasing) of the tree rows a ``view_nodes``-row view keeps.
+
+    The roots (rows ``< num_nodes`` whose parent is ``-1``) come first in priority, then the
+    most recent rows; with ``num_nodes <= view_nodes`` every real row is kept.
+    """
+    n = int(num_nodes)
+    if n <= view_nodes:
+        return np.arange(n)
+    roots = np.flatnonzero(np.asarray(parent[:n]) < 0)
+    if roots.size >= view_nodes:         # more roots than rows: keep the first ones
+        return roots[:view_nodes]
+    # the window of recent rows grows by the roots that fall inside it (at most r passes)
+    window = view_nodes - roots.size
+    while True:
+        older = roots[roots < n - window]
+        if view_nodes - older.size == window:
+            break
+        window = view_nodes - older.size
+    return np.concatenate([older, np.arange(n - window, n)])
+
+
+def tree_view(obs: Mapping[str, np.ndarray], view_nodes: int = DEFAULT_VIEW_NODES) -> dict[str, np.ndarray]:
+    """The ``view_nodes``-row view of one (unbatched) padded observation; new arrays.
+
+    Same keys, dtypes and layout as the full observation, with ``N`` replaced by
+    ``view_nodes``; see the module docstring for what is kept and how parents are remapped.
+    """
+    k = int(view_nodes)
+    nodes, feats, parent = obs["nodes"], obs["node_features"], np.asarray(obs["parent"])
+    n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
+    rows = view_rows(parent, n, k)
+    m = rows.size
+    out_nodes = np.zeros((k, nodes.shape[-1]), dtype=nodes.dtype)
+    out_feats = np.zeros((k, feats.shape[-1]), dtype=feats.dtype)
+    out_parent = np.full(k, -1, dtype=parent.dtype)
+    out_mask = np.zeros(k, dtype=np.asarray(obs["mask"]).dtype)
+    out_nodes[:m] = nodes[rows]
+    out_feats[:m] = feats[rows]
+    if m:
+        # old row -> view row; parents not in the view (and roots, -1) map to -1
+        old_parent = parent[rows]
+        pos = np.searchsorted(rows, old_parent)
+        pos = np.minimum(pos, m - 1)
+        inside = (old_parent >= 0) & (rows[pos] == old_parent)
+        out_parent[:m] = np.where(inside, pos, -1)
+    out_mask[:m] = 1
+    out = {
+        "nodes": out_nodes,
+        "node_features": out_feats,
+        "parent": out_parent,
+        "mask": out_mask,
+        "num_nodes": np.array([m], dtype=np.asarray(obs["num_nodes"]).dtype),
+    }
+    for key in obs:
+        if key not in out:
+            out[key] = np.array(obs[key], copy=True)
+    return out
+
+
+def view_space(space: spaces.Dict, view_nodes: int = DEFAULT_VIEW_NODES) -> spaces.Dict:
+    """The observation space of :func:`tree_view` for a full observation space ``space``."""
+    k = int(view_nodes)
+    out = {}
+    for key, sub in space.spaces.items():
+        if key in ("nodes", "node_features"):
+            out[key] = spaces.Box(sub.low[:1].repeat(k, 0), sub.high[:1].repeat(k, 0), dtype=sub.dtype)
+        elif key == "parent":
+            out[key] = spaces.Box(-1, k - 1, shape=(k,), dtype=sub.dtype)
+        elif key == "mask":
+            out[key] = spaces.MultiBinary(k)
+        elif key == "num_nodes":
+            out[key] = spaces.Box(0, k, shape=(1,), dtype=sub.dtype)
+        else:
+            out[key] = sub
+    return spaces.Dict(out)
+
+
+class TreeViewWrapper(gym.ObservationWrapper):
+    """Present a bounded ``view_nodes``-row view of the tree (same keys and layout).
+
+    ``info`` is unchanged: ``nodes_expanded`` and the other counters describe the whole tree.
+    """
+
+    def __init__(self, env: gym.Env, view_nodes: int = DEFAULT_VIEW_NODES) -> None:
+        super().__init__(env)
+        if int(view_nodes) < 2:
+            raise ValueError(f"view_nodes must be >= 2, got {view_nodes}")
+        self.view_nodes = int(view_nodes)
+        self.observation_space = view_space(env.observation_space, self.view_nodes)
+
+    def observation(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return tree_view(observation, self.view_nodes)
+
+
+def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """A policy action in ``[-1, 1]^d`` -> a state in ``[low, high]`` (``RescaleAction``'s map)."""
+    a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
+    return (low + (high - low) * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)).astype(np.float32)
+
+
+def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
+                planner: str | None = None, scale_actions: bool = True, **env_kwargs: Any) -> gym.Env:
+    """The environment every RL training script (and the RL sampler's conventions) use.
+
+    ``task``'s benchmark environment (``planner="rrt"``/``"birrt"`` picks another registered
+    variant), problems of ``split`` (``"train"`` to learn, ``"val"`` to tune), wrapped in
+    :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation) and
+    ``RescaleAction`` to ``[-1, 1]`` (``scale_actions=False`` keeps state-space actions).
+    ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
+    ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
+    ``scene``, ``task_kwargs``. Observations are not copied by the env
+    (``copy_observations=False``): the view is a fresh copy already.
+    """
+    from gnn_mp_envs.registration import task_spec
+
+    spec = task_spec(task)
+    env_id = spec.env_id
+    if planner is not None:
+        ids = [i for i, v in spec.envs.items() if v.get("planner") == planner]
+        if not ids:
+            raise ValueError(f"task {task!r} has no {planner!r} environment; "
+                             f"known: {', '.join(sorted(v.get('planner', '?') for v in spec.envs.values()))}")
+        env_id = ids[0]
+    env_kwargs.setdefault("copy_observations", view_nodes is None)
+    env = gym.make(env_id, split=split, disable_env_checker=True, **env_kwargs)
+    if view_nodes is not None:
+        env = TreeViewWrapper(env, view_nodes)
+    if scale_actions:
+        d = env.action_space.shape[0]
+        env = RescaleAction(env, np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
+    return env
+
+
+__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "TreeViewWrapper", "make_rl_env", "scale_action",
+           "tree_view", "view_rows", "view_space"]

@@ -1,0 +1,136 @@
+"""Train a Stable-Baselines3 PPO or SAC sampler on a tree environment.
+
+    gnn-mp train rl --lib sb3 --algo ppo --task maze2d --total-steps 50000
+    gnn-mp train rl --lib sb3 --algo sac --task pendulum --total-steps 20000
+
+Read top to bottom: flags (``train.rl_common.RLArgs``, one dataclass) -> vectorised
+``make_rl_env`` envs (tree view of ``--view-nodes`` rows, actions in [-1, 1]) -> PPO or SAC with
+``TreeFeaturesExtractor`` (the shared ``TreeEncoder``) -> optional warm start of the encoder
+(``--init-from``) -> ``learn`` with a progress bar and an evaluation callback (split ``val``,
+every ``--eval-every`` steps: checkpoint ``policy.pt``/``best.pt`` in the one checkpoint format,
+``evaluations.json``, TensorBoard scalars) -> learning curve, optional ``--tune-mix`` and
+``--ship``. Outputs go to ``runs/`` (see :mod:`train.rl_common`).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import torch
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+from agents.models.rl import policy_from_sb3, warm_start_encoder
+from agents.sb3 import TreeFeaturesExtractor
+from gnn_mp_envs.envs.wrappers import make_rl_env
+from train.rl_common import Evaluator, RLArgs, check_args, fmt_seconds, human_bytes, sb3_buffer_nbytes, write_config
+
+
+class EvalCallback(BaseCallback):
+    """Every ``--eval-every`` steps: evaluate on split val, checkpoint, log to TensorBoard."""
+
+    def __init__(self, evaluator: Evaluator) -> None:
+        super().__init__()
+        self.evaluator = evaluator
+
+    def _on_step(self) -> bool:
+        if self.evaluator.due(self.num_timesteps):
+            row = self.evaluator(self.num_timesteps)
+            self.logger.dump(self.num_timesteps)
+            if self.evaluator.args.progress:
+                print(f"\n  step {row['steps']:>7}: val success {row['success']:.2f}, "
+                      f"median nodes {row['median_nodes']:.0f} ({row['eval_wall_s']:.0f} s)", flush=True)
+        return True
+
+
+class ProgressCallback(BaseCallback):
+    """A tqdm bar over environment steps (SB3's own needs ``rich``)."""
+
+    def __init__(self, total: int) -> None:
+        super().__init__()
+        self.total, self.bar = total, None
+
+    def _on_training_start(self) -> None:
+        from tqdm import tqdm
+        self.bar = tqdm(total=self.total, unit="step", dynamic_ncols=True)
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.num_timesteps - self.bar.n)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.bar.close()
+
+
+def build_model(args: RLArgs, env) -> PPO | SAC:
+    """PPO or SAC over the env with the tree encoder as features extractor."""
+    policy_kwargs = {"features_extractor_class": TreeFeaturesExtractor,
+                     "features_extractor_kwargs": args.encoder_kwargs(), "net_arch": list(args.net_arch)}
+    common = {"learning_rate": args.lr, "gamma": args.gamma, "batch_size": args.batch_size, "seed": args.seed,
+              "device": "cpu", "tensorboard_log": str(args.run_dir() / "tb"), "verbose": 0}
+    if args.algo == "ppo":
+        policy_kwargs["log_std_init"] = args.log_std_init
+        return PPO("MultiInputPolicy", env, n_steps=args.n_steps, n_epochs=args.n_epochs,
+                   gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
+                   policy_kwargs=policy_kwargs, **common)
+    return SAC("MultiInputPolicy", env, buffer_size=args.buffer_size, learning_starts=args.learning_starts,
+               policy_kwargs=policy_kwargs, **common)
+
+
+def encoders_of(model: PPO | SAC) -> list:
+    """Every ``TreeEncoder`` of a model (PPO: the shared one; SAC: actor, critic, target critic)."""
+    return [m for m in model.policy.modules() if type(m).__name__ == "TreeEncoder"]
+
+
+def train(args: RLArgs) -> Path:
+    check_args(args)
+    torch.set_num_threads(args.threads)
+    run_dir = args.run_dir()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_config(args, run_dir)
+
+    # 1. environments: n_envs copies of make_rl_env (tree view + actions in [-1, 1]), seeded
+    env_kwargs = {"task": args.task, "split": "train", **args.env_kwargs()}
+    vec_env = make_vec_env(make_rl_env, n_envs=args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
+                           vec_env_cls=SubprocVecEnv if args.parallel else DummyVecEnv)
+
+    # 2. the agent, the optional warm start of its encoder(s)
+    model = build_model(args, vec_env)
+    if args.init_from is not None:
+        source = warm_start_encoder(args.init_from, *encoders_of(model))
+        print(f"encoder initialised from {args.init_from} ({source})")
+    buffer = model.rollout_buffer if args.algo == "ppo" else model.replay_buffer
+    print(f"{args.algo.upper()} on {args.task}: {sum(p.numel() for p in model.policy.parameters()):,} parameters, "
+          f"{'rollout' if args.algo == 'ppo' else 'replay'} buffer {human_bytes(sb3_buffer_nbytes(buffer))}, "
+          f"run directory {run_dir}")
+
+    # 3. evaluation on split val (the policy exported to the sampler the benchmark runs)
+    full = make_rl_env(args.task, view_nodes=None, planner=args.planner, scale_actions=False)
+    low, high = full.action_space.low, full.action_space.high
+    full.close()
+
+    def log(name: str, value: float, step: int) -> None:
+        model.logger.record(name, value)
+
+    evaluator = Evaluator(args, run_dir, lambda: policy_from_sb3(model), low, high, log=log)
+
+    # 4. learn
+    callbacks = [EvalCallback(evaluator)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
+    started = time.perf_counter()
+    model.learn(total_timesteps=args.total_steps, callback=callbacks, tb_log_name=f"{args.algo}_{args.task}")
+    train_time = time.perf_counter() - started
+
+    # 5. final evaluation, learning curve, --tune-mix, --ship
+    best = evaluator.finish(model.num_timesteps)
+    vec_env.close()
+    print(f"trained {model.num_timesteps:,} steps in {fmt_seconds(train_time)}; best val: "
+          f"{max(evaluator.rows, key=lambda r: (r['success'], -r['median_nodes']))}; policy {best}")
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    from train.rl import main as rl_main
+    return rl_main(["--lib", "sb3", *(argv or [])])
