@@ -118,6 +118,17 @@ class RLArgs:
         return SAMPLER_NAMES[(self.lib, self.algo)]
 
 
+@dataclass
+class RunResult:
+    """What a training script returns."""
+
+    best: Path                          # the best policy on split val (best.pt)
+    steps: int                          # environment steps trained
+    train_seconds: float                # wall time of the training loop (evaluations included)
+    buffer_bytes: int                   # SB3: the rollout/replay buffer's arrays; TorchRL: one batch
+    evaluations: list[dict[str, Any]]   # the rows of evaluations.json
+
+
 def check_args(args: RLArgs) -> None:
     """One-line ``ValueError`` for combinations that cannot run."""
     from gnn_mp_envs.registration import task_spec
@@ -334,16 +345,14 @@ def sb3_buffer_nbytes(buffer: Any) -> int:
 
 
 def sb3_buffer_bytes(observation_space: Any, action_dim: int, size: int, n_envs: int, kind: str) -> int:
-    """Bytes SB3 2.x allocates for a Dict-observation buffer, computed from the space (nothing
-    allocated): ``kind="rollout"`` (PPO's ``DictRolloutBuffer``: float32 observations, six float32
-    per-step arrays) or ``kind="replay"`` (SAC's ``DictReplayBuffer``: observations and next
-    observations in the space's dtypes, float32 actions, rewards, dones, timeouts). Checked
-    against real buffers in ``tests/test_rl.py``."""
+    """Bytes SB3 2.9 allocates for a Dict-observation buffer, computed from the space (nothing
+    allocated): observations in the space's dtypes (float32, int64 ``parent``, int8 ``mask``, ...)
+    and float32 actions, plus ``kind="rollout"`` (PPO's ``DictRolloutBuffer``, ``size`` steps per
+    env: six float32 per-step arrays) or ``kind="replay"`` (SAC's ``DictReplayBuffer``, ``size``
+    transitions in all: next observations too, rewards, dones, timeouts). Checked against real
+    buffers in ``tests/test_rl.py``."""
     steps = size * n_envs if kind == "rollout" else max(size // n_envs, 1) * n_envs
-    obs = 0
-    for sub in observation_space.spaces.values():
-        itemsize = 4 if kind == "rollout" else np.dtype(sub.dtype).itemsize
-        obs += int(np.prod(sub.shape)) * itemsize
+    obs = sum(int(np.prod(sub.shape)) * np.dtype(sub.dtype).itemsize for sub in observation_space.spaces.values())
     if kind == "rollout":
         return steps * (obs + 4 * action_dim + 6 * 4)
     return steps * (2 * obs + 4 * action_dim + 3 * 4)

@@ -15,7 +15,6 @@ every ``--eval-every`` steps: checkpoint ``policy.pt``/``best.pt`` in the one ch
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import torch
 from stable_baselines3 import PPO, SAC
@@ -26,7 +25,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 from agents.models.rl import policy_from_sb3, warm_start_encoder
 from agents.sb3 import TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl_common import Evaluator, RLArgs, check_args, fmt_seconds, human_bytes, sb3_buffer_nbytes, write_config
+from train.rl_common import (Evaluator, RLArgs, RunResult, check_args, fmt_seconds, human_bytes, sb3_buffer_nbytes,
+                             write_config)
 
 
 class EvalCallback(BaseCallback):
@@ -40,9 +40,9 @@ class EvalCallback(BaseCallback):
         if self.evaluator.due(self.num_timesteps):
             row = self.evaluator(self.num_timesteps)
             self.logger.dump(self.num_timesteps)
-            if self.evaluator.args.progress:
-                print(f"\n  step {row['steps']:>7}: val success {row['success']:.2f}, "
-                      f"median nodes {row['median_nodes']:.0f} ({row['eval_wall_s']:.0f} s)", flush=True)
+            lead = "\n" if self.evaluator.args.progress else ""   # below the progress bar
+            print(f"{lead}  step {row['steps']:>7}: val success {row['success']:.2f}, "
+                  f"median nodes {row['median_nodes']:.0f} ({row['eval_wall_s']:.0f} s)", flush=True)
         return True
 
 
@@ -85,7 +85,7 @@ def encoders_of(model: PPO | SAC) -> list:
     return [m for m in model.policy.modules() if type(m).__name__ == "TreeEncoder"]
 
 
-def train(args: RLArgs) -> Path:
+def train(args: RLArgs) -> RunResult:
     check_args(args)
     torch.set_num_threads(args.threads)
     run_dir = args.run_dir()
@@ -103,8 +103,9 @@ def train(args: RLArgs) -> Path:
         source = warm_start_encoder(args.init_from, *encoders_of(model))
         print(f"encoder initialised from {args.init_from} ({source})")
     buffer = model.rollout_buffer if args.algo == "ppo" else model.replay_buffer
+    buffer_bytes = sb3_buffer_nbytes(buffer)
     print(f"{args.algo.upper()} on {args.task}: {sum(p.numel() for p in model.policy.parameters()):,} parameters, "
-          f"{'rollout' if args.algo == 'ppo' else 'replay'} buffer {human_bytes(sb3_buffer_nbytes(buffer))}, "
+          f"{'rollout' if args.algo == 'ppo' else 'replay'} buffer {human_bytes(buffer_bytes)}, "
           f"run directory {run_dir}")
 
     # 3. evaluation on split val (the policy exported to the sampler the benchmark runs)
@@ -126,9 +127,8 @@ def train(args: RLArgs) -> Path:
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(model.num_timesteps)
     vec_env.close()
-    print(f"trained {model.num_timesteps:,} steps in {fmt_seconds(train_time)}; best val: "
-          f"{max(evaluator.rows, key=lambda r: (r['success'], -r['median_nodes']))}; policy {best}")
-    return best
+    print(f"trained {model.num_timesteps:,} steps in {fmt_seconds(train_time)}; policy {best}")
+    return RunResult(best, int(model.num_timesteps), train_time, buffer_bytes, evaluator.rows)
 
 
 def main(argv: list[str] | None = None) -> int:

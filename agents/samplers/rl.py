@@ -25,7 +25,7 @@ from typing import Any, Mapping
 
 import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 
@@ -96,26 +96,34 @@ class RLSampler(LearnedSampler):
         return torch.logaddexp(model + float(np.log1p(-self.uniform_mix)),
                                log_uniform + float(np.log(self.uniform_mix)))
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        if self.squash == "tanh":
-            return super().forward(tensordict)   # TanhNormal on [low, high] = tanh, then the box map
-        self.encoder(tensordict)
-        self.head(tensordict)
-        loc, scale = tensordict.get("loc"), tensordict.get("scale")
+    def sample(self, view: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
+        """``(embed, loc, scale, action)`` for viewed observations (a dict of tensors, no TensorDict:
+        building one costs more than the encoder on a single observation)."""
+        embed = self.policy.encoder(view)[1]
+        loc, scale = self.policy.params(embed)
         shape = loc.shape[:-1]
         z = loc if self.deterministic else loc + scale * torch.randn(loc.shape, generator=self.generator)
-        action = self.to_box(torch.clamp(z, ACTION_LOW, ACTION_HIGH))
+        u = torch.clamp(z, ACTION_LOW, ACTION_HIGH) if self.squash == "clip" else torch.tanh(z)
+        action = self.to_box(u)
         if self.uniform_mix > 0.0 and not self.deterministic:
             uniform = self.uniform(shape)
             pick = torch.rand(*shape, 1, generator=self.generator) < self.uniform_mix
             action = torch.where(pick, uniform, action)
+        return embed, loc, scale, action
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Full observations in; ``"embed"``, ``"loc"``, ``"scale"``, ``"action"`` and the log-prob out."""
+        embed, loc, scale, action = self.sample(self.view(tensordict))
+        tensordict.set("embed", embed)
+        tensordict.set("loc", loc)
+        tensordict.set("scale", scale)
         tensordict.set("action", action)
         tensordict.set(self.log_prob_key, self.log_prob(loc, scale, action))
         return tensordict
 
     # ------------------------------------------------------------------ the view
-    def view(self, obs: Mapping) -> TensorDict:
-        """The policy's view of (possibly batched) full observations, as a ``TensorDict``."""
+    def view(self, obs: Mapping) -> dict[str, torch.Tensor]:
+        """The policy's view of (possibly batched) full observations, as a dict of tensors."""
         shape = batch_shape_of(obs["start"])
         arrays = {k: np.asarray(obs[k].cpu() if isinstance(obs[k], torch.Tensor) else obs[k]) for k in OBSERVATION_KEYS}
         if len(shape) == 0:
@@ -125,10 +133,10 @@ class RLSampler(LearnedSampler):
             flat = {k: v.reshape(b, *v.shape[len(shape):]) for k, v in arrays.items()}
             items = [tree_view({k: v[i] for k, v in flat.items()}, self.view_nodes) for i in range(b)]
             views = {k: np.stack([it[k] for it in items]).reshape(*shape, *items[0][k].shape) for k in items[0]}
-        return TensorDict({k: torch.as_tensor(v) for k, v in views.items()}, batch_size=shape)
+        return {k: torch.as_tensor(v) for k, v in views.items()}
 
     def propose(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        return self.forward(self.view(obs))["action"]
+        return self.sample(self.view(obs))[-1]
 
     def act(self, obs: Mapping) -> np.ndarray:
         with torch.no_grad():

@@ -117,14 +117,15 @@ def view_space(space: spaces.Dict, view_nodes: int = DEFAULT_VIEW_NODES) -> spac
     return spaces.Dict(out)
 
 
-class TreeViewWrapper(gym.ObservationWrapper):
+class TreeViewWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """Present a bounded ``view_nodes``-row view of the tree (same keys and layout).
 
     ``info`` is unchanged: ``nodes_expanded`` and the other counters describe the whole tree.
     """
 
     def __init__(self, env: gym.Env, view_nodes: int = DEFAULT_VIEW_NODES) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, view_nodes=view_nodes)
+        gym.ObservationWrapper.__init__(self, env)
         if int(view_nodes) < 2:
             raise ValueError(f"view_nodes must be >= 2, got {view_nodes}")
         self.view_nodes = int(view_nodes)
@@ -160,7 +161,7 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     if planner is not None:
         ids = [i for i, v in spec.envs.items() if v.get("planner") == planner]
         if not ids:
-            raise ValueError(f"task {task!r} has no {planner!r} environment; "
+            raise ValueError(f"task {task!r} has no {planner!r} planner environment; "
                              f"known: {', '.join(sorted(v.get('planner', '?') for v in spec.envs.values()))}")
         env_id = ids[0]
     env_kwargs.setdefault("copy_observations", view_nodes is None)

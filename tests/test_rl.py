@@ -1,0 +1,284 @@
+"""RL samplers (issue #10): the tree view, buffer memory, short training runs of SB3 PPO/SAC and
+TorchRL PPO, policy checkpoints as reproducible samplers, the warm start, the CLI."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import gnn_mp_envs  # noqa: F401
+from gnn_mp_envs.envs.wrappers import TreeViewWrapper, make_rl_env, scale_action, tree_view, view_rows
+
+torch.set_num_threads(1)
+
+
+def tree_obs(parent, n_real=None, d=2):
+    """A padded observation of a hand-made tree: node i's state is (i, 10 i)."""
+    parent = np.asarray(parent, np.int64)
+    N = len(parent)
+    n = N if n_real is None else n_real
+    nodes = np.zeros((N, d), np.float32)
+    nodes[:n, 0] = np.arange(n)
+    nodes[:n, 1] = 10 * np.arange(n)
+    feats = np.zeros((N, 2 * d + 1), np.float32)
+    feats[:n, 0] = np.arange(n)
+    mask = np.zeros(N, np.int8)
+    mask[:n] = 1
+    par = np.full(N, -1, np.int64)
+    par[:n] = parent[:n]
+    return {"nodes": nodes, "node_features": feats, "parent": par, "mask": mask,
+            "num_nodes": np.array([n], np.int64), "start": np.zeros(d, np.float32),
+            "goal": np.ones(d, np.float32), "active_tree": np.array([1], np.int64),
+            "obstacles": np.zeros((1, 1), np.float32)}
+
+
+# ----------------------------------------------------------------------------- the view
+def test_view_of_a_known_tree():
+    #         0 (root)
+    #        / \
+    #       1   3
+    #       |   |
+    #       2   5
+    #       |
+    #       4
+    obs = tree_obs([-1, 0, 1, 0, 2, 3, -1, -1], n_real=6)
+    view = tree_view(obs, 4)
+    # the root, then the 3 most recent nodes (3, 4, 5)
+    assert view["nodes"][:, 0].tolist() == [0, 3, 4, 5]
+    # 3's parent 0 -> row 0; 4's parent 2 is not in the view -> -1; 5's parent 3 -> row 1
+    assert view["parent"].tolist() == [-1, 0, -1, 1]
+    assert view["num_nodes"].tolist() == [4] and view["mask"].tolist() == [1, 1, 1, 1]
+    assert view["node_features"][:, 0].tolist() == [0, 3, 4, 5]
+    assert view["active_tree"].tolist() == [1] and view["goal"].tolist() == [1, 1]
+    assert {k: v.dtype for k, v in view.items()} == {k: v.dtype for k, v in obs.items()}
+    # a small tree is copied whole and padded
+    small = tree_view(tree_obs([-1, 0, 1], n_real=3), 5)
+    assert small["parent"].tolist() == [-1, 0, 1, -1, -1] and small["mask"].tolist() == [1, 1, 1, 0, 0]
+    assert small["nodes"][3:].sum() == 0
+
+
+def test_view_keeps_both_birrt_roots():
+    # BiRRT: rows 0 and 1 are the roots of the start and goal trees
+    parent = [-1, -1, 0, 1, 2, 3, 4, 5, 6, 7]
+    assert view_rows(np.array(parent), 10, 4).tolist() == [0, 1, 8, 9]
+    # a root among the recent rows frees a row for one more recent node
+    assert view_rows(np.array([-1, 0, 1, 2, -1, 4]), 6, 3).tolist() == [0, 4, 5]
+    assert view_rows(np.array([-1, 0, 1, 2, 3, -1]), 6, 3).tolist() == [0, 4, 5]
+    view = tree_view(tree_obs(parent), 4)
+    assert view["parent"].tolist() == [-1, -1, -1, -1]   # 8 <- 6, 9 <- 7: both cut
+
+
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_view_matches_the_env_tree(task):
+    env = make_rl_env(task, view_nodes=16, copy_observations=True)
+    obs, _ = env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        obs, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+    full = env.unwrapped._obs.as_dict()
+    n = int(full["num_nodes"][0])
+    rows = view_rows(full["parent"], n, 16)
+    m = int(obs["num_nodes"][0])
+    assert m == min(n, 16) and obs["mask"].sum() == m
+    np.testing.assert_array_equal(obs["nodes"][:m], full["nodes"][rows])
+    for i, p in enumerate(obs["parent"][:m]):
+        if p >= 0:
+            assert full["parent"][rows[i]] == rows[p]
+        else:
+            assert full["parent"][rows[i]] not in rows or full["parent"][rows[i]] < 0
+    assert env.observation_space.contains(obs)
+
+
+def test_view_wrapper_passes_the_checkers():
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+    from torchrl.envs import GymWrapper, check_env_specs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for task in ("maze2d", "pendulum"):
+            gym_check_env(make_rl_env(task, view_nodes=8), skip_render_check=True)
+            sb3_check_env(make_rl_env(task, view_nodes=8), warn=False)
+            check_env_specs(GymWrapper(make_rl_env(task, view_nodes=8)), seed=0)
+        wrapped = TreeViewWrapper(gym.make("GNNMP/Maze2DBiRRT-v0", max_nodes=300), 8)
+        gym_check_env(wrapped, skip_render_check=True)
+
+
+def test_make_rl_env_scales_actions():
+    env = make_rl_env("pendulum", view_nodes=8)
+    box = env.unwrapped.action_space
+    assert np.allclose(env.action_space.low, -1) and np.allclose(env.action_space.high, 1)
+    np.testing.assert_allclose(scale_action(np.array([-1, 1]), box.low, box.high), [box.low[0], box.high[1]])
+    np.testing.assert_allclose(scale_action(np.zeros(2), box.low, box.high), (box.low + box.high) / 2, atol=1e-6)
+    with pytest.raises(ValueError, match="planner"):
+        make_rl_env("pendulum", planner="birrt")
+    with pytest.raises(ValueError, match="view_nodes"):
+        TreeViewWrapper(gym.make("GNNMP/PendulumRRT-v0", max_nodes=50), 1)
+
+
+# ----------------------------------------------------------------------------- memory
+def test_buffer_formula_matches_sb3_buffers():
+    from stable_baselines3.common.buffers import DictReplayBuffer, DictRolloutBuffer
+
+    from train.rl_common import memory_table, sb3_buffer_bytes, sb3_buffer_nbytes
+    for k in (None, 32):
+        env = make_rl_env("maze2d", view_nodes=k, max_nodes=200)
+        space, act = env.observation_space, env.action_space
+        rollout = DictRolloutBuffer(64, space, act, n_envs=2)
+        replay = DictReplayBuffer(100, space, act, n_envs=1)
+        assert sb3_buffer_nbytes(rollout) == sb3_buffer_bytes(space, 2, 64, 2, "rollout")
+        assert sb3_buffer_nbytes(replay) == sb3_buffer_bytes(space, 2, 100, 1, "replay")
+    full, view = memory_table("maze2d", 64)
+    assert full["sac_replay_bytes"] > 30 * 2**30          # ~34 GiB for 100k transitions, full padding
+    assert view["sac_replay_bytes"] < 600 * 2**20          # a few hundred MiB with the 64-row view
+    assert view["ppo_rollout_bytes"] < 20 * 2**20
+
+
+# ----------------------------------------------------------------------------- training
+def tiny_args(tmp_path, lib, algo, task, **kw):
+    from train.rl_common import RLArgs
+    defaults = dict(lib=lib, algo=algo, task=task, total_steps=256, n_envs=2, n_steps=64, batch_size=32,
+                    n_epochs=1, view_nodes=16, hidden_channels=8, num_layers=1, out_channels=16, net_arch=[16],
+                    buffer_size=500, learning_starts=64, eval_every=10_000, eval_problems=1, eval_max_steps=100,
+                    progress=False, out=tmp_path / f"{lib}-{algo}-{task}")
+    defaults.update(kw)
+    return RLArgs(**defaults)
+
+
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+@pytest.mark.parametrize("lib,algo", [("sb3", "ppo"), ("sb3", "sac"), ("torchrl", "ppo")])
+def test_short_training_runs(tmp_path, lib, algo, task):
+    from train.rl import main  # noqa: F401  (the CLI module imports)
+    from train.rl_sb3 import train as train_sb3
+    from train.rl_torchrl import train as train_torchrl
+    args = tiny_args(tmp_path, lib, algo, task)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = (train_sb3 if lib == "sb3" else train_torchrl)(args)
+    assert result.steps >= 256
+    assert 0 < result.buffer_bytes < 8 * 2**20     # bounded: the full padding would be 100-1000x more
+    run = args.run_dir()
+    for name in ("config.json", "policy.pt", "best.pt", "evaluations.json", "learning_curve.png"):
+        assert (run / name).exists(), name
+    assert json.loads((run / "config.json").read_text())["algo"] == algo
+    rows = json.loads((run / "evaluations.json").read_text())
+    assert rows[0]["steps"] == 0 and rows[-1]["steps"] == result.steps
+    assert list((run / "tb").rglob("events.out.tfevents.*"))
+    # the policy is a sampler of the benchmark
+    from agents.samplers import load_sampler
+    env = gym.make(f"GNNMP/{'Maze2D' if task == 'maze2d' else 'Pendulum'}RRT-v0", copy_observations=False)
+    sampler = load_sampler(args.sampler_name, env.action_space.low, env.action_space.high, task=task, seed=0,
+                           checkpoint=result.best)
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(sampler.act(obs))
+
+
+def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
+    """Same seed -> same actions, for every policy kind, after a save/load round trip."""
+    from agents.models.rl import SB3PPOPolicy, SB3SACPolicy, TorchRLPPOPolicy, encoder_config
+    from agents.encoders import TreeEncoder
+    from agents.samplers import load_sampler
+    from agents.samplers.rl import RL_SAMPLERS, save_policy
+    env = gym.make("GNNMP/Maze2DRRT-v0", copy_observations=False)
+    low, high = env.action_space.low, env.action_space.high
+    view_space = make_rl_env("maze2d", view_nodes=16).observation_space
+    enc = encoder_config(TreeEncoder.from_space(view_space, hidden_channels=8, num_layers=1, out_channels=16))
+    obs, _ = env.reset(seed=0)
+    for _ in range(40):
+        obs, *_ = env.step(env.action_space.sample())
+    policies = {"rl/sb3-ppo": (SB3PPOPolicy, {"hidden": [16]}), "rl/sb3-sac": (SB3SACPolicy, {"hidden": [16]}),
+                "rl/torchrl-ppo": (TorchRLPPOPolicy, {"head_hidden": 16})}
+    for name, kind in RL_SAMPLERS.items():
+        cls, extra = policies[kind]
+        torch.manual_seed(0)
+        args = {"encoder": enc, "action_dim": 2, **extra}
+        path = save_policy(tmp_path / f"{name}.pt", cls(**args), kind, args, task="maze2d", view_nodes=16,
+                           low=low, high=high, uniform_mix=0.25)
+        a = load_sampler(name, low, high, task="maze2d", seed=7, checkpoint=path)
+        b = load_sampler(name, low, high, task="maze2d", seed=7, checkpoint=path)
+        assert a.uniform_mix == 0.25 and a.view_nodes == 16
+        first = [a.act(obs) for _ in range(20)]
+        assert np.array_equal(first, [b.act(obs) for _ in range(20)])
+        a.reset(7)
+        assert np.array_equal(first, [a.act(obs) for _ in range(20)])
+        a.reset(8)
+        assert not np.array_equal(first, [a.act(obs) for _ in range(20)])
+        assert all(np.all(x >= low) and np.all(x <= high) for x in first)
+        # batched TorchRL use: full observations in, actions and log-probs out
+        from tensordict import TensorDict
+        td = TensorDict({k: torch.as_tensor(np.stack([v] * 3)) for k, v in obs.items()}, batch_size=[3])
+        out = a(td)
+        assert out["action"].shape == (3, 2) and torch.isfinite(out["sample_log_prob"]).all()
+        with pytest.raises(ValueError, match="task"):
+            load_sampler(name, low, high, task="pendulum", checkpoint=path)
+    with pytest.raises(FileNotFoundError):
+        load_sampler("rl-sac", low, high, task="arm", seed=0)
+
+
+def test_warm_start_copies_the_encoder(tmp_path):
+    from agents.checkpoints import save_checkpoint
+    from agents.encoders import TreeEncoder
+    from agents.models.rl import SB3PPOPolicy, encoder_config, warm_start_encoder
+    space = make_rl_env("maze2d", view_nodes=16).observation_space
+    source = SB3PPOPolicy(encoder_config(TreeEncoder.from_space(space, hidden_channels=8, num_layers=1,
+                                                                out_channels=16)), 2, hidden=[16])
+    path = save_checkpoint(tmp_path / "src.pt", source, "rl/sb3-ppo",
+                           {"encoder": encoder_config(source.encoder), "action_dim": 2, "hidden": [16]})
+    targets = [TreeEncoder.from_space(space, hidden_channels=8, num_layers=1, out_channels=16) for _ in range(2)]
+    assert warm_start_encoder(path, *targets) == "rl/sb3-ppo:encoder."
+    for t in targets:
+        for k, v in source.encoder.state_dict().items():
+            assert torch.equal(t.state_dict()[k], v)
+    with pytest.raises(ValueError, match="TreeEncoder"):
+        warm_start_encoder(path, TreeEncoder.from_space(space, hidden_channels=12, num_layers=1, out_channels=16))
+
+
+def test_warm_start_flag_in_training(tmp_path):
+    from agents.checkpoints import read_checkpoint
+    from train.rl_sb3 import train
+    first = train(tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "a"))
+    src = {k: v for k, v in read_checkpoint(first.best)["state_dict"].items() if k.startswith("encoder.")}
+    args = tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "b", init_from=first.best,
+                     lr=1e-12)
+    second = train(args)
+    after = read_checkpoint(tmp_path / "b" / "policy.pt")["state_dict"]
+    for k, v in src.items():
+        assert torch.allclose(after[k], v, atol=1e-6), k
+
+
+def test_cli_train_rl_flags(tmp_path, capsys):
+    from train.cli import main
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "rl", "--lib", "torchrl", "--algo", "sac", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "not available" in capsys.readouterr().err
+
+
+def test_arm_view_and_sampler(tmp_path):
+    """BiRRT on the arm: both roots stay in the view, and a policy acts for the active tree."""
+    from agents.encoders import TreeEncoder
+    from agents.models.rl import SB3PPOPolicy, encoder_config
+    from agents.samplers.rl import sampler_from_checkpoint, save_policy
+    env = make_rl_env("arm", view_nodes=8, max_nodes=300)
+    obs, _ = env.reset(seed=0)
+    assert obs["parent"][:2].tolist() == [-1, -1] and obs["node_features"].shape == (8, 13)
+    for _ in range(20):
+        obs, _, term, trunc, info = env.step(env.action_space.sample())
+        if term or trunc:
+            break
+    assert env.observation_space.contains(obs)
+    enc = encoder_config(TreeEncoder.from_space(env.observation_space, hidden_channels=8, num_layers=1,
+                                                out_channels=16))
+    box = env.unwrapped.action_space
+    args = {"encoder": enc, "action_dim": 6, "hidden": [16]}
+    path = save_policy(tmp_path / "arm.pt", SB3PPOPolicy(**args), "rl/sb3-ppo", args, task="arm", view_nodes=8,
+                       low=box.low, high=box.high)
+    sampler = sampler_from_checkpoint(path, box.low, box.high, seed=0, task="arm")
+    full = env.unwrapped._obs.as_dict()
+    action = sampler.act(full)
+    assert action.shape == (6,) and box.contains(action)
+    env.close()

@@ -1,0 +1,128 @@
+"""Train a TorchRL PPO sampler on a tree environment.
+
+    gnn-mp train rl --lib torchrl --algo ppo --task maze2d --total-steps 50000
+
+Read top to bottom: flags (``train.rl_common.RLArgs``) -> a batched env (``SerialEnv``, or
+``ParallelEnv`` with ``--parallel``) of ``GymWrapper(make_rl_env(...))`` (tree view of
+``--view-nodes`` rows, actions in [-1, 1]) -> ``ProbabilisticActor`` and value head over the
+shared ``TreeEncoder`` (:mod:`agents.torchrl`) -> ``Collector`` -> GAE + ``ClipPPOLoss``,
+``--n-epochs`` passes of minibatches per batch -> TensorBoard logger, periodic evaluation on
+split ``val`` with checkpoints (the policy exported to the sampler ``rl-ppo-torchrl``).
+"""
+
+from __future__ import annotations
+
+import time
+from functools import partial
+
+import torch
+from torchrl.collectors import Collector
+from torchrl.envs import GymWrapper, ParallelEnv, SerialEnv
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+from torchrl.record.loggers import TensorboardLogger
+
+from agents.models.rl import policy_from_torchrl, warm_start_encoder
+from agents.torchrl import make_actor, make_value
+from gnn_mp_envs.envs.wrappers import make_rl_env
+from train.rl_common import Evaluator, RLArgs, RunResult, check_args, fmt_seconds, write_config
+
+
+def make_env(args: RLArgs, seed: int) -> GymWrapper:
+    """One training env: ``make_rl_env`` (view + rescaled actions) as a TorchRL env, seeded."""
+    env = GymWrapper(make_rl_env(args.task, split="train", **args.env_kwargs()))
+    env.set_seed(seed)
+    return env
+
+
+def make_batched_env(args: RLArgs):
+    """``n_envs`` training envs stepped together; env ``i`` draws problems from seed ``seed + i``."""
+    fns = [partial(make_env, args, args.seed + i) for i in range(args.n_envs)]
+    return (ParallelEnv if args.parallel else SerialEnv)(args.n_envs, fns)
+
+
+def train(args: RLArgs) -> RunResult:
+    check_args(args)
+    if args.algo != "ppo":
+        raise ValueError("the TorchRL script trains PPO only (use --lib sb3 for SAC)")
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    run_dir = args.run_dir()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_config(args, run_dir)
+
+    # 1. environments
+    probe = make_rl_env(args.task, split="train", **args.env_kwargs())
+    observation_space, action_space = probe.observation_space, probe.action_space
+    low, high = probe.unwrapped.action_space.low, probe.unwrapped.action_space.high   # the state box
+    probe.close()
+    env = make_batched_env(args)
+
+    # 2. actor (TanhNormal on [-1, 1]) and critic, each over its own TreeEncoder
+    actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0], **args.encoder_kwargs())
+    value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
+    if args.init_from is not None:
+        encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ == "TreeEncoder"]
+        print(f"encoders initialised from {args.init_from} ({warm_start_encoder(args.init_from, *encoders)})")
+
+    # 3. collector, advantage, loss, optimiser, logger
+    frames_per_batch = args.n_steps * args.n_envs
+    collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=args.total_steps,
+                          auto_register_policy_transforms=False)
+    # deactivate_vmap: the graph conversion has data-dependent shapes, which vmap cannot batch
+    advantage = GAE(gamma=args.gamma, lmbda=args.gae_lambda, value_network=value, average_gae=True,
+                    deactivate_vmap=True)
+    loss_module = ClipPPOLoss(actor, value, clip_epsilon=args.clip_range, entropy_coeff=args.ent_coef,
+                              normalize_advantage=False)
+    optimiser = torch.optim.Adam(loss_module.parameters(), lr=args.lr)
+    logger = TensorboardLogger(exp_name=f"ppo_{args.task}", log_dir=str(run_dir / "tb"))
+    evaluator = Evaluator(args, run_dir, lambda: policy_from_torchrl(actor), low, high,
+                          log=lambda name, v, step: logger.log_scalar(name, v, step=step))
+    print(f"TorchRL PPO on {args.task}: {sum(p.numel() for p in loss_module.parameters()):,} parameters, "
+          f"{frames_per_batch} frames per batch, run directory {run_dir}")
+
+    # 4. the loop: collect a batch, GAE, epochs of minibatch updates, log, evaluate
+    from tqdm import tqdm
+    bar = tqdm(total=args.total_steps, unit="step", disable=not args.progress, dynamic_ncols=True)
+    started, steps, batch_bytes = time.perf_counter(), 0, 0
+    evaluator(0)
+    for batch in collector:
+        steps += batch.numel()
+        batch_bytes = max(batch_bytes, batch.bytes())   # the rollout storage of one batch
+        for _ in range(args.n_epochs):
+            with torch.no_grad():
+                advantage(batch)
+            flat = batch.reshape(-1)
+            for idx in torch.randperm(flat.numel()).split(args.batch_size):
+                losses = loss_module(flat[idx])
+                loss = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                optimiser.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(loss_module.parameters(), 0.5)
+                optimiser.step()
+        collector.update_policy_weights_()
+        done = batch["next", "done"]
+        logger.log_scalar("train/reward_per_step", batch["next", "reward"].mean().item(), step=steps)
+        logger.log_scalar("train/episodes_ended", done.sum().item(), step=steps)
+        logger.log_scalar("train/loss_objective", losses["loss_objective"].item(), step=steps)
+        logger.log_scalar("train/loss_critic", losses["loss_critic"].item(), step=steps)
+        bar.update(batch.numel())
+        if evaluator.due(steps):
+            row = evaluator(steps)
+            bar.write(f"  step {steps:>7}: val success {row['success']:.2f}, median nodes {row['median_nodes']:.0f} "
+                      f"({row['eval_wall_s']:.0f} s)")
+    bar.close()
+    collector.shutdown()
+    train_time = time.perf_counter() - started
+
+    # 5. final evaluation, learning curve, --tune-mix, --ship
+    best = evaluator.finish(steps)
+    if not env.is_closed:
+        env.close()
+    print(f"trained {steps:,} steps in {fmt_seconds(train_time)}; policy {best}")
+    return RunResult(best, steps, train_time, batch_bytes, evaluator.rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from train.rl import main as rl_main
+    return rl_main(["--lib", "torchrl", *(argv or [])])
