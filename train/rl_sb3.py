@@ -36,6 +36,9 @@ class EvalCallback(BaseCallback):
         super().__init__()
         self.evaluator = evaluator
 
+    def _on_training_start(self) -> None:
+        self._on_step()   # the untrained policy: the learning curve's first point
+
     def _on_step(self) -> bool:
         if self.evaluator.due(self.num_timesteps):
             row = self.evaluator(self.num_timesteps)
