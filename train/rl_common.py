@@ -87,8 +87,8 @@ class RLArgs:
     eval_every: int = arg(10_000, "evaluate (and checkpoint) every N steps", parse=positive_int)
     eval_problems: int = arg(10, "problems 0..N-1 of split val per evaluation", parse=positive_int)
     eval_max_steps: int = arg(4000, "planner iterations per evaluation problem (then a failure)", parse=positive_int)
-    uniform_mix: float = arg(0.0, "sampler: probability of a uniform sample instead of the policy's",
-                             parse=non_negative_float)
+    uniform_mix: float = arg(0.5, "probability of a uniform sample instead of the policy's, in training "
+                             "(UniformMixAction) and in the sampler", parse=non_negative_float)
     tune_mix: list[float] | None = arg(None, "after training, pick the sampler's uniform_mix among these on "
                                        "split val (e.g. 0,0.25,0.5)", parse=_mixes)
     out: Path | None = arg(None, "run directory (default: runs/rl-<lib>-<algo>-<task>-s<seed>)")
@@ -103,7 +103,7 @@ class RLArgs:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
         kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner,
                               "step_penalty": self.step_penalty, "collision_check_cost": self.collision_check_cost,
-                              "success_reward": self.success_reward}
+                              "success_reward": self.success_reward, "uniform_mix": self.uniform_mix}
         if self.max_nodes is not None:
             kw["max_nodes"] = self.max_nodes
         return kw

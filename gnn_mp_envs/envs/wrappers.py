@@ -135,6 +135,35 @@ class TreeViewWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return tree_view(observation, self.view_nodes)
 
 
+class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
+    """With probability ``p``, replace the agent's action by a uniform one over the action box.
+
+    The classical learned-sampler mixture (a fraction of uniform samples keeps the planner
+    probabilistically complete) applied during training, so the policy learns where to put
+    the *other* samples; the sampler then mixes at the same rate (``uniform_mix``). The draws
+    come from the wrapper's own generator, seeded by ``reset(seed=...)``.
+    """
+
+    def __init__(self, env: gym.Env, p: float) -> None:
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"p must be in [0, 1], got {p}")
+        gym.utils.RecordConstructorArgs.__init__(self, p=p)
+        gym.ActionWrapper.__init__(self, env)
+        self.p = float(p)
+        self._rng = np.random.default_rng()
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            self._rng = np.random.default_rng([int(seed), 0x5EED])
+        return super().reset(seed=seed, options=options)
+
+    def action(self, action):
+        if self.p > 0.0 and self._rng.random() < self.p:
+            box = self.action_space
+            return self._rng.uniform(box.low, box.high).astype(box.dtype)
+        return action
+
+
 def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """A policy action in ``[-1, 1]^d`` -> a state in ``[low, high]`` (``RescaleAction``'s map)."""
     a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
@@ -142,13 +171,16 @@ def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nd
 
 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
-                planner: str | None = None, scale_actions: bool = True, **env_kwargs: Any) -> gym.Env:
+                planner: str | None = None, scale_actions: bool = True, uniform_mix: float = 0.0,
+                **env_kwargs: Any) -> gym.Env:
     """The environment every RL training script (and the RL sampler's conventions) use.
 
     ``task``'s benchmark environment (``planner="rrt"``/``"birrt"`` picks another registered
     variant), problems of ``split`` (``"train"`` to learn, ``"val"`` to tune), wrapped in
     :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation) and
-    ``RescaleAction`` to ``[-1, 1]`` (``scale_actions=False`` keeps state-space actions).
+    ``RescaleAction`` to ``[-1, 1]`` (``scale_actions=False`` keeps state-space actions), and,
+    with ``uniform_mix > 0``, :class:`UniformMixAction` (that fraction of the actions replaced
+    by uniform samples, as the sampler will do).
     ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
     ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
     ``scene``, ``task_kwargs``. Observations are not copied by the env
@@ -171,8 +203,11 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     if scale_actions:
         d = env.action_space.shape[0]
         env = RescaleAction(env, np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
+    if uniform_mix > 0.0:
+        env = UniformMixAction(env, uniform_mix)
     return env
 
 
-__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "TreeViewWrapper", "make_rl_env", "scale_action",
+__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "TreeViewWrapper", "UniformMixAction", "make_rl_env",
+           "scale_action",
            "tree_view", "view_rows", "view_space"]
