@@ -15,6 +15,7 @@ def hand_made() -> TreeDataset:
     parent = np.array([-1, 0, 0, 2, 1, 3], dtype=np.int32)
     return TreeDataset(
         config=TreeDataConfig(task="maze2d", problems=1), node_ptr=np.array([0, 6]), states=states,
+        node_features=np.zeros((6, 5), np.float32),
         parent=parent, tree_id=np.zeros(6, np.int8), path_ptr=np.array([0, 4]),
         path_nodes=np.array([0, 2, 3, 5], np.int32), start=states[:1], goal=states[5:6],
         obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]))

@@ -63,6 +63,7 @@ class TreeDataset:
     config: TreeDataConfig
     node_ptr: np.ndarray     # (P+1,) offsets into states/parent/tree_id
     states: np.ndarray       # (N, d) float32
+    node_features: np.ndarray  # (N, 2d+1) float32, as the environment computed them
     parent: np.ndarray       # (N,) int32, local to its problem (-1 for roots)
     tree_id: np.ndarray      # (N,) int8
     path_ptr: np.ndarray     # (P+1,) offsets into path_nodes
@@ -78,6 +79,17 @@ class TreeDataset:
     def tree(self, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b = self.node_ptr[p], self.node_ptr[p + 1]
         return self.states[a:b], self.parent[a:b], self.tree_id[a:b]
+
+    def rows(self, p: int, j: int, view: str) -> np.ndarray:
+        """Local node indices of the example's graph: ``0..j-1`` (grown) or the roots and the
+        path nodes before ``j`` (prefix), in insertion order."""
+        _, parent, _ = self.tree(p)
+        if view == "grown":
+            return np.arange(j)
+        if view != "prefix":
+            raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
+        path = self.path(p)
+        return np.union1d(np.flatnonzero(parent[:j] < 0), path[path < j])
 
     def path(self, p: int) -> np.ndarray:
         return self.path_nodes[self.path_ptr[p]:self.path_ptr[p + 1]]
@@ -95,19 +107,20 @@ class TreeDataset:
         nodes inserted before ``j``, parents re-indexed into that subset.
         """
         states, parent, tree_id = self.tree(p)
-        active = int(tree_id[j])
-        if view == "grown":
-            return states[:j], parent[:j], tree_id[:j], active
-        if view != "prefix":
-            raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
-        keep = np.union1d(np.flatnonzero(parent[:j] < 0), self.path(p)[self.path(p) < j])
-        remap = np.full(len(states), -1, dtype=np.int64)
-        remap[keep] = np.arange(len(keep))
-        sub_parent = np.where(parent[keep] >= 0, remap[np.maximum(parent[keep], 0)], -1)
-        return states[keep], sub_parent.astype(np.int32), tree_id[keep], active
+        keep = self.rows(p, j, view)
+        return states[keep], reindex(parent, keep), tree_id[keep], int(tree_id[j])
 
     def label(self, p: int, j: int) -> np.ndarray:
         return self.states[self.node_ptr[p] + j]
+
+
+def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Parents of the rows ``keep`` (sorted) as indices into ``keep``; -1 where the parent is
+    a root's none or not kept."""
+    remap = np.full(len(parent), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    sub = parent[keep]
+    return np.where(sub >= 0, remap[np.maximum(sub, 0)], -1).astype(np.int32)
 
 
 def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
@@ -135,22 +148,24 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
                       disable=not progress):
             seed = problem_seed(config.seed, i)
             sampler.reset(seed)
-            observations = {}
+            last = {}
 
-            def keep_obstacles(obs, _info, _done, store=observations) -> None:
-                store.setdefault("obstacles", np.array(obs["obstacles"]))
+            def keep_last(obs, _info, done, store=last) -> None:
+                if done:   # live views: copy what the episode ends with
+                    n = int(obs["num_nodes"][0])
+                    store.update(features=np.array(obs["node_features"][:n]), obstacles=np.array(obs["obstacles"]))
 
-            record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_obstacles)
+            record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_last)
             if not record.success:
                 continue
             tree = base.planner.tree
             n = len(tree)
             trees.append((tree.states[:n].astype(np.float32), tree.parent[:n].astype(np.int32),
-                          tree.tree_id[:n].astype(np.int8)))
+                          tree.tree_id[:n].astype(np.int8), last["features"].astype(np.float32)))
             paths.append(np.asarray(record.path_nodes, dtype=np.int32))
             starts.append(base.problem.start)
             goals.append(base.problem.goal)
-            obstacles.append(observations["obstacles"])
+            obstacles.append(last["obstacles"])
             indices.append(i)
     finally:
         env.close()
@@ -160,15 +175,15 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
     return TreeDataset(
         config=config,
         node_ptr=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
-        states=np.concatenate([t[0] for t in trees]), parent=np.concatenate([t[1] for t in trees]),
-        tree_id=np.concatenate([t[2] for t in trees]),
+        states=np.concatenate([t[0] for t in trees]), node_features=np.concatenate([t[3] for t in trees]),
+        parent=np.concatenate([t[1] for t in trees]), tree_id=np.concatenate([t[2] for t in trees]),
         path_ptr=np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64),
         path_nodes=np.concatenate(paths), start=np.stack(starts).astype(np.float32),
         goal=np.stack(goals).astype(np.float32), obstacles=np.stack(obstacles).astype(np.float32),
         problem_index=np.asarray(indices, dtype=np.int64))
 
 
-FIELDS = ("node_ptr", "states", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal", "obstacles",
+FIELDS = ("node_ptr", "states", "node_features", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal", "obstacles",
           "problem_index")
 
 
@@ -210,3 +225,32 @@ def batches(pairs: np.ndarray, batch_size: int, rng: np.random.Generator | None 
     order = rng.permutation(len(pairs)) if rng is not None else np.arange(len(pairs))
     for k in range(0, len(order), batch_size):
         yield pairs[order[k:k + batch_size]]
+
+
+def collate(dataset: TreeDataset, pairs: np.ndarray, view: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """A batch of examples as the environment's padded observation (``B`` rows, padded to the
+    largest graph) and the labels ``(B, d)``: models train on exactly what they see online."""
+    rows = [dataset.rows(int(p), int(j), view) for p, j in pairs]
+    B, N = len(rows), max(len(r) for r in rows)
+    d = dataset.states.shape[1]
+    f = dataset.node_features.shape[1]
+    obs = {
+        "nodes": np.zeros((B, N, d), np.float32), "node_features": np.zeros((B, N, f), np.float32),
+        "parent": np.full((B, N), -1, np.int64), "mask": np.zeros((B, N), np.int8),
+        "num_nodes": np.zeros((B, 1), np.int64), "start": dataset.start[pairs[:, 0]],
+        "goal": dataset.goal[pairs[:, 0]], "active_tree": np.zeros((B, 1), np.int64),
+        "obstacles": dataset.obstacles[pairs[:, 0]],
+    }
+    labels = np.zeros((B, d), np.float32)
+    for b, ((p, j), keep) in enumerate(zip(pairs, rows)):
+        states, parent, tree_id = dataset.tree(int(p))
+        a = dataset.node_ptr[p]
+        n = len(keep)
+        obs["nodes"][b, :n] = states[keep]
+        obs["node_features"][b, :n] = dataset.node_features[a + keep]
+        obs["parent"][b, :n] = reindex(parent, keep)
+        obs["mask"][b, :n] = 1
+        obs["num_nodes"][b, 0] = n
+        obs["active_tree"][b, 0] = tree_id[j]
+        labels[b] = states[j]
+    return obs, labels
