@@ -2,19 +2,22 @@
 
 Seeded training problems (split ``train``; for the arm the two training scene families) are
 solved with the uniform sampler through :func:`gnn_mp_envs.rollout.rollout`. For each solved
-problem the file keeps the whole final tree (states, parents, tree ids), the solution path's
-node indices, start, goal and the observation's obstacle rows. Examples are cut from that at
-load time, in one of two views:
+problem the file keeps the whole final tree (states, node features as the environment
+computed them, parents, tree ids), the solution path's node indices, every iteration's tree
+size and active tree, start, goal and the observation's obstacle rows. Examples
+(*snapshots*: a tree and the sample that should come next) are cut from that at load time,
+in one of two views:
 
 * ``"prefix"`` (the paper's): the graph is ``x_init`` (and, for BiRRT, ``x_goal``) plus the
   path nodes inserted before path node ``j``; the label is path node ``j``.
-* ``"grown"`` (the remedy for the train/online mismatch): the graph is the tree the uniform
-  planner had actually grown when path node ``j`` was inserted (its rows ``0..j-1``); the
-  label is path node ``j``, which the tree reached next on its way to the goal.
+* ``"grown"`` (the remedy for the train/online mismatch): the tree the uniform planner had
+  actually grown at an iteration (its first rows, insertion order); the label is the first
+  node along the solution path, walked from the active tree's root, that the active tree
+  does not hold yet (RRT: the next path node beyond the tree; BiRRT's goal tree walks the
+  path from the goal).
 
-Both views use every non-root path node ``j`` (for BiRRT both trees' path nodes, each with
-the tree it extends as ``active_tree``). Files are byte-reproducible for a seed and config,
-written atomically, and carry a format version (:mod:`gnn_mp_envs.utils.npz`).
+Files are byte-reproducible for a seed and config, written atomically, and carry a format
+version (:mod:`gnn_mp_envs.utils.npz`).
 """
 
 from __future__ import annotations
@@ -72,6 +75,9 @@ class TreeDataset:
     goal: np.ndarray         # (P, d)
     obstacles: np.ndarray    # (P, M, 1+w) observation rows
     problem_index: np.ndarray  # (P,) index of each problem in its split
+    iter_ptr: np.ndarray     # (P+1,) offsets into iter_nodes/iter_active
+    iter_nodes: np.ndarray   # (I,) int32 tree size before each iteration
+    iter_active: np.ndarray  # (I,) int8 the tree each iteration extended
 
     def __len__(self) -> int:
         return len(self.start)
@@ -80,38 +86,31 @@ class TreeDataset:
         a, b = self.node_ptr[p], self.node_ptr[p + 1]
         return self.states[a:b], self.parent[a:b], self.tree_id[a:b]
 
-    def rows(self, p: int, j: int, view: str) -> np.ndarray:
-        """Local node indices of the example's graph: ``0..j-1`` (grown) or the roots and the
-        path nodes before ``j`` (prefix), in insertion order."""
-        _, parent, _ = self.tree(p)
-        if view == "grown":
-            return np.arange(j)
-        if view != "prefix":
-            raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
-        path = self.path(p)
-        return np.union1d(np.flatnonzero(parent[:j] < 0), path[path < j])
-
     def path(self, p: int) -> np.ndarray:
         return self.path_nodes[self.path_ptr[p]:self.path_ptr[p + 1]]
 
-    def examples(self) -> np.ndarray:
-        """(E, 2) pairs ``(problem, node j)``: every non-root path node of every problem."""
-        pairs = [(p, int(j)) for p in range(len(self)) for j in self.path(p)
-                 if self.parent[self.node_ptr[p] + j] >= 0]
-        return np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-
-    def graph(self, p: int, j: int, view: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """The example's tree as (states, parent, tree_id) and its ``active_tree``.
-
-        ``grown``: rows ``0..j-1`` as the planner had them; ``prefix``: the roots and the path
-        nodes inserted before ``j``, parents re-indexed into that subset.
-        """
-        states, parent, tree_id = self.tree(p)
-        keep = self.rows(p, j, view)
-        return states[keep], reindex(parent, keep), tree_id[keep], int(tree_id[j])
-
-    def label(self, p: int, j: int) -> np.ndarray:
-        return self.states[self.node_ptr[p] + j]
+    def snapshots(self, p: int, view: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(rows, sizes, active, labels)`` of problem ``p``: the node rows of the graph (into its
+        tree; a snapshot is the first ``sizes[t]`` of them), each snapshot's active tree and its
+        label's node index. See the module docstring for the two views."""
+        _, parent, tree_id = self.tree(p)
+        path = self.path(p)
+        if view == "prefix":
+            rows = np.union1d(np.flatnonzero(parent < 0), path)            # roots + path, insertion order
+            targets = [j for j in path if parent[j] >= 0]
+            sizes = np.searchsorted(rows, targets)
+            return rows, sizes, tree_id[targets].astype(np.int64), np.asarray(targets, np.int64)
+        if view != "grown":
+            raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
+        walks = (path, path[::-1])
+        i0, i1 = self.iter_ptr[p], self.iter_ptr[p + 1]
+        sizes, actives, labels = [], [], []
+        for n, a in zip(self.iter_nodes[i0:i1].tolist(), self.iter_active[i0:i1].tolist()):
+            label = next((g for g in walks[a] if not (g < n and tree_id[g] == a)), None)
+            if label is not None:
+                sizes.append(n), actives.append(a), labels.append(label)
+        return (np.arange(len(parent)), np.asarray(sizes, np.int64), np.asarray(actives, np.int64),
+                np.asarray(labels, np.int64))
 
 
 def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -142,18 +141,22 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
     env = gym.make(spec.env_id, disable_env_checker=True, **kwargs)
     base = env.unwrapped
     sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
-    trees, paths, starts, goals, obstacles, indices = [], [], [], [], [], []
+    trees, paths, starts, goals, obstacles, indices, iters = [], [], [], [], [], [], []
     try:
         for i in tqdm(range(config.problems), desc=f"{config.task} uniform solutions", unit="problem",
                       disable=not progress):
             seed = problem_seed(config.seed, i)
             sampler.reset(seed)
-            last = {}
+            last: dict = {}
+            roots = 2 if base.planner_name == "birrt" else 1
+            iterations = [(roots, 0)]   # (tree size, active tree) before each iteration
 
             def keep_last(obs, _info, done, store=last) -> None:
                 if done:   # live views: copy what the episode ends with
                     n = int(obs["num_nodes"][0])
                     store.update(features=np.array(obs["node_features"][:n]), obstacles=np.array(obs["obstacles"]))
+                else:
+                    iterations.append((int(obs["num_nodes"][0]), int(obs["active_tree"][0])))
 
             record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_last)
             if not record.success:
@@ -167,6 +170,7 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
             goals.append(base.problem.goal)
             obstacles.append(last["obstacles"])
             indices.append(i)
+            iters.append(np.asarray(iterations, dtype=np.int32))
     finally:
         env.close()
     if not trees:
@@ -180,11 +184,14 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
         path_ptr=np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64),
         path_nodes=np.concatenate(paths), start=np.stack(starts).astype(np.float32),
         goal=np.stack(goals).astype(np.float32), obstacles=np.stack(obstacles).astype(np.float32),
-        problem_index=np.asarray(indices, dtype=np.int64))
+        problem_index=np.asarray(indices, dtype=np.int64),
+        iter_ptr=np.concatenate([[0], np.cumsum([len(t) for t in iters])]).astype(np.int64),
+        iter_nodes=np.concatenate([t[:, 0] for t in iters]).astype(np.int32),
+        iter_active=np.concatenate([t[:, 1] for t in iters]).astype(np.int8))
 
 
-FIELDS = ("node_ptr", "states", "node_features", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal", "obstacles",
-          "problem_index")
+FIELDS = ("node_ptr", "states", "node_features", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal",
+          "obstacles", "problem_index", "iter_ptr", "iter_nodes", "iter_active")
 
 
 def save(dataset: TreeDataset, path: str | Path) -> Path:
@@ -218,39 +225,3 @@ def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bo
     dataset = generate(config, progress)
     save(dataset, path)
     return dataset
-
-
-def batches(pairs: np.ndarray, batch_size: int, rng: np.random.Generator | None = None) -> Iterator[np.ndarray]:
-    """Example pairs in batches (shuffled when ``rng`` is given)."""
-    order = rng.permutation(len(pairs)) if rng is not None else np.arange(len(pairs))
-    for k in range(0, len(order), batch_size):
-        yield pairs[order[k:k + batch_size]]
-
-
-def collate(dataset: TreeDataset, pairs: np.ndarray, view: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """A batch of examples as the environment's padded observation (``B`` rows, padded to the
-    largest graph) and the labels ``(B, d)``: models train on exactly what they see online."""
-    rows = [dataset.rows(int(p), int(j), view) for p, j in pairs]
-    B, N = len(rows), max(len(r) for r in rows)
-    d = dataset.states.shape[1]
-    f = dataset.node_features.shape[1]
-    obs = {
-        "nodes": np.zeros((B, N, d), np.float32), "node_features": np.zeros((B, N, f), np.float32),
-        "parent": np.full((B, N), -1, np.int64), "mask": np.zeros((B, N), np.int8),
-        "num_nodes": np.zeros((B, 1), np.int64), "start": dataset.start[pairs[:, 0]],
-        "goal": dataset.goal[pairs[:, 0]], "active_tree": np.zeros((B, 1), np.int64),
-        "obstacles": dataset.obstacles[pairs[:, 0]],
-    }
-    labels = np.zeros((B, d), np.float32)
-    for b, ((p, j), keep) in enumerate(zip(pairs, rows)):
-        states, parent, tree_id = dataset.tree(int(p))
-        a = dataset.node_ptr[p]
-        n = len(keep)
-        obs["nodes"][b, :n] = states[keep]
-        obs["node_features"][b, :n] = dataset.node_features[a + keep]
-        obs["parent"][b, :n] = reindex(parent, keep)
-        obs["mask"][b, :n] = 1
-        obs["num_nodes"][b, 0] = n
-        obs["active_tree"][b, 0] = tree_id[j]
-        labels[b] = states[j]
-    return obs, labels
