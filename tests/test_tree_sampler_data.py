@@ -19,7 +19,8 @@ def hand_made(iterations=((1, 0), (2, 0), (3, 0), (4, 0), (5, 0))) -> TreeDatase
         node_features=np.zeros((6, 5), np.float32), parent=parent, tree_id=np.zeros(6, np.int8),
         path_ptr=np.array([0, 4]), path_nodes=np.array([0, 2, 3, 5], np.int32), start=states[:1], goal=states[5:6],
         obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]), iter_ptr=np.array([0, len(it)]),
-        iter_nodes=it[:, 0].astype(np.int32), iter_active=it[:, 1].astype(np.int8))
+        iter_nodes=it[:, 0].astype(np.int32), iter_active=it[:, 1].astype(np.int8),
+        iter_sample=np.zeros((len(it), 2), np.float32), iter_created=np.full(len(it), -1, np.int32))
 
 
 def test_grown_labels_are_the_next_path_node_beyond_the_tree():
@@ -62,6 +63,15 @@ def test_generated_runs_record_iterations_and_solve():
         assert path[0] == 0 and all(parent[b] == a for a, b in zip(path[:-1], path[1:]))
         _, sizes, _, labels = data.snapshots(p, "grown")
         assert np.all(labels >= sizes)                   # RRT: the label is not in the tree yet
+        created = data.iter_created[i0:i1]
+        made = created >= 0
+        # an iteration creates the node at the tree's size, whose parent is its sample's nearest node
+        assert np.array_equal(created[made], data.iter_nodes[i0:i1][made])
+        states, parent, _ = data.tree(p)
+        for t in np.flatnonzero(made)[:20]:
+            n, c = data.iter_nodes[i0 + t], created[t]
+            x = data.iter_sample[i0 + t]
+            assert np.argmin(((states[:n] - x) ** 2).sum(1)) == parent[c]
 
 
 def test_arm_snapshots_cover_both_trees():

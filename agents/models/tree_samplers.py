@@ -66,7 +66,8 @@ def wrap_periodic(delta: Tensor, periodic: Tensor) -> Tensor:
 def causal_knn(nodes: Tensor, tree_id: Tensor, k: int, step_scale: Tensor, periodic: Tensor,
                chunk: int = 1024) -> Tensor:
     """``(N, k)`` indices of each node's ``k`` nearest *earlier* nodes of its own tree (-1 pads),
-    distances in ``step_scale`` units (periodic columns wrapped). Exact; chunked over rows."""
+    distances in ``step_scale`` units (periodic columns wrapped), ties to the earlier node.
+    Exact; chunked over rows."""
     n = nodes.shape[0]
     out = torch.full((n, k), -1, dtype=torch.long)
     if n < 2 or k == 0:
@@ -79,7 +80,8 @@ def causal_knn(nodes: Tensor, tree_id: Tensor, k: int, step_scale: Tensor, perio
         allowed = (index[None, :hi] < index[lo:hi, None]) & (tree_id[None, :hi] == tree_id[lo:hi, None])
         dist = dist.masked_fill(~allowed, float("inf"))
         kk = min(k, hi)
-        d, j = torch.topk(dist, kk, dim=1, largest=False)
+        d, j = torch.sort(dist, dim=1, stable=True)   # ties (duplicate states) go to the earlier node
+        d, j = d[:, :kk], j[:, :kk]
         out[lo:hi, :kk] = torch.where(torch.isfinite(d), j, torch.full_like(j, -1))
     return out
 

@@ -51,6 +51,21 @@ register_sampler("goal-bias", lambda low, high, task=None, seed=None, goal_bias=
                  "uniform with 5% samples at the active tree's target")
 
 
+def _tree_sampler(name: str) -> SamplerFactory:
+    """Factory of a learned tree sampler; imports the models (PyG) only when one is built."""
+    def factory(low, high, task=None, seed=None, checkpoint=None, **settings):
+        from agents.samplers.tree import load_tree_sampler
+        return load_tree_sampler(name, low, high, task=task, seed=seed, checkpoint=checkpoint, **settings)
+    return factory
+
+
+register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree; "
+                 "shipped weights per task, 25% uniform")
+register_sampler("cvae", _tree_sampler("cvae"), "learned baseline (Ichter et al. 2018): CVAE on start, goal and "
+                 "obstacles; ignores the tree")
+register_sampler("gnn-cvae", _tree_sampler("gnn-cvae"), "learned baseline: CVAE conditioned on the causal GNN's "
+                 "tree context")
+
 
 def __getattr__(name: str):
     if name == "LearnedSampler":

@@ -78,6 +78,8 @@ class TreeDataset:
     iter_ptr: np.ndarray     # (P+1,) offsets into iter_nodes/iter_active
     iter_nodes: np.ndarray   # (I,) int32 tree size before each iteration
     iter_active: np.ndarray  # (I,) int8 the tree each iteration extended
+    iter_sample: np.ndarray  # (I, d) float32 the sample (action) of each iteration
+    iter_created: np.ndarray  # (I,) int32 the node its extension created (-1: blocked)
 
     def __len__(self) -> int:
         return len(self.start)
@@ -158,7 +160,13 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
                 else:
                     iterations.append((int(obs["num_nodes"][0]), int(obs["active_tree"][0])))
 
-            record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_last)
+            samples: list[np.ndarray] = []
+
+            def act(obs, store=samples):
+                store.append(sampler.act(obs))
+                return store[-1]
+
+            record = rollout(env, act, seed=seed, options={"index": i}, on_step=keep_last)
             if not record.success:
                 continue
             tree = base.planner.tree
@@ -170,7 +178,10 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
             goals.append(base.problem.goal)
             obstacles.append(last["obstacles"])
             indices.append(i)
-            iters.append(np.asarray(iterations, dtype=np.int32))
+            sizes = np.asarray(iterations + [(n, 0)], dtype=np.int64)[:, 0]
+            created = np.where(sizes[1:] > sizes[:-1], sizes[:-1], -1)
+            iters.append((np.asarray(iterations, dtype=np.int32), np.stack(samples).astype(np.float32),
+                          created.astype(np.int32)))
     finally:
         env.close()
     if not trees:
@@ -185,13 +196,14 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
         path_nodes=np.concatenate(paths), start=np.stack(starts).astype(np.float32),
         goal=np.stack(goals).astype(np.float32), obstacles=np.stack(obstacles).astype(np.float32),
         problem_index=np.asarray(indices, dtype=np.int64),
-        iter_ptr=np.concatenate([[0], np.cumsum([len(t) for t in iters])]).astype(np.int64),
-        iter_nodes=np.concatenate([t[:, 0] for t in iters]).astype(np.int32),
-        iter_active=np.concatenate([t[:, 1] for t in iters]).astype(np.int8))
+        iter_ptr=np.concatenate([[0], np.cumsum([len(t[0]) for t in iters])]).astype(np.int64),
+        iter_nodes=np.concatenate([t[0][:, 0] for t in iters]).astype(np.int32),
+        iter_active=np.concatenate([t[0][:, 1] for t in iters]).astype(np.int8),
+        iter_sample=np.concatenate([t[1] for t in iters]), iter_created=np.concatenate([t[2] for t in iters]))
 
 
 FIELDS = ("node_ptr", "states", "node_features", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal",
-          "obstacles", "problem_index", "iter_ptr", "iter_nodes", "iter_active")
+          "obstacles", "problem_index", "iter_ptr", "iter_nodes", "iter_active", "iter_sample", "iter_created")
 
 
 def save(dataset: TreeDataset, path: str | Path) -> Path:
