@@ -9,48 +9,79 @@ from gnn_mp_envs.utils.npz import DatasetCacheError
 from train.tree_samplers.data import TreeDataConfig, TreeDataset, generate, load, load_or_generate, save
 
 
-def hand_made() -> TreeDataset:
+def hand_made(iterations=((1, 0), (2, 0), (3, 0), (4, 0), (5, 0))) -> TreeDataset:
     """One RRT tree of 6 nodes; the path is 0 -> 2 -> 3 -> 5 (1 and 4 are side branches)."""
     states = np.array([[0, 0], [1, 0], [0, 1], [0, 2], [1, 1], [0, 3]], dtype=np.float32)
     parent = np.array([-1, 0, 0, 2, 1, 3], dtype=np.int32)
+    it = np.asarray(iterations)
     return TreeDataset(
         config=TreeDataConfig(task="maze2d", problems=1), node_ptr=np.array([0, 6]), states=states,
-        parent=parent, tree_id=np.zeros(6, np.int8), path_ptr=np.array([0, 4]),
-        path_nodes=np.array([0, 2, 3, 5], np.int32), start=states[:1], goal=states[5:6],
-        obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]))
+        node_features=np.zeros((6, 5), np.float32), parent=parent, tree_id=np.zeros(6, np.int8),
+        path_ptr=np.array([0, 4]), path_nodes=np.array([0, 2, 3, 5], np.int32), start=states[:1], goal=states[5:6],
+        obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]), iter_ptr=np.array([0, len(it)]),
+        iter_nodes=it[:, 0].astype(np.int32), iter_active=it[:, 1].astype(np.int8),
+        iter_sample=np.zeros((len(it), 2), np.float32), iter_created=np.full(len(it), -1, np.int32))
 
 
-def test_labels_are_the_next_path_nodes_on_a_hand_made_tree():
+def test_grown_labels_are_the_next_path_node_beyond_the_tree():
+    rows, sizes, active, labels = hand_made().snapshots(0, "grown")
+    assert rows.tolist() == list(range(6))
+    # before iteration t the tree holds `size` nodes; the label is the first path node it lacks
+    assert sizes.tolist() == [1, 2, 3, 4, 5] and active.tolist() == [0] * 5
+    assert labels.tolist() == [2, 2, 3, 5, 5]
+
+
+def test_prefix_labels_follow_the_path_over_path_only_graphs():
+    rows, sizes, active, labels = hand_made().snapshots(0, "prefix")
+    assert rows.tolist() == [0, 2, 3, 5]                 # the root and the path, no side branches
+    assert sizes.tolist() == [1, 2, 3] and labels.tolist() == [2, 3, 5]
+
+
+def test_birrt_goal_tree_walks_the_path_from_the_goal():
+    # BiRRT: nodes 0 (start root, tree 0), 1 (goal root, tree 1), 2 (tree 0), 3 (tree 1); path 0 2 3 1
     data = hand_made()
-    assert data.examples().tolist() == [[0, 2], [0, 3], [0, 5]]
-    np.testing.assert_array_equal([data.label(0, j) for j in (2, 3, 5)], [[0, 1], [0, 2], [0, 3]])
-    # prefix view: the root and the path nodes before the label
-    states, parent, _, active = data.graph(0, 5, "prefix")
-    np.testing.assert_array_equal(states, [[0, 0], [0, 1], [0, 2]])
-    assert parent.tolist() == [-1, 0, 1] and active == 0
-    # grown view: everything the planner had when node 5 was inserted, side branches too
-    states, parent, _, _ = data.graph(0, 5, "grown")
-    assert len(states) == 5 and parent.tolist() == [-1, 0, 0, 2, 1]
-    assert data.graph(0, 2, "prefix")[0].tolist() == [[0, 0]]
+    data.states = np.arange(8, dtype=np.float32).reshape(4, 2)
+    data.node_features = np.zeros((4, 5), np.float32)
+    data.parent = np.array([-1, -1, 0, 1], np.int32)
+    data.tree_id = np.array([0, 1, 0, 1], np.int8)
+    data.node_ptr, data.path_nodes, data.path_ptr = np.array([0, 4]), np.array([0, 2, 3, 1], np.int32), np.array([0, 4])
+    data.iter_ptr, data.iter_nodes, data.iter_active = np.array([0, 3]), np.array([2, 3, 4], np.int32), np.array([0, 1, 0], np.int8)
+    _, sizes, active, labels = data.snapshots(0, "grown")
+    assert active.tolist() == [0, 1, 0]
+    # tree 0 lacks node 2 first; tree 1 (walking 1 -> 3 -> 2 -> 0) lacks 3; then tree 0 holds 0, 2 and lacks 3
+    assert labels.tolist() == [2, 3, 3]
 
 
-def test_rrt_labels_follow_the_solution_path():
+def test_generated_runs_record_iterations_and_solve():
     data = generate(TreeDataConfig(task="maze2d", problems=2, max_nodes=2000), progress=False)
     assert len(data) == 2
-    for p, j in data.examples():
-        states, parent, tree_id = data.tree(p)
-        path = list(data.path(p))
-        assert path[path.index(j) - 1] == parent[j]          # the label's parent is the previous path node
-        assert data.graph(p, j, "grown")[0].shape[0] == j
+    for p in range(len(data)):
+        _, parent, _ = data.tree(p)
+        i0, i1 = data.iter_ptr[p], data.iter_ptr[p + 1]
+        assert data.iter_nodes[i0] == 1 and np.all(np.diff(data.iter_nodes[i0:i1]) >= 0)
+        path = data.path(p)
+        assert path[0] == 0 and all(parent[b] == a for a, b in zip(path[:-1], path[1:]))
+        _, sizes, _, labels = data.snapshots(p, "grown")
+        assert np.all(labels >= sizes)                   # RRT: the label is not in the tree yet
+        created = data.iter_created[i0:i1]
+        made = created >= 0
+        # an iteration creates the node at the tree's size, whose parent is its sample's nearest node
+        assert np.array_equal(created[made], data.iter_nodes[i0:i1][made])
+        states, parent, _ = data.tree(p)
+        for t in np.flatnonzero(made)[:20]:
+            n, c = data.iter_nodes[i0 + t], created[t]
+            x = data.iter_sample[i0 + t]
+            assert np.argmin(((states[:n] - x) ** 2).sum(1)) == parent[c]
 
 
-def test_arm_examples_cover_both_trees():
+def test_arm_snapshots_cover_both_trees():
     data = generate(TreeDataConfig(task="arm", scene="train", problems=3), progress=False)
-    actives = {data.graph(p, j, "grown")[3] for p, j in data.examples()}
+    actives = set()
+    for p in range(len(data)):
+        _, _, tree_id = data.tree(p)
+        _, sizes, active, labels = data.snapshots(p, "grown")
+        actives |= set(active.tolist())
     assert actives == {0, 1}
-    for p, j in data.examples():
-        states, parent, tree_id = data.tree(p)
-        assert tree_id[parent[j]] == tree_id[j]               # a label extends its own tree
 
 
 def test_files_regenerate_byte_identically_and_damage_is_named(tmp_path):

@@ -60,6 +60,21 @@ for _name, _what in (("rl-ppo", "SB3 PPO"), ("rl-sac", "SB3 SAC"), ("rl-ppo-torc
     register_sampler(_name, _rl_factory(_name), f"{_what} policy over the tree view (gnn-mp train rl; per-task weights)")
 
 
+def _tree_sampler(name: str) -> SamplerFactory:
+    """Factory of a learned tree sampler; imports the models (PyG) only when one is built."""
+    def factory(low, high, task=None, seed=None, checkpoint=None, **settings):
+        from agents.samplers.tree import load_tree_sampler
+        return load_tree_sampler(name, low, high, task=task, seed=seed, checkpoint=checkpoint, **settings)
+    return factory
+
+
+register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree; "
+                 "shipped weights per task, 25% uniform")
+register_sampler("cvae", _tree_sampler("cvae"), "learned baseline (Ichter et al. 2018): CVAE on start, goal and "
+                 "obstacles; ignores the tree")
+register_sampler("gnn-cvae", _tree_sampler("gnn-cvae"), "learned baseline: CVAE conditioned on the causal GNN's "
+                 "tree context")
+
 
 def __getattr__(name: str):
     if name == "LearnedSampler":

@@ -40,7 +40,9 @@ class BenchmarkArgs:
     samplers: list[str] = arg(["uniform", "goal-bias"], "comma-separated sampler names (see `gnn-mp "
                               "samplers`; OMPL rows: ompl-rrtconnect / ompl-rrt for maze2d and arm, "
                               "ompl-rrt / ompl-kpiece for the pendulum)", parse=name_list)
-    problems: int = arg(20, "held-out (split='test') problems 0..N-1", parse=positive_int)
+    problems: int = arg(20, "problems 0..N-1 of --split", parse=positive_int)
+    split: str = arg("test", "problem split: test (held out, what results report) or val (for tuning)",
+                     choices=("val", "test"))
     seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=non_negative_int)
     max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
     scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
@@ -79,7 +81,7 @@ def env_kwargs_for(args: BenchmarkArgs) -> dict[str, Any]:
     the next step, and a per-step copy of a 20,000-row padded observation would otherwise
     dominate the measured wall time.
     """
-    kwargs: dict[str, Any] = {"split": "test", "copy_observations": False}
+    kwargs: dict[str, Any] = {"split": args.split, "copy_observations": False}
     if args.max_nodes is not None:
         kwargs["max_nodes"] = int(args.max_nodes)
     if args.scene is not None:
@@ -126,7 +128,7 @@ def validate_args(args: BenchmarkArgs) -> None:
     if args.scene is not None and args.scene not in spec.scenes:
         raise BenchmarkError(f"unknown scene {args.scene!r} for {args.task}; known: {', '.join(spec.scenes)}")
     if args.scene is None:
-        args.scene = spec.benchmark_scene
+        args.scene = spec.benchmark_scene   # the held-out family, for both splits
     if args.problems < 1:
         raise BenchmarkError(f"--problems must be >= 1, got {args.problems}")
     if not 0 <= args.seed < MAX_SEED:

@@ -50,7 +50,7 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
     planner = planner_row[len(OMPL_PREFIX):]
     task_kwargs = {"scene": args.scene} if args.scene is not None else None
     try:
-        results = ompl_runner.run_ompl(args.task, indices, split="test", task_kwargs=task_kwargs,
+        results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
                                        planner=planner, time_limit=args.ompl_time_limit, seed=args.seed)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None

@@ -43,7 +43,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "seed": int(args.seed),
         "results": {name: sampler_summary(runs[name]) for name in args.samplers},
         "env_id": spec.env_id,
-        "split": "test",
+        "split": args.split,
         "max_nodes": int(max_nodes),
         "scene": args.scene,
         "samplers": list(args.samplers),

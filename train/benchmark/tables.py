@@ -32,7 +32,8 @@ def format_table(report: dict[str, Any]) -> str:
     lines.insert(1, "  ".join("-" * w for w in widths))
     title = (f"{report['task']} ({report['env_id']}, max_nodes={report['max_nodes']}"
              + (f", scene={report['scene']}" if report.get("scene") else "")
-             + f"): {report['problems']} held-out problems, seed {report['seed']}")
+             + f"): {report['problems']} {'held-out' if report.get('split', 'test') == 'test' else report['split']} "
+               f"problems, seed {report['seed']}")
     note = ("median [q25, q75]; *path length over successful runs only; "
             "wall time = planning loop incl. sampler inference (OMPL: solve time)")
     return "\n".join([title, *lines, note])

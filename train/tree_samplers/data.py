@@ -2,19 +2,22 @@
 
 Seeded training problems (split ``train``; for the arm the two training scene families) are
 solved with the uniform sampler through :func:`gnn_mp_envs.rollout.rollout`. For each solved
-problem the file keeps the whole final tree (states, parents, tree ids), the solution path's
-node indices, start, goal and the observation's obstacle rows. Examples are cut from that at
-load time, in one of two views:
+problem the file keeps the whole final tree (states, node features as the environment
+computed them, parents, tree ids), the solution path's node indices, every iteration's tree
+size and active tree, start, goal and the observation's obstacle rows. Examples
+(*snapshots*: a tree and the sample that should come next) are cut from that at load time,
+in one of two views:
 
 * ``"prefix"`` (the paper's): the graph is ``x_init`` (and, for BiRRT, ``x_goal``) plus the
   path nodes inserted before path node ``j``; the label is path node ``j``.
-* ``"grown"`` (the remedy for the train/online mismatch): the graph is the tree the uniform
-  planner had actually grown when path node ``j`` was inserted (its rows ``0..j-1``); the
-  label is path node ``j``, which the tree reached next on its way to the goal.
+* ``"grown"`` (the remedy for the train/online mismatch): the tree the uniform planner had
+  actually grown at an iteration (its first rows, insertion order); the label is the first
+  node along the solution path, walked from the active tree's root, that the active tree
+  does not hold yet (RRT: the next path node beyond the tree; BiRRT's goal tree walks the
+  path from the goal).
 
-Both views use every non-root path node ``j`` (for BiRRT both trees' path nodes, each with
-the tree it extends as ``active_tree``). Files are byte-reproducible for a seed and config,
-written atomically, and carry a format version (:mod:`gnn_mp_envs.utils.npz`).
+Files are byte-reproducible for a seed and config, written atomically, and carry a format
+version (:mod:`gnn_mp_envs.utils.npz`).
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ class TreeDataset:
     config: TreeDataConfig
     node_ptr: np.ndarray     # (P+1,) offsets into states/parent/tree_id
     states: np.ndarray       # (N, d) float32
+    node_features: np.ndarray  # (N, 2d+1) float32, as the environment computed them
     parent: np.ndarray       # (N,) int32, local to its problem (-1 for roots)
     tree_id: np.ndarray      # (N,) int8
     path_ptr: np.ndarray     # (P+1,) offsets into path_nodes
@@ -71,6 +75,11 @@ class TreeDataset:
     goal: np.ndarray         # (P, d)
     obstacles: np.ndarray    # (P, M, 1+w) observation rows
     problem_index: np.ndarray  # (P,) index of each problem in its split
+    iter_ptr: np.ndarray     # (P+1,) offsets into iter_nodes/iter_active
+    iter_nodes: np.ndarray   # (I,) int32 tree size before each iteration
+    iter_active: np.ndarray  # (I,) int8 the tree each iteration extended
+    iter_sample: np.ndarray  # (I, d) float32 the sample (action) of each iteration
+    iter_created: np.ndarray  # (I,) int32 the node its extension created (-1: blocked)
 
     def __len__(self) -> int:
         return len(self.start)
@@ -82,32 +91,37 @@ class TreeDataset:
     def path(self, p: int) -> np.ndarray:
         return self.path_nodes[self.path_ptr[p]:self.path_ptr[p + 1]]
 
-    def examples(self) -> np.ndarray:
-        """(E, 2) pairs ``(problem, node j)``: every non-root path node of every problem."""
-        pairs = [(p, int(j)) for p in range(len(self)) for j in self.path(p)
-                 if self.parent[self.node_ptr[p] + j] >= 0]
-        return np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-
-    def graph(self, p: int, j: int, view: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """The example's tree as (states, parent, tree_id) and its ``active_tree``.
-
-        ``grown``: rows ``0..j-1`` as the planner had them; ``prefix``: the roots and the path
-        nodes inserted before ``j``, parents re-indexed into that subset.
-        """
-        states, parent, tree_id = self.tree(p)
-        active = int(tree_id[j])
-        if view == "grown":
-            return states[:j], parent[:j], tree_id[:j], active
-        if view != "prefix":
+    def snapshots(self, p: int, view: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(rows, sizes, active, labels)`` of problem ``p``: the node rows of the graph (into its
+        tree; a snapshot is the first ``sizes[t]`` of them), each snapshot's active tree and its
+        label's node index. See the module docstring for the two views."""
+        _, parent, tree_id = self.tree(p)
+        path = self.path(p)
+        if view == "prefix":
+            rows = np.union1d(np.flatnonzero(parent < 0), path)            # roots + path, insertion order
+            targets = [j for j in path if parent[j] >= 0]
+            sizes = np.searchsorted(rows, targets)
+            return rows, sizes, tree_id[targets].astype(np.int64), np.asarray(targets, np.int64)
+        if view != "grown":
             raise ValueError(f"unknown view {view!r}; known: {VIEWS}")
-        keep = np.union1d(np.flatnonzero(parent[:j] < 0), self.path(p)[self.path(p) < j])
-        remap = np.full(len(states), -1, dtype=np.int64)
-        remap[keep] = np.arange(len(keep))
-        sub_parent = np.where(parent[keep] >= 0, remap[np.maximum(parent[keep], 0)], -1)
-        return states[keep], sub_parent.astype(np.int32), tree_id[keep], active
+        walks = (path, path[::-1])
+        i0, i1 = self.iter_ptr[p], self.iter_ptr[p + 1]
+        sizes, actives, labels = [], [], []
+        for n, a in zip(self.iter_nodes[i0:i1].tolist(), self.iter_active[i0:i1].tolist()):
+            label = next((g for g in walks[a] if not (g < n and tree_id[g] == a)), None)
+            if label is not None:
+                sizes.append(n), actives.append(a), labels.append(label)
+        return (np.arange(len(parent)), np.asarray(sizes, np.int64), np.asarray(actives, np.int64),
+                np.asarray(labels, np.int64))
 
-    def label(self, p: int, j: int) -> np.ndarray:
-        return self.states[self.node_ptr[p] + j]
+
+def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Parents of the rows ``keep`` (sorted) as indices into ``keep``; -1 where the parent is
+    a root's none or not kept."""
+    remap = np.full(len(parent), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    sub = parent[keep]
+    return np.where(sub >= 0, remap[np.maximum(sub, 0)], -1).astype(np.int32)
 
 
 def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
@@ -129,29 +143,45 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
     env = gym.make(spec.env_id, disable_env_checker=True, **kwargs)
     base = env.unwrapped
     sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
-    trees, paths, starts, goals, obstacles, indices = [], [], [], [], [], []
+    trees, paths, starts, goals, obstacles, indices, iters = [], [], [], [], [], [], []
     try:
         for i in tqdm(range(config.problems), desc=f"{config.task} uniform solutions", unit="problem",
                       disable=not progress):
             seed = problem_seed(config.seed, i)
             sampler.reset(seed)
-            observations = {}
+            last: dict = {}
+            roots = 2 if base.planner_name == "birrt" else 1
+            iterations = [(roots, 0)]   # (tree size, active tree) before each iteration
 
-            def keep_obstacles(obs, _info, _done, store=observations) -> None:
-                store.setdefault("obstacles", np.array(obs["obstacles"]))
+            def keep_last(obs, _info, done, store=last) -> None:
+                if done:   # live views: copy what the episode ends with
+                    n = int(obs["num_nodes"][0])
+                    store.update(features=np.array(obs["node_features"][:n]), obstacles=np.array(obs["obstacles"]))
+                else:
+                    iterations.append((int(obs["num_nodes"][0]), int(obs["active_tree"][0])))
 
-            record = rollout(env, sampler.act, seed=seed, options={"index": i}, on_step=keep_obstacles)
+            samples: list[np.ndarray] = []
+
+            def act(obs, store=samples):
+                store.append(sampler.act(obs))
+                return store[-1]
+
+            record = rollout(env, act, seed=seed, options={"index": i}, on_step=keep_last)
             if not record.success:
                 continue
             tree = base.planner.tree
             n = len(tree)
             trees.append((tree.states[:n].astype(np.float32), tree.parent[:n].astype(np.int32),
-                          tree.tree_id[:n].astype(np.int8)))
+                          tree.tree_id[:n].astype(np.int8), last["features"].astype(np.float32)))
             paths.append(np.asarray(record.path_nodes, dtype=np.int32))
             starts.append(base.problem.start)
             goals.append(base.problem.goal)
-            obstacles.append(observations["obstacles"])
+            obstacles.append(last["obstacles"])
             indices.append(i)
+            sizes = np.asarray(iterations + [(n, 0)], dtype=np.int64)[:, 0]
+            created = np.where(sizes[1:] > sizes[:-1], sizes[:-1], -1)
+            iters.append((np.asarray(iterations, dtype=np.int32), np.stack(samples).astype(np.float32),
+                          created.astype(np.int32)))
     finally:
         env.close()
     if not trees:
@@ -160,16 +190,20 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
     return TreeDataset(
         config=config,
         node_ptr=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
-        states=np.concatenate([t[0] for t in trees]), parent=np.concatenate([t[1] for t in trees]),
-        tree_id=np.concatenate([t[2] for t in trees]),
+        states=np.concatenate([t[0] for t in trees]), node_features=np.concatenate([t[3] for t in trees]),
+        parent=np.concatenate([t[1] for t in trees]), tree_id=np.concatenate([t[2] for t in trees]),
         path_ptr=np.concatenate([[0], np.cumsum([len(p) for p in paths])]).astype(np.int64),
         path_nodes=np.concatenate(paths), start=np.stack(starts).astype(np.float32),
         goal=np.stack(goals).astype(np.float32), obstacles=np.stack(obstacles).astype(np.float32),
-        problem_index=np.asarray(indices, dtype=np.int64))
+        problem_index=np.asarray(indices, dtype=np.int64),
+        iter_ptr=np.concatenate([[0], np.cumsum([len(t[0]) for t in iters])]).astype(np.int64),
+        iter_nodes=np.concatenate([t[0][:, 0] for t in iters]).astype(np.int32),
+        iter_active=np.concatenate([t[0][:, 1] for t in iters]).astype(np.int8),
+        iter_sample=np.concatenate([t[1] for t in iters]), iter_created=np.concatenate([t[2] for t in iters]))
 
 
-FIELDS = ("node_ptr", "states", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal", "obstacles",
-          "problem_index")
+FIELDS = ("node_ptr", "states", "node_features", "parent", "tree_id", "path_ptr", "path_nodes", "start", "goal",
+          "obstacles", "problem_index", "iter_ptr", "iter_nodes", "iter_active", "iter_sample", "iter_created")
 
 
 def save(dataset: TreeDataset, path: str | Path) -> Path:
@@ -203,10 +237,3 @@ def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bo
     dataset = generate(config, progress)
     save(dataset, path)
     return dataset
-
-
-def batches(pairs: np.ndarray, batch_size: int, rng: np.random.Generator | None = None) -> Iterator[np.ndarray]:
-    """Example pairs in batches (shuffled when ``rng`` is given)."""
-    order = rng.permutation(len(pairs)) if rng is not None else np.arange(len(pairs))
-    for k in range(0, len(order), batch_size):
-        yield pairs[order[k:k + batch_size]]
