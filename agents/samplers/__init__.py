@@ -51,6 +51,7 @@ register_sampler("goal-bias", lambda low, high, task=None, seed=None, goal_bias=
                  GoalBiasSampler(low, high, seed, goal_bias),
                  "uniform with 5% samples at the active tree's target")
 
+
 # RL policies (issue #10, agents/samplers/rl.py; imported on first use: it needs torch_geometric)
 def _rl_factory(name: str) -> SamplerFactory:
     return lambda **kw: importlib.import_module("agents.samplers.rl").load_rl_sampler(name, **kw)
