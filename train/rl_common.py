@@ -63,6 +63,8 @@ class RLArgs:
     step_penalty: float = arg(1.0, "reward: -step_penalty per planner iteration", parse=non_negative_float)
     collision_check_cost: float = arg(0.0, "reward: -cost per validity check of the step", parse=non_negative_float)
     success_reward: float = arg(10.0, "reward: +success_reward on the step that finds a path", parse=non_negative_float)
+    progress_reward: float = arg(10.0, "reward shaping: coef of the potential-based progress term "
+                                 "(ProgressReward; 0: the env's reward only)", parse=non_negative_float)
     # --- networks (the shared TreeEncoder + the library's head)
     hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=positive_int)
     num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
@@ -103,7 +105,8 @@ class RLArgs:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
         kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner,
                               "step_penalty": self.step_penalty, "collision_check_cost": self.collision_check_cost,
-                              "success_reward": self.success_reward, "uniform_mix": self.uniform_mix}
+                              "success_reward": self.success_reward, "uniform_mix": self.uniform_mix,
+                              "progress_reward": self.progress_reward, "gamma": self.gamma}
         if self.max_nodes is not None:
             kw["max_nodes"] = self.max_nodes
         return kw

@@ -135,6 +135,52 @@ class TreeViewWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         return tree_view(observation, self.view_nodes)
 
 
+class ProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Potential-based shaping (Ng et al. 1999) of the planning reward: progress toward the target.
+
+    ``reward += coef * (gamma * phi(s') - phi(s))`` with ``phi = -D / distance(start, goal)``,
+    ``D`` the smallest planner distance from a tree node to its tree's target (the goal for the
+    start tree, the start for BiRRT's goal tree), and ``phi = 0`` once the path is found. It
+    rewards samples whose extension gets a tree closer to its target, a per-step signal the
+    sparse reward lacks, and leaves the optimal policy of the discounted MDP unchanged (use
+    the agent's ``gamma``). Wrap the planning env itself (it reads the planner's tree).
+    """
+
+    def __init__(self, env: gym.Env, coef: float, gamma: float = 0.99) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, coef=coef, gamma=gamma)
+        gym.Wrapper.__init__(self, env)
+        self.coef, self.gamma = float(coef), float(gamma)
+        self._seen, self._best, self._phi, self._scale = 0, np.inf, 0.0, 1.0
+
+    def _update(self) -> float:
+        base = self.env.unwrapped
+        tree, problem = base.planner.tree, base.problem
+        n = len(tree)
+        if n > self._seen:
+            states, ids = tree.states[self._seen:n], tree.tree_id[self._seen:n]
+            for tid, target in ((0, problem.goal), (1, problem.start)):
+                rows = states[ids == tid]
+                if len(rows):
+                    self._best = min(self._best, float(problem.distance(rows, target).min()))
+            self._seen = n
+        return -self._best / self._scale
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        problem = self.env.unwrapped.problem
+        self._seen, self._best = 0, np.inf
+        self._scale = max(float(problem.distance(problem.start[None], problem.goal)[0]), 1e-9)
+        self._phi = self._update()
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        phi = 0.0 if terminated else self._update()
+        reward = float(reward) + self.coef * (self.gamma * phi - self._phi)
+        self._phi = phi
+        return obs, reward, terminated, truncated, info
+
+
 class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """With probability ``p``, replace the agent's action by a uniform one over the action box.
 
@@ -172,7 +218,7 @@ def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nd
 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
                 planner: str | None = None, scale_actions: bool = True, uniform_mix: float = 0.0,
-                **env_kwargs: Any) -> gym.Env:
+                progress_reward: float = 0.0, gamma: float = 0.99, **env_kwargs: Any) -> gym.Env:
     """The environment every RL training script (and the RL sampler's conventions) use.
 
     ``task``'s benchmark environment (``planner="rrt"``/``"birrt"`` picks another registered
@@ -180,7 +226,8 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation) and
     ``RescaleAction`` to ``[-1, 1]`` (``scale_actions=False`` keeps state-space actions), and,
     with ``uniform_mix > 0``, :class:`UniformMixAction` (that fraction of the actions replaced
-    by uniform samples, as the sampler will do).
+    by uniform samples, as the sampler will do); with ``progress_reward > 0``,
+    :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``).
     ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
     ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
     ``scene``, ``task_kwargs``. Observations are not copied by the env
@@ -198,6 +245,8 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
         env_id = ids[0]
     env_kwargs.setdefault("copy_observations", view_nodes is None)
     env = gym.make(env_id, split=split, disable_env_checker=True, **env_kwargs)
+    if progress_reward > 0.0:
+        env = ProgressReward(env, progress_reward, gamma)
     if view_nodes is not None:
         env = TreeViewWrapper(env, view_nodes)
     if scale_actions:
@@ -208,6 +257,6 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     return env
 
 
-__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "TreeViewWrapper", "UniformMixAction", "make_rl_env",
+__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward", "TreeViewWrapper", "UniformMixAction", "make_rl_env",
            "scale_action",
            "tree_view", "view_rows", "view_space"]
