@@ -60,11 +60,14 @@ class RLArgs:
     parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
     view_nodes: int = arg(64, "rows of the tree view the policy sees (roots + most recent nodes)", parse=positive_int)
     max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)", parse=positive_int)
+    action_frame: str = arg("target", "policy actions in [-1, 1]: offsets from the active tree's target "
+                            "(target) or the rescaled state box (absolute)", choices=("target", "absolute"))
     step_penalty: float = arg(1.0, "reward: -step_penalty per planner iteration", parse=non_negative_float)
     collision_check_cost: float = arg(0.0, "reward: -cost per validity check of the step", parse=non_negative_float)
     success_reward: float = arg(10.0, "reward: +success_reward on the step that finds a path", parse=non_negative_float)
     progress_reward: float = arg(10.0, "reward shaping: coef of the potential-based progress term "
                                  "(ProgressReward; 0: the env's reward only)", parse=non_negative_float)
+    reward_scale: float = arg(0.01, "multiply every reward by this (returns of order 1)", parse=positive_float)
     # --- networks (the shared TreeEncoder + the library's head)
     hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=positive_int)
     num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
@@ -103,10 +106,11 @@ class RLArgs:
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
-        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner,
+        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner, "action_frame": self.action_frame,
                               "step_penalty": self.step_penalty, "collision_check_cost": self.collision_check_cost,
                               "success_reward": self.success_reward, "uniform_mix": self.uniform_mix,
-                              "progress_reward": self.progress_reward, "gamma": self.gamma}
+                              "progress_reward": self.progress_reward, "gamma": self.gamma,
+                              "reward_scale": self.reward_scale}
         if self.max_nodes is not None:
             kw["max_nodes"] = self.max_nodes
         return kw
@@ -201,6 +205,17 @@ def _eval_env(task: str, split: str, planner: str | None, max_nodes: int | None)
     return _EVAL_ENVS[key]
 
 
+def state_box(args: RLArgs) -> tuple[np.ndarray, np.ndarray, list[bool]]:
+    """The task's state box (what ``[-1, 1]`` maps to) and which dimensions wrap (the pendulum's angle)."""
+    from gnn_mp_envs.envs.wrappers import make_rl_env, periodic_dims
+    env = make_rl_env(args.task, view_nodes=None, planner=args.planner, scale_actions=False)
+    env.reset(seed=0)
+    low, high = env.action_space.low, env.action_space.high
+    periodic = periodic_dims(env.unwrapped.problem, low, high)
+    env.close()
+    return low, high, periodic
+
+
 def score(row: dict[str, Any]) -> tuple[float, float]:
     """Higher is better: success rate, then fewer median nodes."""
     return (row["success"], -row["median_nodes"])
@@ -213,9 +228,10 @@ class Evaluator:
     receives ``(name, value, step)`` for TensorBoard.
     """
 
-    def __init__(self, args: RLArgs, run_dir: Path, export: Callable[[], tuple], low: np.ndarray, high: np.ndarray,
+    def __init__(self, args: RLArgs, run_dir: Path, export: Callable[[], tuple],
                  log: Callable[[str, float, int], None] | None = None) -> None:
-        self.args, self.run_dir, self.export, self.low, self.high = args, run_dir, export, low, high
+        self.args, self.run_dir, self.export = args, run_dir, export
+        self.low, self.high, self.periodic = state_box(args)
         self.log = log
         self.rows: list[dict[str, Any]] = []
         self.best: tuple[float, float] | None = None
@@ -229,12 +245,13 @@ class Evaluator:
         from agents.samplers.rl import RLSampler
         mix = self.args.uniform_mix if uniform_mix is None else uniform_mix
         return RLSampler(self.low, self.high, 0, policy=policy, view_nodes=self.args.view_nodes,
-                         uniform_mix=mix).eval()
+                         uniform_mix=mix, action_frame=self.args.action_frame, periodic=self.periodic).eval()
 
     def save(self, path: Path, policy: Any, kind: str, ctor_args: dict, uniform_mix: float, **meta: Any) -> Path:
         from agents.samplers.rl import save_policy
         return save_policy(path, policy, kind, ctor_args, task=self.args.task, view_nodes=self.args.view_nodes,
                            low=self.low, high=self.high, uniform_mix=uniform_mix,
+                           action_frame=self.args.action_frame, periodic=self.periodic,
                            meta={"sampler_name": self.args.sampler_name, "planner": self.args.planner,
                                  "train_config": json.loads((self.run_dir / "config.json").read_text()),
                                  **meta})
@@ -269,7 +286,7 @@ class Evaluator:
             self(steps)
         best = self.run_dir / "best.pt"
         if self.args.tune_mix:
-            tune_uniform_mix(best, self.args, self.low, self.high)
+            tune_uniform_mix(best, self.args)
         plot_learning_curve(self.rows, self.run_dir / "learning_curve.png",
                             title=f"{self.args.lib} {self.args.algo.upper()} on {self.args.task}")
         if self.args.ship:
@@ -277,12 +294,13 @@ class Evaluator:
         return best
 
 
-def tune_uniform_mix(path: Path, args: RLArgs, low: np.ndarray, high: np.ndarray) -> float:
+def tune_uniform_mix(path: Path, args: RLArgs) -> float:
     """Pick ``uniform_mix`` among ``args.tune_mix`` on split ``val`` and store it in the checkpoint."""
     import torch
 
     from agents.checkpoints import load_checkpoint, save_checkpoint
     from agents.samplers.rl import sampler_from_checkpoint
+    low, high, _ = state_box(args)
     rows = []
     for mix in args.tune_mix or []:
         sampler = sampler_from_checkpoint(path, low, high, seed=0, uniform_mix=mix)

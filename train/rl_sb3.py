@@ -112,14 +112,10 @@ def train(args: RLArgs) -> RunResult:
           f"run directory {run_dir}")
 
     # 3. evaluation on split val (the policy exported to the sampler the benchmark runs)
-    full = make_rl_env(args.task, view_nodes=None, planner=args.planner, scale_actions=False)
-    low, high = full.action_space.low, full.action_space.high
-    full.close()
-
     def log(name: str, value: float, step: int) -> None:
         model.logger.record(name, value)
 
-    evaluator = Evaluator(args, run_dir, lambda: policy_from_sb3(model), low, high, log=log)
+    evaluator = Evaluator(args, run_dir, lambda: policy_from_sb3(model), log=log)
 
     # 4. learn
     callbacks = [EvalCallback(evaluator)] + ([ProgressCallback(args.total_steps)] if args.progress else [])

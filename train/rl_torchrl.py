@@ -54,7 +54,6 @@ def train(args: RLArgs) -> RunResult:
     # 1. environments
     probe = make_rl_env(args.task, split="train", **args.env_kwargs())
     observation_space, action_space = probe.observation_space, probe.action_space
-    low, high = probe.unwrapped.action_space.low, probe.unwrapped.action_space.high   # the state box
     probe.close()
     env = make_batched_env(args)
 
@@ -76,7 +75,7 @@ def train(args: RLArgs) -> RunResult:
                               normalize_advantage=False)
     optimiser = torch.optim.Adam(loss_module.parameters(), lr=args.lr)
     logger = TensorboardLogger(exp_name=f"ppo_{args.task}", log_dir=str(run_dir / "tb"))
-    evaluator = Evaluator(args, run_dir, lambda: policy_from_torchrl(actor), low, high,
+    evaluator = Evaluator(args, run_dir, lambda: policy_from_torchrl(actor),
                           log=lambda name, v, step: logger.log_scalar(name, v, step=step))
     print(f"TorchRL PPO on {args.task}: {sum(p.numel() for p in loss_module.parameters()):,} parameters, "
           f"{frames_per_batch} frames per batch, run directory {run_dir}")

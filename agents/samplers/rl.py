@@ -35,7 +35,7 @@ from agents.models.rl import POLICY_KINDS, RLPolicy
 from agents.samplers.base import batch_shape_of
 from agents.samplers.learned import LearnedSampler
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
-from gnn_mp_envs.envs.wrappers import ACTION_HIGH, ACTION_LOW, tree_view
+from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, tree_view
 
 #: sampler name -> checkpoint kind
 RL_SAMPLERS: dict[str, str] = {"rl-ppo": "rl/sb3-ppo", "rl-sac": "rl/sb3-sac", "rl-ppo-torchrl": "rl/torchrl-ppo"}
@@ -66,28 +66,51 @@ class RLSampler(LearnedSampler):
     """
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: RLPolicy,
-                 view_nodes: int, uniform_mix: float = 0.0, deterministic: bool = False) -> None:
+                 view_nodes: int, uniform_mix: float = 0.0, deterministic: bool = False,
+                 action_frame: str = "absolute", periodic: list[bool] | None = None) -> None:
         head = TensorDictModule(_Params(policy), in_keys=["embed"], out_keys=["loc", "scale"])
         super().__init__(low, high, seed, encoder=EncoderModule(policy.encoder), head=head,
                          uniform_mix=uniform_mix, deterministic=deterministic)
         if policy.action_dim != self.state_dim:
             raise ValueError(f"the policy acts in {policy.action_dim} dimensions, the bounds have {self.state_dim}")
+        if action_frame not in ACTION_FRAMES:
+            raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
         self.policy = policy
         self.view_nodes = int(view_nodes)
         self.squash = policy.squash
+        self.action_frame = action_frame
+        periodic = [False] * self.state_dim if periodic is None else [bool(p) for p in periodic]
+        self.register_buffer("periodic", torch.tensor(periodic, dtype=torch.bool), persistent=False)
 
     # ------------------------------------------------------------------ distribution
-    def to_box(self, u: torch.Tensor) -> torch.Tensor:
-        """``[-1, 1]`` -> ``[low, high]``: the map of ``RescaleAction`` in ``make_rl_env``."""
-        a = self.low + self.span * (u - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
+    def to_box(self, u: torch.Tensor, view: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """``[-1, 1]^d`` -> a state, as ``make_rl_env`` maps actions: ``RescaleAction`` (absolute
+        frame) or ``TargetRelativeAction`` (offsets from the active tree's target, periodic
+        dimensions wrapped), then clipped to the box."""
+        if self.action_frame == "absolute":
+            a = self.low + self.span * (u - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
+        else:
+            shape = u.shape[:-1]
+            target = torch.where(view["active_tree"].reshape(*shape, 1) == 1, view["start"], view["goal"])
+            a = target.to(u.dtype) + u * self.span
+            a = torch.where(self.periodic, self.low + torch.remainder(a - self.low, self.span), a)
         return torch.minimum(torch.maximum(a, self.low), self.high)
 
-    def log_prob(self, loc, scale, action):
+    def log_prob(self, loc, scale, action, view=None):
+        """Log-density of the mixture at ``action`` (approximate where the box clips or wraps)."""
+        if self.action_frame == "target":
+            shape = action.shape[:-1]
+            target = torch.where(view["active_tree"].reshape(*shape, 1) == 1, view["start"], view["goal"])
+            u = ((action - target) / self.span).clamp(ACTION_LOW, ACTION_HIGH)
+            jac = torch.log(self.span).sum()
+        else:
+            u = (action - self.low) / self.span * (ACTION_HIGH - ACTION_LOW) + ACTION_LOW
+            jac = torch.log(self.span / 2).sum()
         if self.squash == "tanh":
-            return super().log_prob(loc, scale, action)
-        # "clip": the Normal's density inside the box (the clipped mass on the border is ignored)
-        u = (action - self.low) / self.span * (ACTION_HIGH - ACTION_LOW) + ACTION_LOW
-        model = torch.distributions.Normal(loc, scale).log_prob(u).sum(-1) - torch.log(self.span / 2).sum()
+            u = u.clamp(-1 + 1e-6, 1 - 1e-6)
+            model = (torch.distributions.Normal(loc, scale).log_prob(torch.atanh(u)) - torch.log1p(-u * u)).sum(-1) - jac
+        else:   # "clip": the Normal's density inside the box (the clipped mass on the border is ignored)
+            model = torch.distributions.Normal(loc, scale).log_prob(u).sum(-1) - jac
         if self.uniform_mix == 0.0:
             return model
         log_uniform = -torch.log(self.span).sum()
@@ -104,7 +127,7 @@ class RLSampler(LearnedSampler):
         shape = loc.shape[:-1]
         z = loc if self.deterministic else loc + scale * torch.randn(loc.shape, generator=self.generator)
         u = torch.clamp(z, ACTION_LOW, ACTION_HIGH) if self.squash == "clip" else torch.tanh(z)
-        action = self.to_box(u)
+        action = self.to_box(u, view)
         if self.uniform_mix > 0.0 and not self.deterministic:
             uniform = self.uniform(shape)
             pick = torch.rand(*shape, 1, generator=self.generator) < self.uniform_mix
@@ -113,12 +136,13 @@ class RLSampler(LearnedSampler):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Full observations in; ``"embed"``, ``"loc"``, ``"scale"``, ``"action"`` and the log-prob out."""
-        embed, loc, scale, action = self.sample(self.view(tensordict))
+        view = self.view(tensordict)
+        embed, loc, scale, action = self.sample(view)
         tensordict.set("embed", embed)
         tensordict.set("loc", loc)
         tensordict.set("scale", scale)
         tensordict.set("action", action)
-        tensordict.set(self.log_prob_key, self.log_prob(loc, scale, action))
+        tensordict.set(self.log_prob_key, self.log_prob(loc, scale, action, view))
         return tensordict
 
     # ------------------------------------------------------------------ the view
@@ -146,9 +170,11 @@ class RLSampler(LearnedSampler):
 # ----------------------------------------------------------------------------- files
 def save_policy(path: str | Path, policy: RLPolicy, kind: str, ctor_args: Mapping[str, Any], *, task: str,
                 view_nodes: int, low: np.ndarray, high: np.ndarray, uniform_mix: float = 0.0,
+                action_frame: str = "absolute", periodic: list[bool] | None = None,
                 meta: Mapping[str, Any] | None = None) -> Path:
     """Write a policy checkpoint that :func:`load_rl_sampler` turns into a sampler."""
     obs_spec = {"view_nodes": int(view_nodes), "state_dim": int(len(low)), "action_box": [ACTION_LOW, ACTION_HIGH],
+                "action_frame": action_frame, "periodic": list(periodic or [False] * len(low)),
                 "low": np.asarray(low, np.float64).tolist(), "high": np.asarray(high, np.float64).tolist()}
     full_meta = {"task": task, "view_nodes": int(view_nodes), "sampler": {"uniform_mix": float(uniform_mix)},
                  **dict(meta or {})}
@@ -175,7 +201,8 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
     if uniform_mix is None:
         uniform_mix = float(meta.get("sampler", {}).get("uniform_mix", 0.0))
     return RLSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
-                     uniform_mix=uniform_mix, deterministic=deterministic).eval()
+                     uniform_mix=uniform_mix, deterministic=deterministic,
+                     action_frame=spec.get("action_frame", "absolute"), periodic=spec.get("periodic")).eval()
 
 
 def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | None = None, seed: int | None = None,

@@ -37,6 +37,8 @@ from gymnasium.wrappers import RescaleAction
 DEFAULT_VIEW_NODES = 64
 #: The action box the RL policies act in (:func:`make_rl_env` rescales it to the state box).
 ACTION_LOW, ACTION_HIGH = -1.0, 1.0
+#: How a policy action in [-1, 1]^d becomes a state (``make_rl_env(action_frame=...)``).
+ACTION_FRAMES = ("absolute", "target")
 
 
 def view_rows(parent: np.ndarray, num_nodes: int, view_nodes: int) -> np.ndarray:
@@ -181,6 +183,19 @@ class ProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, reward, terminated, truncated, info
 
 
+class ScaleReward(gym.RewardWrapper, gym.utils.RecordConstructorArgs):
+    """Multiply every reward by ``scale`` (returns of order 1 keep the value loss from swamping
+    the policy's share of a clipped gradient)."""
+
+    def __init__(self, env: gym.Env, scale: float) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, scale=scale)
+        gym.RewardWrapper.__init__(self, env)
+        self.scale = float(scale)
+
+    def reward(self, reward):
+        return float(reward) * self.scale
+
+
 class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """With probability ``p``, replace the agent's action by a uniform one over the action box.
 
@@ -210,6 +225,40 @@ class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         return action
 
 
+class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
+    """Actions in ``[-1, 1]^d`` as offsets from the active tree's target, in units of the box span.
+
+    ``state = clip(normalize(target + a * (high - low)))``, ``target`` the goal (RRT, BiRRT's
+    start tree) or the start (BiRRT's goal tree), ``normalize`` the problem's (wraps the
+    pendulum's angle). ``a = 0`` samples the target itself, so an untrained policy
+    (``loc = 0``) starts as a Gaussian goal bias and RL learns the spread and where else to
+    sample; ``|a| = 1`` reaches the whole box from any target.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ActionWrapper.__init__(self, env)
+        box = env.action_space
+        self._low, self._high = box.low.astype(np.float64), box.high.astype(np.float64)
+        d = box.shape[0]
+        self.action_space = spaces.Box(np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
+
+    def action(self, action):
+        base = self.env.unwrapped
+        problem = base.problem
+        target = problem.start if int(base.planner.active_tree) == 1 else problem.goal
+        a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
+        x = problem.normalize(target + a * (self._high - self._low))
+        return np.clip(x, self._low, self._high).astype(np.float32)
+
+
+def periodic_dims(problem: Any, low: np.ndarray, high: np.ndarray) -> list[bool]:
+    """Which state dimensions ``problem.normalize`` wraps with period ``high - low``."""
+    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    probe = low + 1.25 * (high - low)
+    return (~np.isclose(np.asarray(problem.normalize(probe), np.float64), probe)).tolist()
+
+
 def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """A policy action in ``[-1, 1]^d`` -> a state in ``[low, high]`` (``RescaleAction``'s map)."""
     a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
@@ -218,16 +267,20 @@ def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nd
 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
                 planner: str | None = None, scale_actions: bool = True, uniform_mix: float = 0.0,
-                progress_reward: float = 0.0, gamma: float = 0.99, **env_kwargs: Any) -> gym.Env:
+                action_frame: str = "absolute", progress_reward: float = 0.0, gamma: float = 0.99,
+                reward_scale: float = 1.0, **env_kwargs: Any) -> gym.Env:
     """The environment every RL training script (and the RL sampler's conventions) use.
 
     ``task``'s benchmark environment (``planner="rrt"``/``"birrt"`` picks another registered
     variant), problems of ``split`` (``"train"`` to learn, ``"val"`` to tune), wrapped in
     :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation) and
-    ``RescaleAction`` to ``[-1, 1]`` (``scale_actions=False`` keeps state-space actions), and,
-    with ``uniform_mix > 0``, :class:`UniformMixAction` (that fraction of the actions replaced
-    by uniform samples, as the sampler will do); with ``progress_reward > 0``,
-    :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``).
+    ``RescaleAction`` to ``[-1, 1]`` (``action_frame="absolute"``) or
+    :class:`TargetRelativeAction` (``action_frame="target"``: offsets from the active tree's
+    target), ``scale_actions=False`` keeping state-space actions; with ``uniform_mix > 0``,
+    :class:`UniformMixAction` (that fraction of the samples replaced by uniform states, as
+    the sampler will do); with ``progress_reward > 0``,
+    :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``); rewards are
+    multiplied by ``reward_scale`` (:class:`ScaleReward`).
     ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
     ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
     ``scene``, ``task_kwargs``. Observations are not copied by the env
@@ -244,19 +297,26 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
                              f"known: {', '.join(sorted(v.get('planner', '?') for v in spec.envs.values()))}")
         env_id = ids[0]
     env_kwargs.setdefault("copy_observations", view_nodes is None)
+    if action_frame not in ACTION_FRAMES:
+        raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
     env = gym.make(env_id, split=split, disable_env_checker=True, **env_kwargs)
+    if uniform_mix > 0.0:
+        env = UniformMixAction(env, uniform_mix)      # state-space samples: uniform over the box
     if progress_reward > 0.0:
         env = ProgressReward(env, progress_reward, gamma)
+    if reward_scale != 1.0:
+        env = ScaleReward(env, reward_scale)
     if view_nodes is not None:
         env = TreeViewWrapper(env, view_nodes)
     if scale_actions:
-        d = env.action_space.shape[0]
-        env = RescaleAction(env, np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
-    if uniform_mix > 0.0:
-        env = UniformMixAction(env, uniform_mix)
+        if action_frame == "target":
+            env = TargetRelativeAction(env)
+        else:
+            d = env.action_space.shape[0]
+            env = RescaleAction(env, np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
     return env
 
 
-__all__ = ["ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward", "TreeViewWrapper", "UniformMixAction", "make_rl_env",
-           "scale_action",
-           "tree_view", "view_rows", "view_space"]
+__all__ = ["ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward", "ScaleReward",
+           "TargetRelativeAction", "TreeViewWrapper", "UniformMixAction", "make_rl_env", "periodic_dims",
+           "scale_action", "tree_view", "view_rows", "view_space"]
