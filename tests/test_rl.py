@@ -282,3 +282,56 @@ def test_arm_view_and_sampler(tmp_path):
     action = sampler.act(full)
     assert action.shape == (6,) and box.contains(action)
     env.close()
+
+
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_sampler_maps_actions_as_the_training_env(task):
+    """TargetRelativeAction (training) and RLSampler.to_box (benchmark) give the same state."""
+    from agents.encoders import TreeEncoder
+    from agents.models.rl import SB3PPOPolicy, encoder_config
+    from agents.samplers.rl import RLSampler
+    from gnn_mp_envs.envs.wrappers import TargetRelativeAction, periodic_dims
+    env = make_rl_env(task, view_nodes=8, action_frame="target")
+    env.reset(seed=3)
+    box = env.unwrapped.action_space
+    periodic = periodic_dims(env.unwrapped.problem, box.low, box.high)
+    assert periodic == ([True, False] if task == "pendulum" else [False, False])
+    enc = encoder_config(TreeEncoder.from_space(env.observation_space, hidden_channels=8, num_layers=1,
+                                                out_channels=8))
+    sampler = RLSampler(box.low, box.high, 0, policy=SB3PPOPolicy(enc, 2, hidden=[8]), view_nodes=8,
+                        action_frame="target", periodic=periodic)
+    full = {k: torch.as_tensor(v) for k, v in env.unwrapped._obs.as_dict().items()}
+    wrapper = env
+    while not isinstance(wrapper, TargetRelativeAction):
+        wrapper = wrapper.env
+    assert np.allclose(wrapper.action(np.zeros(2)), env.unwrapped.problem.goal, atol=1e-6)   # 0 = the goal
+    for u in np.random.default_rng(0).uniform(-1, 1, (100, 2)).astype(np.float32):
+        np.testing.assert_allclose(wrapper.action(u), sampler.to_box(torch.as_tensor(u), full).numpy(), atol=1e-5)
+
+
+def test_training_wrappers():
+    from gnn_mp_envs.envs.wrappers import ProgressReward, UniformMixAction
+    # uniform mix: reproducible under reset(seed), about the requested fraction replaced
+    env = UniformMixAction(gym.make("GNNMP/Maze2DRRT-v0", max_nodes=500, copy_observations=False), 0.5)
+    env.reset(seed=0)
+    a = np.array([0.5, 0.5], np.float32)
+    first = [env.action(a) for _ in range(200)]
+    env.reset(seed=0)
+    assert np.array_equal(first, [env.action(a) for _ in range(200)])
+    assert 60 < sum(np.array_equal(x, a) for x in first) < 140
+    # progress shaping: gamma * phi' - phi with phi = -(closest distance to the goal) / |start - goal|
+    base = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=500, copy_observations=False, step_penalty=0.0)
+    shaped = ProgressReward(base, 1.0, gamma=1.0)
+    shaped.reset(seed=0)
+    problem = base.unwrapped.problem
+    scale = float(problem.distance(problem.start[None], problem.goal)[0])
+    total = 0.0
+    for _ in range(50):
+        _, r, term, *_ = shaped.step(np.asarray(problem.goal, np.float32))   # pull toward the goal
+        total += r
+        if term:
+            break
+    tree = base.unwrapped.planner.tree
+    closest = float(problem.distance(tree.states[:len(tree)], problem.goal).min())
+    expected = (0.0 if term else -closest / scale) + 1.0 + (base.unwrapped.success_reward if term else 0.0)
+    assert total == pytest.approx(expected, abs=1e-6)
