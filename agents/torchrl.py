@@ -33,27 +33,31 @@ def _encoder(observation_space: spaces.Dict, encoder: EncoderModule | None, enco
 
 
 def make_gaussian_head(embed_dim: int, action_dim: int, hidden: int = 64, num_cells: int = 2,
-                       in_key: str = "embed") -> TensorDictModule:
-    """``"embed"`` -> ``"loc"``, ``"scale"`` (pre-squash Normal parameters), an MLP."""
+                       in_key: str = "embed", init_scale: float = 1.0) -> TensorDictModule:
+    """``"embed"`` -> ``"loc"``, ``"scale"`` (pre-squash Normal parameters), an MLP.
+
+    ``init_scale``: the scale for a zero MLP output (``NormalParamExtractor``'s biased softplus).
+    """
     net = nn.Sequential(MLP(in_features=embed_dim, out_features=2 * action_dim, num_cells=[hidden] * num_cells,
                             activation_class=nn.ReLU),
-                        NormalParamExtractor())
+                        NormalParamExtractor(scale_mapping=f"biased_softplus_{float(init_scale)}"))
     return TensorDictModule(net, in_keys=[in_key], out_keys=["loc", "scale"])
 
 
 def make_actor(observation_space: spaces.Dict, action_space: spaces.Box, *, encoder: EncoderModule | None = None,
-               head_hidden: int = 64, **encoder_kw) -> ProbabilisticActor:
+               head_hidden: int = 64, init_scale: float = 1.0, **encoder_kw) -> ProbabilisticActor:
     """encoder -> ``"embed"`` -> Gaussian head -> ``"loc"``/``"scale"`` -> ``TanhNormal`` on the box.
 
     ``return_log_prob=True``: the actor writes the action's log-probability under TorchRL's
     default key (``actor.log_prob_key``; ``"action_log_prob"`` in TorchRL 0.14, what
     ``ClipPPOLoss`` reads). ``encoder_kw`` go to ``TreeEncoder.from_space`` (or pass a built
-    ``encoder`` to share it with :func:`make_value`).
+    ``encoder`` to share it with :func:`make_value`); ``init_scale`` is the head's initial scale.
     """
     enc = _encoder(observation_space, encoder, encoder_kw)
     low = torch.as_tensor(np.asarray(action_space.low, np.float32))
     high = torch.as_tensor(np.asarray(action_space.high, np.float32))
-    head = make_gaussian_head(enc.out_channels, int(low.shape[-1]), head_hidden, in_key=enc.out_keys[0])
+    head = make_gaussian_head(enc.out_channels, int(low.shape[-1]), head_hidden, in_key=enc.out_keys[0],
+                              init_scale=init_scale)
     return ProbabilisticActor(TensorDictSequential(enc, head), in_keys=["loc", "scale"], out_keys=["action"],
                               distribution_class=TanhNormal, distribution_kwargs={"low": low, "high": high},
                               return_log_prob=True)

@@ -335,3 +335,36 @@ def test_training_wrappers():
     closest = float(problem.distance(tree.states[:len(tree)], problem.goal).min())
     expected = (0.0 if term else -closest / scale) + 1.0 + (base.unwrapped.success_reward if term else 0.0)
     assert total == pytest.approx(expected, abs=1e-6)
+
+
+def _docs_rl():
+    from pathlib import Path
+    return (Path(__file__).resolve().parents[1] / "docs" / "rl.md").read_text()
+
+
+def test_docs_tiny_command_runs(tmp_path):
+    """The smallest training command of docs/rl.md, as written (output redirected to tmp_path)."""
+    import shlex
+
+    from train.cli import main
+    line = next(ln for ln in _docs_rl().splitlines() if ln.startswith("gnn-mp train rl") and "runs/tiny" in ln)
+    argv = shlex.split(line)[1:]
+    argv[argv.index("--out") + 1] = str(tmp_path / "tiny")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(argv + ["--no-progress"]) == 0
+    assert (tmp_path / "tiny" / "best.pt").exists()
+
+
+def test_docs_python_block_runs():
+    """The python block of docs/rl.md (it loads the shipped maze2d policy)."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+    blocks = re.findall(r"```python\n(.*?)```", _docs_rl(), re.S)
+    assert blocks
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", "\n".join(blocks)], cwd=root, capture_output=True, text=True,
+                         timeout=300, env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    assert out.returncode == 0, out.stderr[-2000:]

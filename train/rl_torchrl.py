@@ -12,6 +12,7 @@ split ``val`` with checkpoints (the policy exported to the sampler ``rl-ppo-torc
 
 from __future__ import annotations
 
+import math
 import time
 from functools import partial
 
@@ -58,7 +59,8 @@ def train(args: RLArgs) -> RunResult:
     env = make_batched_env(args)
 
     # 2. actor (TanhNormal on [-1, 1]) and critic, each over its own TreeEncoder
-    actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0], **args.encoder_kwargs())
+    actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
+                       init_scale=float(math.exp(args.log_std_init)), **args.encoder_kwargs())
     value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
     if args.init_from is not None:
         encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ == "TreeEncoder"]

@@ -127,10 +127,12 @@ class TorchRLPPOPolicy(RLPolicy):
     """The actor of :func:`agents.torchrl.make_actor`: the same Gaussian head (MLP +
     ``NormalParamExtractor``), ``TanhNormal`` on the box."""
 
-    def __init__(self, encoder: Mapping[str, Any], action_dim: int, head_hidden: int = 64) -> None:
+    def __init__(self, encoder: Mapping[str, Any], action_dim: int, head_hidden: int = 64,
+                 init_scale: float = 1.0) -> None:
         super().__init__(encoder, action_dim)
         from agents.torchrl import make_gaussian_head
-        self.head = make_gaussian_head(self.encoder.out_channels, self.action_dim, int(head_hidden)).module
+        self.head = make_gaussian_head(self.encoder.out_channels, self.action_dim, int(head_hidden),
+                                       init_scale=init_scale).module
 
     def params(self, embed):
         return self.head(embed)
@@ -191,10 +193,12 @@ def policy_from_torchrl(actor: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
     sequential = actor.module[0] if hasattr(actor, "module") else actor
     encoder_module, head = sequential.module[0], sequential.module[1]
     encoder = encoder_module.encoder
-    mlp = head.module[0]
+    mlp, extractor = head.module[0], head.module[1]
     linears = [m for m in mlp.modules() if isinstance(m, nn.Linear)]
+    mapping = extractor.scale_mapping
+    init_scale = float(mapping.forward(torch.zeros(1)).item()) if isinstance(mapping, nn.Module) else 1.0
     args = {"encoder": encoder_config(encoder), "action_dim": linears[-1].out_features // 2,
-            "head_hidden": linears[0].out_features}
+            "head_hidden": linears[0].out_features, "init_scale": round(init_scale, 6)}
     policy = TorchRLPPOPolicy(**args)
     policy.encoder.load_state_dict(encoder.state_dict())
     policy.head.load_state_dict(head.module.state_dict())
