@@ -26,7 +26,7 @@ from torchrl.record.loggers import TensorboardLogger
 from agents.models.rl import policy_from_torchrl, warm_start_encoder
 from agents.torchrl import make_actor, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl_common import Evaluator, RLArgs, RunResult, check_args, fmt_seconds, write_config
+from train.rl_common import Evaluator, RLArgs, RunResult, check_args, fmt_seconds, human_bytes, write_config
 
 
 def make_env(args: RLArgs, seed: int) -> GymWrapper:
@@ -120,7 +120,8 @@ def train(args: RLArgs) -> RunResult:
     best = evaluator.finish(steps)
     if not env.is_closed:
         env.close()
-    print(f"trained {steps:,} steps in {fmt_seconds(train_time)}; policy {best}")
+    print(f"trained {steps:,} steps in {fmt_seconds(train_time)} (batches of {human_bytes(batch_bytes)}); "
+          f"policy {best}")
     return RunResult(best, steps, train_time, batch_bytes, evaluator.rows)
 
 
