@@ -95,10 +95,10 @@ class RLArgs:
     eval_max_steps: int = arg(4000, "planner iterations per evaluation problem (then a failure)", parse=positive_int)
     uniform_mix: float = arg(0.5, "probability of a uniform sample instead of the policy's, in training "
                              "(UniformMixAction) and in the sampler", parse=non_negative_float)
-    tune_mix: list[float] | None = arg(None, "after training, pick the sampler's uniform_mix among these on "
-                                       "split val (e.g. 0,0.25,0.5)", parse=_mixes)
+    tune_mix: list[float] | None = arg(None, "after training, pick the final policy's uniform_mix among these "
+                                       "on split val (e.g. 0.25,0.5,0.75)", parse=_mixes)
     out: Path | None = arg(None, "run directory (default: runs/rl-<lib>-<algo>-<task>-s<seed>)")
-    ship: bool = arg(False, "copy the best policy to agents/checkpoints/<sampler>_<task>.pt (+ .json)")
+    ship: bool = arg(False, "copy the final policy to agents/checkpoints/<sampler>_<task>.pt (+ .json)")
     progress: bool = arg(True, "hide the progress bar")
     threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
 
@@ -286,12 +286,12 @@ class Evaluator:
         if not self.rows or self.rows[-1]["steps"] != steps:
             self(steps)
         best = self.run_dir / "best.pt"
-        if self.args.tune_mix:
-            tune_uniform_mix(best, self.args)
+        if self.args.tune_mix:   # of the final policy, the one --ship copies
+            tune_uniform_mix(self.run_dir / "policy.pt", self.args)
         plot_learning_curve(self.rows, self.run_dir / "learning_curve.png",
                             title=f"{self.args.lib} {self.args.algo.upper()} on {self.args.task}")
-        if self.args.ship:
-            ship(best, self.args.sampler_name, self.args.task)
+        if self.args.ship:   # the final policy: what the command trained (best.pt is the val pick)
+            ship(self.run_dir / "policy.pt", self.args.sampler_name, self.args.task)
         return best
 
 
