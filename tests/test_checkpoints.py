@@ -235,7 +235,7 @@ def test_no_unsafe_torch_load_in_the_sources():
 # ----------------------------------------------------------------------------- shipped files
 
 
-@pytest.mark.parametrize("path", sorted(SHIPPED_DIR.glob("*.pt")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted(SHIPPED_DIR.glob("critical_*.pt")), ids=lambda p: p.name)   # rl-*: test_rl.py
 def test_shipped_checkpoints_are_in_the_current_format(path):
     raw = torch.load(path, weights_only=True, map_location="cpu")
     assert raw["format_version"] == FORMAT_VERSION

@@ -368,3 +368,20 @@ def test_docs_python_block_runs():
     out = subprocess.run([sys.executable, "-c", "\n".join(blocks)], cwd=root, capture_output=True, text=True,
                          timeout=300, env={**__import__("os").environ, "PYTHONPATH": str(root)})
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+@pytest.mark.parametrize("path", sorted(__import__("agents.checkpoints", fromlist=["SHIPPED_DIR"]).SHIPPED_DIR
+                                        .glob("rl-*.pt")), ids=lambda p: p.name)
+def test_shipped_rl_checkpoints(path):
+    """Shipped RL policies: current format, a policy kind, a sidecar, loadable by name for their task."""
+    from agents.checkpoints import FORMAT_VERSION, read_checkpoint
+    from agents.samplers import load_sampler
+    from agents.samplers.rl import RL_SAMPLERS
+    name, task = path.stem.split("_")
+    record = read_checkpoint(path, expected_kind=RL_SAMPLERS[name])
+    assert record["format_version"] == FORMAT_VERSION and record["meta"]["task"] == task
+    assert json.loads(path.with_suffix(".json").read_text())["task"] == task
+    env = gym.make(f"GNNMP/{'Maze2D' if task == 'maze2d' else 'Pendulum'}RRT-v0", copy_observations=False)
+    sampler = load_sampler(name, env.action_space.low, env.action_space.high, task=task, seed=0)
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(sampler.act(obs))
