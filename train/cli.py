@@ -33,6 +33,7 @@ PASSTHROUGH: dict[str, tuple[str, str]] = {
 #: ``gnn-mp train NAME ...`` -> (module, argv prefix).
 TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
     "critical": ("train.critical", ["train"]),
+    "sampler": ("train.tree_samplers.cli", []),
 }
 
 

@@ -70,7 +70,7 @@ class IncrementalTreeGNN:
         self.feature_scale, self.step = buf(m.feature_scale), buf(m.step_scale)
         self.periodic = m.periodic.numpy().copy()
         self.input = _linears(m.input)
-        H, d = self.H, self.d
+        H = self.H
         # First message layer split into sender / receiver parts: W [h_j, (x_j - x_i)/s] + b.
         self.messages = []
         for conv_p, conv_k in zip(m.parent_convs, m.knn_convs):
