@@ -86,6 +86,23 @@ class TreeDataset:
     def __len__(self) -> int:
         return len(self.start)
 
+    def subset(self, problems: list[int]) -> "TreeDataset":
+        """The dataset of the given problems only (offsets rebuilt)."""
+        def ragged(ptr: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+            pieces = [[a[ptr[p]:ptr[p + 1]] for p in problems] for a in arrays]
+            sizes = [ptr[p + 1] - ptr[p] for p in problems]
+            return (np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+                    *[np.concatenate(ps) for ps in pieces])
+        node_ptr, states, feats, parent, tree_id = ragged(self.node_ptr, self.states, self.node_features,
+                                                          self.parent, self.tree_id)
+        path_ptr, path_nodes = ragged(self.path_ptr, self.path_nodes)
+        iter_ptr, nodes, active, sample, created = ragged(self.iter_ptr, self.iter_nodes, self.iter_active,
+                                                          self.iter_sample, self.iter_created)
+        idx = np.asarray(problems, dtype=np.int64)
+        return TreeDataset(self.config, node_ptr, states, feats, parent, tree_id, path_ptr, path_nodes,
+                           self.start[idx], self.goal[idx], self.obstacles[idx], self.problem_index[idx],
+                           iter_ptr, nodes, active, sample, created)
+
     def tree(self, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b = self.node_ptr[p], self.node_ptr[p + 1]
         return self.states[a:b], self.parent[a:b], self.tree_id[a:b]

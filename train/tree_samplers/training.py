@@ -164,11 +164,11 @@ def evaluate_loss(model: torch.nn.Module, adapter, items: list, batch_size: int 
     return total / max(count, 1)
 
 
-def split_items(items: list, seed: int) -> tuple[list, list]:
-    """A fixed tenth of the problems for validation."""
-    order = np.random.default_rng(seed).permutation(len(items))
-    cut = max(1, len(items) // 10)
-    return [items[i] for i in order[cut:]], [items[i] for i in order[:cut]]
+def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDataset]:
+    """(training, validation) problems: a fixed tenth (at least one) held out."""
+    order = np.random.default_rng(seed).permutation(len(data))
+    cut = max(1, len(data) // 10)
+    return data.subset(sorted(order[cut:].tolist())), data.subset(sorted(order[:cut].tolist()))
 
 
 # ---------------------------------------------------------------------------- the whole job
@@ -190,31 +190,38 @@ def train(args: TrainArgs) -> dict[str, Any]:
     data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
     data = load_or_generate(data_config, args.data_dir, progress=args.progress)
     rng = np.random.default_rng(args.seed)
-    items = adapter.items(model, data, args.view, rng, TASKS[args.task].max_snapshots)
-    if len(items) < 2:
-        raise TrainError(f"only {len(items)} training item(s) in {data_config.file_name()}; raise --problems")
-    train_items, val_items = split_items(items, args.seed)
+    snapshots = TASKS[args.task].max_snapshots
+    if len(data) < 2:
+        raise TrainError(f"only {len(data)} solved problem(s) in {data_config.file_name()}; raise --problems")
+    train_data, val_data = split_problems(data, args.seed)
+    train_items = adapter.items(model, train_data, args.view, rng, snapshots)
+    val_items = adapter.items(model, val_data, args.view, rng, snapshots)
 
     from torch.utils.tensorboard import SummaryWriter
     writer = SummaryWriter(str(out / "tb"))
     resume_path = out / "resume.pt"
     resume = load_training_state(resume_path)["training_state"] if args.resume and resume_path.exists() else None
     summary: dict[str, Any] = {"config": _plain(asdict(args)), "dataset": data_config.file_name(),
-                               "dataset_problems_solved": len(data), "items": len(items)}
+                               "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
     # 2. the first phase
     phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed, writer,
                   "phase0", args.progress, resume=resume, resume_path=resume_path)]
     # 3. DAgger
     settings = dict(TASKS[args.task].sampler.get(args.model, {}))
     for r in range(args.dagger_rounds):
-        own = plan_with(model, ctor_args, adapter, args, settings, round_index=r)
-        new_items = adapter.items(model, own, "grown", rng, TASKS[args.task].max_snapshots)
-        more_train, more_val = split_items(new_items, args.seed + r + 1)
-        train_items, val_items = train_items + more_train, val_items + more_val
+        own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r),
+                                            args.seed + r + 1)
+        train_items += adapter.items(model, own_train, "grown", rng, snapshots)
+        val_items += adapter.items(model, own_val, "grown", rng, snapshots)
         phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
                           args.batch_size, args.seed + r + 1, writer, f"dagger{r + 1}", args.progress))
     summary["phases"] = phases
     summary["train_seconds"] = time.perf_counter() - started
+    # The train/online mismatch: the loss on both views of the held-out problems (online the
+    # sampler sees grown trees, whichever view it was trained on).
+    summary["validation_loss_by_view"] = {
+        view: evaluate_loss(model, adapter, adapter.items(model, val_data, view, np.random.default_rng(1), snapshots))
+        for view in VIEWS}
 
     # 4. save, evaluate, ship
     meta = {"task": args.task, "sampler": settings, "config": summary["config"], "dataset": summary["dataset"]}
