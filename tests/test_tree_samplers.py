@@ -94,3 +94,21 @@ def test_a_checkpoint_for_another_task_is_refused(tmp_path):
     path = save_checkpoint(tmp_path / "m.pt", net, adapter.kind, ctor_args, meta={"task": "maze2d"})
     with pytest.raises(ValueError, match="trained for task 'maze2d'"):
         load_sampler("gnn", env.action_space.low, env.action_space.high, task="arm", checkpoint=str(path))
+
+
+def test_training_resumes_from_its_state(tmp_path):
+    from agents.checkpoints import load_training_state
+    data = generate(TreeDataConfig(task="maze2d", problems=4, max_nodes=1500), progress=False)
+    env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=50)
+    adapter = adapter_for("gnn", "maze2d")
+    net, _ = adapter.build("maze2d", env.observation_space)
+    items = adapter.items(net, data, "grown", np.random.default_rng(0), 8)
+    state_path = tmp_path / "resume.pt"
+    first = fit(net, adapter, items, items, minutes=0.02, lr=1e-3, batch_size=2, seed=0, writer=None, phase="a",
+                progress=False, resume_path=state_path)
+    state = load_training_state(state_path)
+    assert state["epoch"] == first["epochs"] == len(state["history"])
+    fresh, _ = adapter.build("maze2d", env.observation_space)
+    second = fit(fresh, adapter, items, items, minutes=0.04, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
+                 progress=False, resume=state)
+    assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]

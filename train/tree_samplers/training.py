@@ -200,7 +200,9 @@ def train(args: TrainArgs) -> dict[str, Any]:
     from torch.utils.tensorboard import SummaryWriter
     writer = SummaryWriter(str(out / "tb"))
     resume_path = out / "resume.pt"
-    resume = load_training_state(resume_path)["training_state"] if args.resume and resume_path.exists() else None
+    if args.resume and not resume_path.exists():
+        raise TrainError(f"--resume: {resume_path} does not exist")
+    resume = load_training_state(resume_path) if args.resume else None
     summary: dict[str, Any] = {"config": _plain(asdict(args)), "dataset": data_config.file_name(),
                                "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
     # 2. the first phase
