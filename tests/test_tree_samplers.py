@@ -109,6 +109,6 @@ def test_training_resumes_from_its_state(tmp_path):
     state = load_training_state(state_path)
     assert state["epoch"] == first["epochs"] == len(state["history"])
     fresh, _ = adapter.build("maze2d", env.observation_space)
-    second = fit(fresh, adapter, items, items, minutes=0.04, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
+    second = fit(fresh, adapter, items, items, minutes=0.3, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
                  progress=False, resume=state)
     assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]
