@@ -193,6 +193,19 @@ class TreeGNN(nn.Module):
                  F.one_hot(active.long(), self.num_trees).float(), means.flatten(1), torch.log1p(counts) / 5]
         return self.query(torch.cat(parts, -1))
 
+    def snapshot_context(self, h: Tensor, tree_id: Tensor, start: Tensor, goal: Tensor, sizes: Tensor,
+                         active: Tensor) -> Tensor:
+        """``q`` of every snapshot (the first ``sizes[t]`` nodes): running means and counts of
+        each tree's embeddings, read off cumulative sums in insertion order."""
+        onehot = F.one_hot(tree_id.long(), self.num_trees).float()                     # (N, trees)
+        csum = torch.cat([h.new_zeros(1, self.num_trees, h.shape[1]),
+                          torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])          # (N+1, trees, H)
+        ccount = torch.cat([h.new_zeros(1, self.num_trees), torch.cumsum(onehot, 0)])  # (N+1, trees)
+        counts = ccount[sizes]
+        T = len(sizes)
+        return self.context(start.expand(T, -1), goal.expand(T, -1), active,
+                            csum[sizes] / counts.clamp(min=1)[..., None], counts)
+
     def node_heads(self, h: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """Per node: key ``(N, H)``, offset and log sigma ``(N, num_trees, d)``."""
         d = self.state_dim
@@ -214,14 +227,7 @@ class TreeGNN(nn.Module):
         ``sizes[t]`` nodes (insertion order), its label the next sample ``labels[t]``."""
         h = self.embed(nodes, features, parent, knn)
         key, offset, log_sigma = self.node_heads(h)
-        onehot = F.one_hot(tree_id.long(), self.num_trees).float()                     # (N, trees)
-        csum = torch.cat([h.new_zeros(1, self.num_trees, h.shape[1]),
-                          torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])          # (N+1, trees, H)
-        ccount = torch.cat([h.new_zeros(1, self.num_trees), torch.cumsum(onehot, 0)])  # (N+1, trees)
-        counts = ccount[sizes]
-        means = csum[sizes] / counts.clamp(min=1)[..., None]
-        T = len(sizes)
-        q = self.context(start.expand(T, -1), goal.expand(T, -1), active, means, counts)
+        q = self.snapshot_context(h, tree_id, start, goal, sizes, active)
         logits = self.logits(q, key)
         valid = torch.arange(len(nodes))[None, :] < sizes[:, None]
         log_w = torch.log_softmax(logits.masked_fill(~valid, -1e9), -1)                 # (T, N)
@@ -330,14 +336,8 @@ class TreeGNNCVAE(_Gaussian):
                  kl_weight: float = 1.0, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
         """(summed reconstruction + KL terms, number of snapshots) of one run."""
         g = self.gnn
-        h = g.embed(nodes, features, parent, knn)
-        onehot = F.one_hot(tree_id.long(), g.num_trees).float()
-        csum = torch.cat([h.new_zeros(1, g.num_trees, h.shape[1]), torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])
-        ccount = torch.cat([h.new_zeros(1, g.num_trees), torch.cumsum(onehot, 0)])
-        counts = ccount[sizes]
+        q = g.snapshot_context(g.embed(nodes, features, parent, knn), tree_id, start, goal, sizes, active)
         T = len(sizes)
-        q = g.context(start.expand(T, -1), goal.expand(T, -1), active, csum[sizes] / counts.clamp(min=1)[..., None],
-                      counts)
         mu, logstd = self.encode(labels, q)
         z = self.reparametrize(mu, logstd, generator)
         err = wrap_periodic(labels - self.decode(z, q), g.periodic) / g.state_scale

@@ -245,7 +245,30 @@ class _MixedSampler(Sampler):
         return self.act(obs)
 
 
-class TreeGNNSampler(_MixedSampler):
+class _TreeContextSampler(_MixedSampler):
+    """A sampler that reads the tree through an :class:`IncrementalTreeGNN` (per-episode caches)."""
+
+    def _attach(self, gnn: TreeGNN) -> None:
+        self.engine = IncrementalTreeGNN(gnn)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if hasattr(self, "engine"):
+            self.engine.clear()
+
+    def tree_context(self, obs: Mapping) -> tuple[np.ndarray, int]:
+        """Ingest the observation's new nodes; the tree context ``q`` and the active tree."""
+        self.engine.ingest(obs)
+        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+        q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
+        return q, active
+
+    def _stateless_act(self, obs: Mapping) -> np.ndarray:
+        self.engine.clear()
+        return self.act(obs)
+
+
+class TreeGNNSampler(_TreeContextSampler):
     """The GNN sampler (Algorithm 1): a node of the tree ~ softmax(key . q / temperature), then
     a Gaussian around its learned offset (scale times ``sigma_scale``)."""
 
@@ -255,28 +278,16 @@ class TreeGNNSampler(_MixedSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.periodic.numpy())
         self.model = model.eval()
-        self.engine = IncrementalTreeGNN(model)
+        self._attach(model)
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
 
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        if hasattr(self, "engine"):
-            self.engine.clear()
-
     def model_sample(self, obs: Mapping) -> np.ndarray:
+        q, active = self.tree_context(obs)
         e = self.engine
-        e.ingest(obs)
-        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
-        q = e.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
         p, shift = e.mixture(q, active, self.temperature)
-        m = int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right"))
-        m = min(m, e.n - 1)
+        m = min(int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right")), e.n - 1)
         sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
         return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
-
-    def _stateless_act(self, obs: Mapping) -> np.ndarray:
-        self.engine.clear()
-        return self.act(obs)
 
 
 class TreeCVAESampler(_MixedSampler):
@@ -307,7 +318,7 @@ class TreeCVAESampler(_MixedSampler):
         return self._queue.pop()
 
 
-class TreeGNNCVAESampler(_MixedSampler):
+class TreeGNNCVAESampler(_TreeContextSampler):
     """The GNN-CVAE: the causal GNN summarises the tree (incrementally, as the GNN sampler),
     the decoder turns a latent draw and that context into the next sample."""
 
@@ -316,26 +327,13 @@ class TreeGNNCVAESampler(_MixedSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.gnn.periodic.numpy())
         self.model = model.eval()
-        self.engine = IncrementalTreeGNN(model.gnn)
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        if hasattr(self, "engine"):
-            self.engine.clear()
+        self._attach(model.gnn)
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        e = self.engine
-        e.ingest(obs)
-        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
-        q = torch.as_tensor(e.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64),
-                                      active), dtype=torch.float32)
+        q, _ = self.tree_context(obs)
         z = torch.as_tensor(self.rng.standard_normal(self.model.latent_channels), dtype=torch.float32)
         with torch.no_grad():
-            return self.model.decode(z[None], q[None])[0].double().numpy()
-
-    def _stateless_act(self, obs: Mapping) -> np.ndarray:
-        self.engine.clear()
-        return self.act(obs)
+            return self.model.decode(z[None], torch.as_tensor(q, dtype=torch.float32)[None])[0].double().numpy()
 
 
 def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
