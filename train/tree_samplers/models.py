@@ -8,7 +8,6 @@ An adapter is the only model-specific piece of ``gnn-mp train sampler``: the loo
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol, Sequence
 
@@ -176,15 +175,5 @@ def adapter_for(model: str, task: str) -> Adapter:
 TASK_HEADS: dict[tuple[str, str], Adapter] = {}
 
 
-def snapshot_count(items: Sequence[Any]) -> int:
-    return sum(len(getattr(it, "sizes", getattr(it, "states", []))) for it in items)
-
-
-def log_uniform_density(observation_space: spaces.Dict) -> float:
-    """log of the uniform sampler's density over the state box (a reference for the NLLs)."""
-    start = observation_space["start"]
-    return -float(np.sum(np.log(np.asarray(start.high, np.float64) - np.asarray(start.low, np.float64))))
-
-
 __all__ = ["ADAPTERS", "Adapter", "CVAEAdapter", "GNNAdapter", "GNNCVAEAdapter", "TASKS", "TASK_HEADS", "TaskDefaults",
-           "adapter_for", "log_uniform_density", "math", "snapshot_count", "space_scales"]
+           "adapter_for", "space_scales"]

@@ -21,7 +21,7 @@ import math
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -305,5 +305,4 @@ def _plain(d: dict) -> dict:
     return {k: (str(v) if isinstance(v, Path) else v) for k, v in d.items()}
 
 
-__all__ = ["MODELS", "TrainArgs", "TrainError", "evaluate_online", "fit", "plot_learning_curve", "train",
-           "replace"]
+__all__ = ["MODELS", "TrainArgs", "TrainError", "evaluate_online", "fit", "plot_learning_curve", "train"]
