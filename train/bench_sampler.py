@@ -13,7 +13,8 @@ Run: ``gnn-mp bench-sampler`` (or ``python -m train.bench_sampler``).
    rounds is reported in microseconds per call. Each round makes at most ``--calls`` calls and
    stops early after ``--round-seconds``, so slow (learned) samplers finish too. Learned
    samplers take ``--checkpoint NAME=PATH`` and ``--sampler-module MODULE`` as in
-   ``gnn-mp benchmark``; a sampler that does not support a task prints ``n/a``.
+   ``gnn-mp benchmark``; a sampler that does not support a task (or has no weights for it)
+   prints ``n/a``.
 """
 
 from __future__ import annotations
@@ -160,7 +161,7 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
             kwargs = {"checkpoint": checkpoints[name]} if name in checkpoints else {}
             try:
                 sampler = load_sampler(name, space.low, space.high, task=task, seed=args.seed, **kwargs)
-            except ValueError:
+            except (ValueError, FileNotFoundError):   # rejects the task, or no weights shipped for it
                 out[name, task] = None
                 continue
             out[name, task] = time_act(sampler, obs, args)

@@ -76,6 +76,18 @@ class IncrementalTreeScorer:
         self.multi_tree = False
         self.front[:] = 0.0
 
+    def _sq_dist(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``(A, B)`` squared planner distances between rows of ``a`` and ``b`` (states in their
+        bounds, so a periodic difference is at most one period: ``min(|d|, 2 pi - |d|)``)."""
+        out = np.zeros((len(a), len(b)))
+        for c in range(self.d):
+            diff = np.abs(a[:, c, None] - b[None, :, c])
+            if self.periodic[c]:
+                diff = np.minimum(diff, 2 * np.pi - diff)
+            diff *= self.weights[c]
+            out += diff * diff
+        return out
+
     def _angles(self, x: np.ndarray) -> list[np.ndarray]:
         a = x[..., self.angle_cols]
         return [np.sin(a), np.cos(a)]
@@ -116,8 +128,7 @@ class IncrementalTreeScorer:
         # causal k-NN under the planner's metric: earlier nodes of the same tree, ties to the earlier node
         rows = np.arange(i0, n)
         if self.k:
-            diff = _wrap(self.states[None, :n] - x[:, None], self.periodic) * self.weights
-            dist = (diff * diff).sum(-1)
+            dist = self._sq_dist(x, self.states[:n])
             dist[(np.arange(n)[None, :] >= rows[:, None]) | (self.tree_id[None, :n] != tid[:, None])] = np.inf
             near = np.argsort(dist, axis=1, kind="stable")[:, :min(self.k, n)]
             near_ok = np.isfinite(np.take_along_axis(dist, near, 1))
@@ -154,8 +165,7 @@ class IncrementalTreeScorer:
         if self.multi_tree:
             idx = np.flatnonzero(self.tree_id[:self.n] == active)
             S = S[idx]
-        diff = _wrap(samples[:, None] - S[None], self.periodic) * self.weights
-        j = np.argmin((diff * diff).sum(-1), axis=1)
+        j = np.argmin(self._sq_dist(samples, S), axis=1)
         return j if idx is None else idx[j]
 
     def logits(self, samples: np.ndarray, near: np.ndarray) -> np.ndarray:

@@ -177,6 +177,7 @@ class ScorerAdapter:
     cross-entropy. RRT (one tree) only."""
 
     kind = "tree/gnn-scorer"
+    loss_name = "BCE per sample"
 
     def ctor_args(self, task: str, observation_space: spaces.Dict, **overrides) -> dict:
         t = TASKS[task]
