@@ -146,7 +146,7 @@ def trained_checkpoint(adapter_and_space, tmp_path_factory):
         opt.zero_grad()
         loss.backward()
         opt.step()
-    assert count == sum(len(r.labels) for r in items) and float(loss) < first
+    assert count == sum(len(r.labels) for r in items) and loss.item() < first
     settings = dict(TASKS["pendulum"].sampler["gnn"])
     path = save_checkpoint(tmp_path_factory.mktemp("scorer") / "model.pt", model, adapter.kind, ctor_args,
                            meta={"task": "pendulum", "sampler": settings})
@@ -185,3 +185,9 @@ def test_save_load_gives_identical_proposals(trained_checkpoint, grown_obs):
     np.testing.assert_array_equal(runs[0], runs[1])
     np.testing.assert_array_equal(runs[1], runs[2])
     assert len(np.unique(runs[0], axis=0)) > 30
+
+
+def test_shipped_pendulum_gnn_is_the_scorer():
+    sampler = load_sampler("gnn", LOW, HIGH, task="pendulum", seed=0)
+    assert isinstance(sampler, TreeScorerSampler)
+    assert (sampler.uniform_mix, sampler.goal_bias, sampler.candidates, sampler.temperature) == (0.2, 0.05, 16, 1.0)

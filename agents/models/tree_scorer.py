@@ -136,7 +136,8 @@ class TreeGNNScorer(nn.Module):
                  depth_scale: float = 40.0) -> None:
         super().__init__()
         d = int(state_dim)
-        self.state_dim, self.hidden_channels, self.num_layers, self.knn = d, int(hidden_channels), int(num_layers), int(knn)
+        self.state_dim, self.hidden_channels = d, int(hidden_channels)
+        self.num_layers, self.knn = int(num_layers), int(knn)
         self.depth_scale = float(depth_scale)
 
         def vec(values, default: float, n: int) -> Tensor:

@@ -1,4 +1,5 @@
-"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`.
+"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`
+(the GNN sample scorer, the pendulum's GNN head, is :mod:`agents.samplers.tree_scorer`).
 
 Every sampler mixes its model with uniform samples at a fixed rate (``uniform_mix``, which
 keeps the planner probabilistically complete) and may add goal samples (``goal_bias``):

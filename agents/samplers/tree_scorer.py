@@ -109,7 +109,7 @@ class IncrementalTreeScorer:
         if n == i0:
             return n
         self._grow(n)
-        d, H = self.d, self.H
+        d = self.d
         x = np.asarray(obs["nodes"][i0:n], dtype=np.float64)
         feats = np.asarray(obs["node_features"][i0:n], dtype=np.float64)
         tid = feats[:, 2 * d].astype(np.int64)
@@ -178,7 +178,8 @@ class IncrementalTreeScorer:
                                *self._angles(samples), *self._angles(to_goal)], -1)
         front = self.front[near]
         total, counts = front[:, :self.H], front[:, self.H:]
-        z = np.concatenate([self.h[self.L, near], total / (1 + counts.sum(-1, keepdims=True)), np.log1p(counts), cand], -1)
+        z = np.concatenate([self.h[self.L, near], total / (1 + counts.sum(-1, keepdims=True)), np.log1p(counts), cand],
+                           -1)
         return _run_mlp(self.head, z)[:, 0]
 
 
