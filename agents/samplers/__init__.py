@@ -67,8 +67,8 @@ def _tree_sampler(name: str) -> SamplerFactory:
     return factory
 
 
-register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN reading the tree; shipped "
-                 "weights per task, mixed with uniform")
+register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree "
+                 "(pendulum: a scorer of 16 uniform candidates); shipped weights per task with their uniform/goal mix")
 register_sampler("cvae", _tree_sampler("cvae"), "learned baseline (Ichter et al. 2018): CVAE on start, goal and "
                  "obstacles; ignores the tree")
 register_sampler("gnn-cvae", _tree_sampler("gnn-cvae"), "learned baseline: CVAE conditioned on the causal GNN's "

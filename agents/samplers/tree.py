@@ -1,4 +1,5 @@
-"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`.
+"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`
+(the GNN sample scorer, the pendulum's GNN head, is :mod:`agents.samplers.tree_scorer`).
 
 Every sampler mixes its model with uniform samples at a fixed rate (``uniform_mix``, which
 keeps the planner probabilistically complete) and may add goal samples (``goal_bias``):
@@ -23,6 +24,7 @@ generator (``act``), so a benchmark run is reproducible.
 
 from __future__ import annotations
 
+import importlib
 import math
 from typing import Mapping
 
@@ -360,14 +362,18 @@ def reference_embeddings(model: TreeGNN, obs: Mapping) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------------- registry
-#: Checkpoint kind -> (sampler class, the sampling settings a checkpoint's ``meta["sampler"]`` may carry).
-KIND_SAMPLERS: dict[str, tuple[type, tuple[str, ...]]] = {
+#: Checkpoint kind -> (sampler class or ``"module:Class"`` imported on first use, the sampling
+#: settings a checkpoint's ``meta["sampler"]`` may carry).
+KIND_SAMPLERS: dict[str, tuple[type | str, tuple[str, ...]]] = {
     "tree/gnn": (TreeGNNSampler, ("uniform_mix", "goal_bias", "temperature", "sigma_scale")),
+    "tree/gnn-scorer": ("agents.samplers.tree_scorer:TreeScorerSampler",   # builds on _MixedSampler above
+                        ("uniform_mix", "goal_bias", "candidates", "temperature")),
     "tree/cvae": (TreeCVAESampler, ("uniform_mix", "goal_bias", "proposals")),
     "tree/gnn-cvae": (TreeGNNCVAESampler, ("uniform_mix", "goal_bias")),
 }
-#: Sampler name -> the checkpoint kinds it accepts (a task ships the GNN head that works best for it).
-NAME_KINDS: dict[str, tuple[str, ...]] = {"gnn": ("tree/gnn",), "cvae": ("tree/cvae",),
+#: Sampler name -> the checkpoint kinds it accepts (a task ships the GNN head that works best for it:
+#: the node mixture ``tree/gnn``, or the sample scorer ``tree/gnn-scorer`` on the pendulum).
+NAME_KINDS: dict[str, tuple[str, ...]] = {"gnn": ("tree/gnn", "tree/gnn-scorer"), "cvae": ("tree/cvae",),
                                           "gnn-cvae": ("tree/gnn-cvae",)}
 
 
@@ -391,6 +397,9 @@ def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | 
                                     f"train them with `gnn-mp train sampler --task {task} --model {name}`")
     model, record = load_checkpoint(checkpoint, expected_kind=NAME_KINDS[name])
     cls, allowed = KIND_SAMPLERS[record["kind"]]
+    if isinstance(cls, str):
+        module, _, attr = cls.partition(":")
+        cls = getattr(importlib.import_module(module), attr)
     meta = record.get("meta") or {}
     unknown = sorted(set(settings) - set(allowed))
     if unknown:

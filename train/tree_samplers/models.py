@@ -13,11 +13,14 @@ from typing import Any, Protocol, Sequence
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from gymnasium import spaces
 
 from agents.models.tree_samplers import TreeCVAE, TreeGNN, TreeGNNCVAE
+from agents.models.tree_scorer import TreeGNNScorer
+from gnn_mp_envs.tasks.pendulum import VELOCITY_WEIGHT
 from train.tree_samplers.data import TreeDataset
-from train.tree_samplers.runs import Run, make_run
+from train.tree_samplers.runs import Run, ScorerRun, make_run, make_scorer_run
 
 
 @dataclass(frozen=True)
@@ -27,7 +30,8 @@ class TaskDefaults:
     step_scale: float                      # ~ one extension in state units (relative positions, offsets)
     periodic: tuple[int, ...] = ()         # angle coordinates
     num_trees: int = 1                     # 2 for BiRRT
-    max_snapshots: int = 96                # snapshots per run in an epoch
+    max_snapshots: int = 96                # snapshots per run in an epoch (scorer: negative samples per run)
+    metric_weights: tuple[float, ...] | None = None   # the planner's nearest-neighbour metric (None: Euclidean)
     sampler: dict[str, dict[str, Any]] = field(default_factory=dict)   # model -> sampling settings
 
 
@@ -36,8 +40,10 @@ TASKS: dict[str, TaskDefaults] = {
     "maze2d": TaskDefaults(step_scale=0.05, num_trees=1,
                            sampler={"gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
                                     "cvae": {"uniform_mix": 0.5}, "gnn-cvae": {"uniform_mix": 0.5}}),
-    "pendulum": TaskDefaults(step_scale=0.4, periodic=(0,), num_trees=1,
-                             sampler={"gnn": {"uniform_mix": 0.2, "goal_bias": 0.05},
+    # The pendulum's "gnn" is the sample scorer (TASK_HEADS): M=16 candidates, 20% uniform, 5% goal.
+    "pendulum": TaskDefaults(step_scale=0.4, periodic=(0,), num_trees=1, metric_weights=(1.0, VELOCITY_WEIGHT),
+                             sampler={"gnn": {"uniform_mix": 0.2, "goal_bias": 0.05, "candidates": 16,
+                                              "temperature": 1.0},
                                       "cvae": {"uniform_mix": 0.5}, "gnn-cvae": {"uniform_mix": 0.5}}),
     "arm": TaskDefaults(step_scale=0.4, num_trees=2,
                         sampler={"gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
@@ -163,6 +169,51 @@ class CVAEAdapter:
         return value, len(x), metrics
 
 
+class ScorerAdapter:
+    """The GNN sample scorer (:class:`TreeGNNScorer`): items are runs of classification queries
+    built from the dataset's iteration records (every sample that created a solution-path node,
+    ``max_snapshots`` other samples per run; the ``view`` does not apply), the loss their binary
+    cross-entropy. RRT (one tree) only."""
+
+    kind = "tree/gnn-scorer"
+    loss_name = "BCE per sample"
+
+    def ctor_args(self, task: str, observation_space: spaces.Dict, **overrides) -> dict:
+        t = TASKS[task]
+        if t.num_trees != 1:
+            raise ValueError(f"the sample scorer supports RRT (one tree); task {task!r} plans {t.num_trees} trees")
+        d = int(observation_space["start"].shape[0])
+        args = {"state_dim": d, "hidden_channels": 64, "num_layers": 2, "knn": 6, **space_scales(observation_space),
+                "step_scale": [t.step_scale] * d, "periodic": list(t.periodic),
+                "metric_weights": list(t.metric_weights or [1.0] * d)}
+        args.update(overrides)
+        return args
+
+    def build(self, task, observation_space, **overrides):
+        args = self.ctor_args(task, observation_space, **overrides)
+        return TreeGNNScorer(**args), args
+
+    def items(self, model, data, view, rng, max_snapshots) -> list[ScorerRun]:
+        runs = [make_scorer_run(data, p, model, max_snapshots, rng) for p in range(len(data))]
+        return [r for r in runs if r is not None]
+
+    def loss(self, model, items, generator=None):
+        """Mean BCE over the queries of ``items`` (stacked into one disjoint graph: one forward)."""
+        offsets = np.concatenate([[0], np.cumsum([len(r.nodes) for r in items])])
+        shift = lambda t, o: torch.where(t >= 0, t + int(o), t)  # noqa: E731
+        nodes = torch.cat([r.nodes for r in items])
+        goal = torch.cat([r.goal.expand(len(r.nodes), -1) for r in items])
+        query_goal = torch.cat([r.goal.expand(len(r.near), -1) for r in items])
+        logits = model(nodes, torch.cat([r.features for r in items]),
+                       torch.cat([shift(r.parent, o) for r, o in zip(items, offsets)]),
+                       torch.cat([shift(r.knn, o) for r, o in zip(items, offsets)]), goal,
+                       torch.cat([r.near + int(o) for r, o in zip(items, offsets)]),
+                       torch.cat([r.sizes + int(o) for r, o in zip(items, offsets)]),
+                       torch.cat([r.samples for r in items]), query_goal)
+        labels = torch.cat([r.labels for r in items])
+        return F.binary_cross_entropy_with_logits(logits, labels), len(labels), {}
+
+
 ADAPTERS: dict[str, Adapter] = {"gnn": GNNAdapter(), "cvae": CVAEAdapter(), "gnn-cvae": GNNCVAEAdapter()}
 
 
@@ -172,8 +223,8 @@ def adapter_for(model: str, task: str) -> Adapter:
 
 
 #: (model, task) -> adapter, where a task's best GNN head is not the node mixture.
-TASK_HEADS: dict[tuple[str, str], Adapter] = {}
+TASK_HEADS: dict[tuple[str, str], Adapter] = {("gnn", "pendulum"): ScorerAdapter()}
 
 
-__all__ = ["ADAPTERS", "Adapter", "CVAEAdapter", "GNNAdapter", "GNNCVAEAdapter", "TASKS", "TASK_HEADS", "TaskDefaults",
-           "adapter_for", "space_scales"]
+__all__ = ["ADAPTERS", "Adapter", "CVAEAdapter", "GNNAdapter", "GNNCVAEAdapter", "ScorerAdapter", "TASKS", "TASK_HEADS",
+           "TaskDefaults", "adapter_for", "space_scales"]

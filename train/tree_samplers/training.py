@@ -234,7 +234,8 @@ def train(args: TrainArgs) -> dict[str, Any]:
         for name, stats in summary["validation"].items():
             writer.add_scalar(f"validation/{name}_median_nodes", stats["median_nodes"], 0)
     writer.close()
-    plot_learning_curve(phases, out / "learning_curve.png", f"{args.task} {args.model}")
+    plot_learning_curve(phases, out / "learning_curve.png", f"{args.task} {args.model}",
+                        getattr(adapter, "loss_name", "NLL per snapshot"))
     atomic_write_text(out / "config.json", json.dumps(summary, indent=2, default=float) + "\n")
     if args.ship:
         target = SHIPPED_DIR / f"tree_{args.model}_{args.task}.pt"
@@ -274,7 +275,7 @@ def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed
     return out
 
 
-def plot_learning_curve(phases: list[dict], path: Path, title: str) -> None:
+def plot_learning_curve(phases: list[dict], path: Path, title: str, loss_name: str = "NLL per snapshot") -> None:
     import matplotlib
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
@@ -291,7 +292,7 @@ def plot_learning_curve(phases: list[dict], path: Path, title: str) -> None:
             ax.axvline(offset, color="0.6", linestyle=":", linewidth=1)
         offset = t[-1]
     ax.set_xlabel("training time [min] (dotted: DAgger rounds)")
-    ax.set_ylabel("loss (NLL per snapshot)")
+    ax.set_ylabel(f"loss ({loss_name})")
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
