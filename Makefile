@@ -11,7 +11,7 @@ install: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e ".[test,ompl]"
+	$(BIN)/pip install --quiet -e ".[agents,test,ompl,ray]"
 	touch $(STAMP)
 
 test: install

@@ -43,6 +43,8 @@ class TaskSpec:
     benchmark_scene: str | None = None
     #: OMPL planners the isolated runner can run on this task (rows ``ompl-<planner>``).
     ompl_planners: tuple[str, ...] = ()
+    #: What a path length counts in (the sum of edge costs), for tables and plots.
+    path_unit: str = "state-space length"
 
     @property
     def env_id(self) -> str:
@@ -108,16 +110,16 @@ def make_task(name: str, **kwargs: Any):
 BUILTIN_TASKS = (
     TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d:Maze2DTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
-             max_nodes=5000, ompl_planners=("rrtconnect", "rrt")),
+             max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length"),
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",
              envs={"GNNMP/PendulumRRT-v0": {"planner": "rrt"}},
-             max_nodes=20000, ompl_planners=("rrt", "kpiece")),
+             max_nodes=20000, ompl_planners=("rrt", "kpiece"), path_unit="seconds of motion"),
     # Held-out arm problems solve in < 500 nodes; 5,000 keeps the per-step observation copy
     # small (pass max_nodes=20000 for a 20,000-node budget).
     TaskSpec("arm", "gnn_mp_envs.tasks.arm:ArmTask",
              envs={"GNNMP/ArmBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, scenes=("train-a", "train-b", "train", "test"), benchmark_scene="test",
-             ompl_planners=("rrtconnect", "rrt")),
+             ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2"),
 )
 
 

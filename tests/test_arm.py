@@ -290,7 +290,7 @@ def test_render_draws_arm_scene_and_path():
         _, info, terminated = run_episode(env, seed=0)
         assert terminated
         img = env.render()
-        assert img.shape == (240, 320, 3) and img.dtype == np.uint8
+        assert img.shape == (360, 480, 3) and img.dtype == np.uint8
         assert img.std() > 10
         green = (img[..., 1] > 150) & (img[..., 0] < 60) & (img[..., 2] < 100)
         assert green.sum() > 50  # the flange trace of the path

@@ -98,3 +98,12 @@ def test_ompl_rows_run_the_same_problems():
     assert [r["problem"] for r in runs] == [0, 1]
     assert all(r["success"] and r["collision_checks"] > 0 and r["nodes_expanded"] > 0 for r in runs)
     assert report["results"]["ompl-rrtconnect"]["success_rate"] == 1.0
+
+
+def test_ray_actors_give_the_counters_of_local_workers():
+    """`--ray` (a local Ray instance) runs the same jobs as `--workers 2`: same counters."""
+    pytest.importorskip("ray")
+    on_ray = bm.run_benchmark(tiny_args(workers=2, problems=3, ray="local"))
+    local = bm.run_benchmark(tiny_args(workers=2, problems=3))
+    assert without_wall_time(on_ray) == without_wall_time(local)
+

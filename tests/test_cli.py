@@ -116,3 +116,18 @@ def test_environment_docs_cover_every_id_and_info_key():
         assert f"`{key}`" in text, key
     for key in env.observation_space.spaces:
         assert f"`{key}`" in text, key
+
+
+def test_train_help_lists_the_targets_and_their_flags():
+    result = gnn_mp("train", "--help")
+    assert result.returncode == 0 and "critical" in result.stdout and "sampler" in result.stdout
+    result = gnn_mp("train", "sampler", "--help")
+    assert result.returncode == 0 and "usage: gnn-mp train sampler" in result.stdout and "--dagger-rounds" in result.stdout
+    assert "(default: 400)" in result.stdout
+
+
+def test_listing_the_samplers_imports_no_torch():
+    code = "import sys; from train.cli import main; main(['samplers']); print('torch' in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    lines = result.stdout.strip().splitlines()
+    assert lines[-1] == "False" and any(line.startswith("gnn ") for line in lines)

@@ -346,7 +346,7 @@ def test_torchrl_actor_rollout_and_shared_value_head():
 def test_bench_sampler_reports_both_measurements(capsys):
     from train.cli import main
     code = main(["bench-sampler", "--batch", "6", "--nodes", "40", "--trees", "2", "--conversions", "2",
-                 "--rounds", "1", "--act-nodes", "30", "--calls", "50", "--tasks", "maze2d",
+                 "--rounds", "1", "--act-nodes", "30", "--window", "20", "--tasks", "maze2d",
                  "--samplers", "uniform,goal-bias", "--clock", "cpu"])
     out = capsys.readouterr().out
     assert code == 0

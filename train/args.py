@@ -40,14 +40,15 @@ class OneLineParser(argparse.ArgumentParser):
 
 def arg(default: Any, help: str, *, flag: str | tuple[str, ...] | None = None,
         choices: typing.Sequence[Any] | None = None, metavar: str | None = None,
-        parse: Callable[[str], Any] | None = None, append: bool = False) -> Any:
+        parse: Callable[[str], Any] | None = None, append: bool = False, const: Any = None) -> Any:
     """A dataclass field carrying its command-line help (and optional flag name(s), choices, parser).
 
     ``append``: the flag may be repeated, each value parsed on its own (a ``dict`` field
-    collects ``(key, value)`` pairs). Mutable defaults are copied per instance.
+    collects ``(key, value)`` pairs). ``const``: the flag's value may be left out and then is
+    ``const``. Mutable defaults are copied per instance.
     """
     meta = {"help": help, "flag": flag, "choices": choices, "metavar": metavar, "parse": parse,
-            "append": append}
+            "append": append, "const": const}
     if isinstance(default, (list, dict, set)):
         return dataclasses.field(default_factory=lambda: type(default)(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -161,8 +162,9 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, skip: ty
             # Comma-separated default in --help instead of a Python repr ("%(default).0s" prints
             # nothing and stops the formatter from appending the repr).
             help_text += f" (default: {','.join(map(str, default))})%(default).0s"
+        optional = {"nargs": "?", "const": meta["const"]} if meta.get("const") is not None else {}
         parser.add_argument(*flags, dest=f.name, type=parse, default=default, choices=meta.get("choices"),
-                            metavar=meta.get("metavar"), help=help_text)
+                            metavar=meta.get("metavar"), help=help_text, **optional)
 
 
 def from_namespace(cls: type, ns: argparse.Namespace, **overrides: Any):

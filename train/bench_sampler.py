@@ -8,12 +8,12 @@ Run: ``gnn-mp bench-sampler`` (or ``python -m train.bench_sampler``).
    for mixed sizes (each tree cut to a random prefix of 50-100 % of its nodes), next to the
    per-graph reference converter (``agents.graph.to_pyg_per_graph``, the old loop).
 2. ``act()``: for every sampler in ``--samplers`` (default: all registered) and task in
-   ``--tasks``, one observation of a tree grown to ``--act-nodes`` nodes (padded to the env's
-   default ``max_nodes``) is passed to ``sampler.act`` repeatedly; the best of ``--rounds``
-   rounds is reported in microseconds per call. Each round makes at most ``--calls`` calls and
-   stops early after ``--round-seconds``, so slow (learned) samplers finish too. Learned
-   samplers take ``--checkpoint NAME=PATH`` and ``--sampler-module MODULE`` as in
-   ``gnn-mp benchmark``; a sampler that does not support a task prints ``n/a``.
+   ``--tasks``, a tree is grown to ``--act-nodes`` nodes (validation problem 0, uniform
+   samples) and ``sampler.act`` is called on its last ``--window`` prefixes, one node larger
+   each call, as in a planning loop (learned samplers cache per node, so they pay for every
+   new node); the best of ``--rounds`` rounds is reported in microseconds per call. Learned
+   samplers load their shipped weights, or ``--checkpoint NAME=PATH``; plugin samplers come
+   from ``--sampler-module MODULE``; a sampler that cannot serve a task prints ``n/a``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import torch
 import gnn_mp_envs  # noqa: F401  (registers the environments)
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 from gnn_mp_envs.registration import TASK_SPECS, task_spec
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
 
 SPLIT = "val"   # problems the trees are grown on (timing only; never the held-out split)
 
@@ -40,9 +40,9 @@ class Args:
     samplers: list[str] = arg([], "comma-separated samplers whose act() is timed; empty: every registered sampler")
     tasks: list[str] = arg(["maze2d", "pendulum"], "tasks whose observations act() is timed on")
     act_nodes: int = arg(1000, "tree size (nodes) of the observation act() is timed on", parse=positive_int)
-    calls: int = arg(20000, "at most this many act() calls per round", parse=positive_int)
+    window: int = arg(200, "act() calls per round, each on a tree one node larger (its last nodes)",
+                      parse=positive_int)
     rounds: int = arg(3, "timing rounds per measurement; the best is reported", parse=positive_int)
-    round_seconds: float = arg(2.0, "a round of act() calls stops after about this long", parse=positive_float)
     batch: int = arg(256, "observations per to_pyg batch", parse=positive_int)
     nodes: int = arg(500, "nodes per observation of the to_pyg batch", parse=positive_int)
     trees: int = arg(16, "distinct trees in the to_pyg batch (tiled to --batch)", parse=positive_int)
@@ -135,18 +135,23 @@ def measure_to_pyg(args: Args) -> dict[str, dict[str, float]]:
 
 
 def time_act(sampler, obs: dict[str, np.ndarray], args: Args) -> float:
-    """Best seconds per ``sampler.act(obs)`` call (rounds capped at ``--round-seconds``)."""
-    sampler.reset(args.seed)
-    t0 = time.perf_counter()
-    warm = 0
-    while warm < 50 and time.perf_counter() - t0 < args.round_seconds / 4:
-        sampler.act(obs)
-        warm += 1
-    per_call = (time.perf_counter() - t0) / warm
-    calls = max(1, min(args.calls, int(args.round_seconds / max(per_call, 1e-9))))
-    return best_time(lambda: sampler.act(obs), calls, args.rounds, CLOCKS[args.clock])
-
-
+    """Best (over ``--rounds``) mean seconds per ``sampler.act`` call while the tree grows by one
+    node per call through its last ``--window`` nodes, as in a planning loop: samplers that
+    cache per node (the learned ones) pay for each new node, not only for the query."""
+    n = int(obs["num_nodes"][0])
+    window = max(1, min(args.window, n - 2))
+    prefixes = [cut(obs, n - window + k + 1) for k in range(window)]
+    warm = cut(obs, n - window)
+    clock = CLOCKS[args.clock]
+    best = float("inf")
+    for _ in range(args.rounds):
+        sampler.reset(args.seed)
+        sampler.act(warm)                      # the tree so far (untimed)
+        t0 = clock()
+        for p in prefixes:
+            sampler.act(p)
+        best = min(best, (clock() - t0) / window)
+    return best
 def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float | None]:
     """Seconds per ``act()`` call for each (sampler, task); None where a sampler rejects the task."""
     from agents.samplers import load_sampler
@@ -154,13 +159,13 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
     checkpoints = dict(_checkpoint_pair(text) for text in args.checkpoint)
     out: dict[tuple[str, str], float | None] = {}
     for task in args.tasks:
-        obs = grow(task, args.act_nodes, 0, args.seed)
+        obs = grow(task, args.act_nodes, 0, args.seed, max_nodes=args.act_nodes)
         space = gym.make(task_spec(task).env_id).action_space
         for name in samplers:
             kwargs = {"checkpoint": checkpoints[name]} if name in checkpoints else {}
             try:
                 sampler = load_sampler(name, space.low, space.high, task=task, seed=args.seed, **kwargs)
-            except ValueError:
+            except (ValueError, FileNotFoundError):   # not for this task, or no weights shipped for it
                 out[name, task] = None
                 continue
             out[name, task] = time_act(sampler, obs, args)
@@ -192,8 +197,8 @@ def report_to_pyg(args: Args, result: dict[str, dict[str, float]]) -> None:
 
 
 def report_act(args: Args, samplers: list[str], result: dict[tuple[str, str], float | None]) -> None:
-    print(f"act(): microseconds per call, one observation of {args.act_nodes} nodes, {args.clock} clock, "
-          f"best of {args.rounds}")
+    print(f"act(): microseconds per call on a tree growing to {args.act_nodes} nodes (one node per call, last "
+          f"{args.window}), {args.clock} clock, best of {args.rounds}")
     width = max(len(s) for s in samplers + ["sampler"])
     print(f"  {'sampler':<{width}} " + " ".join(f"{t:>10}" for t in args.tasks))
     for name in samplers:

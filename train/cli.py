@@ -34,8 +34,12 @@ PASSTHROUGH: dict[str, tuple[str, str]] = {
 #: ``gnn-mp train NAME ...`` -> (module, argv prefix).
 TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
     "critical": ("train.critical", ["train"]),
+    "sampler": ("train.tree_samplers.cli", []),
     "rl": ("train.rl", []),   # RL samplers (issue #10): gnn-mp train rl --algo ppo|sac --lib sb3|torchrl
 }
+TRAIN_HELP = {"critical": "critical-sample models on the fixed Halton graph (GNN, GAT, GNN-CVAE, CNN, CVAE)",
+              "sampler": "learned tree samplers, the paper's Algorithm 1 (GNN, CVAE, GNN-CVAE)",
+              "rl": "RL samplers: SB3 PPO/SAC, TorchRL PPO over the tree view (docs/rl.md)"}
 
 
 class CLIError(Exception):
@@ -158,11 +162,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if argv and argv[0] in PASSTHROUGH:
             return run_passthrough(PASSTHROUGH[argv[0]][0], argv[1:], f"{PROG} {argv[0]}")
         if argv and argv[0] == "train":
-            if len(argv) < 2 or argv[1] not in TRAIN_TARGETS:
+            if len(argv) < 2 or argv[1] in ("-h", "--help"):
+                print(f"usage: {PROG} train {{{','.join(sorted(TRAIN_TARGETS))}}} [--help | ARGS]\n\n"
+                      "Train a model; `gnn-mp train TARGET --help` lists its flags.\n")
+                for name, (module, _) in sorted(TRAIN_TARGETS.items()):
+                    print(f"  {name:<10} {TRAIN_HELP.get(name, module)}")
+                return 0 if len(argv) > 1 else 2
+            if argv[1] not in TRAIN_TARGETS:
                 got = repr(argv[1]) if len(argv) > 1 else "nothing"
                 return fail(f"train: expected one of {', '.join(sorted(TRAIN_TARGETS))}, got {got}")
             module, prefix = TRAIN_TARGETS[argv[1]]
-            return run_passthrough(module, prefix + argv[2:], PROG)
+            # `train critical` is `critical train`: name the command its usage lines show
+            prog = f"{PROG} {argv[1]}" if prefix else f"{PROG} train {argv[1]}"
+            return run_passthrough(module, prefix + argv[2:], prog)
         parser = build_parser()
         ns = parser.parse_args(argv)
         if ns.command is None:

@@ -87,10 +87,12 @@ def causal_knn(nodes: Tensor, tree_id: Tensor, k: int, step_scale: Tensor, perio
 
 
 class RelativeConv(MessagePassing):
-    """Mean of ``MLP([h_j, (x_j - x_i) / step_scale])`` over the incoming edges ``j -> i``.
+    """Mean of ``MLP([h_j, (x_j - x_i) / step_scale])`` over the incoming edges ``j -> i`` (0 for
+    a node without any).
 
-    The first linear layer is split into a sender part (cacheable per node) and a receiver
-    part, which is what the online sampler exploits; as a PyG layer it is plain message passing.
+    The MLP is ``Linear -> GELU -> Linear``; computed as PyG message passing with the same
+    result but less work per edge: the first layer's sender part ``W_h h_j`` is computed once per
+    node (the online sampler caches it), and the second, linear layer is applied after the mean.
     """
 
     def __init__(self, hidden_channels: int, state_dim: int) -> None:
@@ -99,10 +101,16 @@ class RelativeConv(MessagePassing):
 
     def forward(self, h: Tensor, rel: Tensor, edge_index: Tensor) -> Tensor:
         """``rel`` is ``(E, d)``: the scaled relative position of each edge's sender."""
-        return self.propagate(edge_index, h=h, rel=rel, size=(h.shape[0], h.shape[0]))
+        first, second = self.net[0], self.net[2]
+        H = h.shape[-1]
+        sender = F.linear(h, first.weight[:, :H])                                   # (N, H) per node
+        edge = F.linear(rel, first.weight[:, H:], first.bias)                       # (E, H)
+        mean = self.propagate(edge_index, sender=sender, edge=edge, size=(h.shape[0], h.shape[0]))
+        has_edges = torch.zeros(h.shape[0], 1, dtype=h.dtype).index_fill_(0, edge_index[1], 1.0)
+        return second(mean) * has_edges
 
-    def message(self, h_j: Tensor, rel: Tensor) -> Tensor:
-        return self.net(torch.cat([h_j, rel], -1))
+    def message(self, sender_j: Tensor, edge: Tensor) -> Tensor:
+        return F.gelu(sender_j + edge)
 
 
 class TreeGNN(nn.Module):
@@ -193,6 +201,19 @@ class TreeGNN(nn.Module):
                  F.one_hot(active.long(), self.num_trees).float(), means.flatten(1), torch.log1p(counts) / 5]
         return self.query(torch.cat(parts, -1))
 
+    def snapshot_context(self, h: Tensor, tree_id: Tensor, start: Tensor, goal: Tensor, sizes: Tensor,
+                         active: Tensor) -> Tensor:
+        """``q`` of every snapshot (the first ``sizes[t]`` nodes): running means and counts of
+        each tree's embeddings, read off cumulative sums in insertion order."""
+        onehot = F.one_hot(tree_id.long(), self.num_trees).float()                     # (N, trees)
+        csum = torch.cat([h.new_zeros(1, self.num_trees, h.shape[1]),
+                          torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])          # (N+1, trees, H)
+        ccount = torch.cat([h.new_zeros(1, self.num_trees), torch.cumsum(onehot, 0)])  # (N+1, trees)
+        counts = ccount[sizes]
+        T = len(sizes)
+        return self.context(start.expand(T, -1), goal.expand(T, -1), active,
+                            csum[sizes] / counts.clamp(min=1)[..., None], counts)
+
     def node_heads(self, h: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """Per node: key ``(N, H)``, offset and log sigma ``(N, num_trees, d)``."""
         d = self.state_dim
@@ -214,14 +235,7 @@ class TreeGNN(nn.Module):
         ``sizes[t]`` nodes (insertion order), its label the next sample ``labels[t]``."""
         h = self.embed(nodes, features, parent, knn)
         key, offset, log_sigma = self.node_heads(h)
-        onehot = F.one_hot(tree_id.long(), self.num_trees).float()                     # (N, trees)
-        csum = torch.cat([h.new_zeros(1, self.num_trees, h.shape[1]),
-                          torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])          # (N+1, trees, H)
-        ccount = torch.cat([h.new_zeros(1, self.num_trees), torch.cumsum(onehot, 0)])  # (N+1, trees)
-        counts = ccount[sizes]
-        means = csum[sizes] / counts.clamp(min=1)[..., None]
-        T = len(sizes)
-        q = self.context(start.expand(T, -1), goal.expand(T, -1), active, means, counts)
+        q = self.snapshot_context(h, tree_id, start, goal, sizes, active)
         logits = self.logits(q, key)
         valid = torch.arange(len(nodes))[None, :] < sizes[:, None]
         log_w = torch.log_softmax(logits.masked_fill(~valid, -1e9), -1)                 # (T, N)
@@ -330,14 +344,8 @@ class TreeGNNCVAE(_Gaussian):
                  kl_weight: float = 1.0, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
         """(summed reconstruction + KL terms, number of snapshots) of one run."""
         g = self.gnn
-        h = g.embed(nodes, features, parent, knn)
-        onehot = F.one_hot(tree_id.long(), g.num_trees).float()
-        csum = torch.cat([h.new_zeros(1, g.num_trees, h.shape[1]), torch.cumsum(onehot[:, :, None] * h[:, None, :], 0)])
-        ccount = torch.cat([h.new_zeros(1, g.num_trees), torch.cumsum(onehot, 0)])
-        counts = ccount[sizes]
+        q = g.snapshot_context(g.embed(nodes, features, parent, knn), tree_id, start, goal, sizes, active)
         T = len(sizes)
-        q = g.context(start.expand(T, -1), goal.expand(T, -1), active, csum[sizes] / counts.clamp(min=1)[..., None],
-                      counts)
         mu, logstd = self.encode(labels, q)
         z = self.reparametrize(mu, logstd, generator)
         err = wrap_periodic(labels - self.decode(z, q), g.periodic) / g.state_scale

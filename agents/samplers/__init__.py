@@ -3,22 +3,23 @@
 Learned samplers register themselves here too, so the benchmark and the training
 scripts never need an if/elif chain over sampler names. Their base class,
 :class:`agents.samplers.learned.LearnedSampler`, is importable from here too
-(``from agents.samplers import LearnedSampler``); it is loaded on first use because it
-pulls in PyTorch Geometric and TorchRL, which the classical samplers do not need.
+(``from agents.samplers import LearnedSampler``). Classes are loaded on first use (listing the
+registry, ``gnn-mp samplers``, imports no torch); the learned samplers' models (PyTorch
+Geometric) load only when one is built.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from agents.samplers.base import SAMPLER_IN_KEYS, SAMPLER_OUT_KEYS, Sampler, batch_shape_of
-from agents.samplers.baselines import GoalBiasSampler, UniformSampler
+if TYPE_CHECKING:
+    from agents.samplers.base import Sampler
 
 #: name -> factory(low, high, task, seed, **kwargs) -> Sampler
-SamplerFactory = Callable[..., Sampler]
+SamplerFactory = Callable[..., "Sampler"]
 SAMPLERS: dict[str, SamplerFactory] = {}
 DESCRIPTIONS: dict[str, str] = {}
 
@@ -45,11 +46,18 @@ def load_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | None 
     return factory(low=low, high=high, task=task, seed=seed, **kwargs)
 
 
-register_sampler("uniform", lambda low, high, task=None, seed=None, **kw: UniformSampler(low, high, seed),
-                 "uniform over the state bounds")
-register_sampler("goal-bias", lambda low, high, task=None, seed=None, goal_bias=0.05, **kw:
-                 GoalBiasSampler(low, high, seed, goal_bias),
-                 "uniform with 5% samples at the active tree's target")
+def _uniform(low, high, task=None, seed=None, **kw):
+    from agents.samplers.baselines import UniformSampler
+    return UniformSampler(low, high, seed)
+
+
+def _goal_bias(low, high, task=None, seed=None, goal_bias=0.05, **kw):
+    from agents.samplers.baselines import GoalBiasSampler
+    return GoalBiasSampler(low, high, seed, goal_bias)
+
+
+register_sampler("uniform", _uniform, "uniform over the state bounds")
+register_sampler("goal-bias", _goal_bias, "uniform with 5% samples at the active tree's target")
 
 
 # RL policies (issue #10, agents/samplers/rl.py; imported on first use: it needs torch_geometric)
@@ -69,18 +77,25 @@ def _tree_sampler(name: str) -> SamplerFactory:
     return factory
 
 
-register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree; "
-                 "shipped weights per task, 25% uniform")
+register_sampler("gnn", _tree_sampler("gnn"), "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree "
+                 "(pendulum: a scorer of 16 uniform candidates); shipped weights per task with their uniform/goal mix")
 register_sampler("cvae", _tree_sampler("cvae"), "learned baseline (Ichter et al. 2018): CVAE on start, goal and "
                  "obstacles; ignores the tree")
 register_sampler("gnn-cvae", _tree_sampler("gnn-cvae"), "learned baseline: CVAE conditioned on the causal GNN's "
                  "tree context")
 
 
+#: Names importable from here, loaded on first use: name -> module.
+_LAZY = {"Sampler": "agents.samplers.base", "SAMPLER_IN_KEYS": "agents.samplers.base",
+         "SAMPLER_OUT_KEYS": "agents.samplers.base", "batch_shape_of": "agents.samplers.base",
+         "UniformSampler": "agents.samplers.baselines", "GoalBiasSampler": "agents.samplers.baselines",
+         "LearnedSampler": "agents.samplers.learned"}
+
+
 def __getattr__(name: str):
-    if name == "LearnedSampler":
-        from agents.samplers.learned import LearnedSampler
-        return LearnedSampler
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

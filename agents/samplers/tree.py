@@ -1,4 +1,5 @@
-"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`.
+"""Samplers over the growing tree: the GNN, CVAE and GNN-CVAE of :mod:`agents.models.tree_samplers`
+(the GNN sample scorer, the pendulum's GNN head, is :mod:`agents.samplers.tree_scorer`).
 
 Every sampler mixes its model with uniform samples at a fixed rate (``uniform_mix``, which
 keeps the planner probabilistically complete) and may add goal samples (``goal_bias``):
@@ -23,6 +24,7 @@ generator (``act``), so a benchmark run is reproducible.
 
 from __future__ import annotations
 
+import importlib
 import math
 from typing import Mapping
 
@@ -70,7 +72,7 @@ class IncrementalTreeGNN:
         self.feature_scale, self.step = buf(m.feature_scale), buf(m.step_scale)
         self.periodic = m.periodic.numpy().copy()
         self.input = _linears(m.input)
-        H, d = self.H, self.d
+        H = self.H
         # First message layer split into sender / receiver parts: W [h_j, (x_j - x_i)/s] + b.
         self.messages = []
         for conv_p, conv_k in zip(m.parent_convs, m.knn_convs):
@@ -245,7 +247,30 @@ class _MixedSampler(Sampler):
         return self.act(obs)
 
 
-class TreeGNNSampler(_MixedSampler):
+class _TreeContextSampler(_MixedSampler):
+    """A sampler that reads the tree through an :class:`IncrementalTreeGNN` (per-episode caches)."""
+
+    def _attach(self, gnn: TreeGNN) -> None:
+        self.engine = IncrementalTreeGNN(gnn)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if hasattr(self, "engine"):
+            self.engine.clear()
+
+    def tree_context(self, obs: Mapping) -> tuple[np.ndarray, int]:
+        """Ingest the observation's new nodes; the tree context ``q`` and the active tree."""
+        self.engine.ingest(obs)
+        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+        q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
+        return q, active
+
+    def _stateless_act(self, obs: Mapping) -> np.ndarray:
+        self.engine.clear()
+        return self.act(obs)
+
+
+class TreeGNNSampler(_TreeContextSampler):
     """The GNN sampler (Algorithm 1): a node of the tree ~ softmax(key . q / temperature), then
     a Gaussian around its learned offset (scale times ``sigma_scale``)."""
 
@@ -255,28 +280,16 @@ class TreeGNNSampler(_MixedSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.periodic.numpy())
         self.model = model.eval()
-        self.engine = IncrementalTreeGNN(model)
+        self._attach(model)
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
 
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        if hasattr(self, "engine"):
-            self.engine.clear()
-
     def model_sample(self, obs: Mapping) -> np.ndarray:
+        q, active = self.tree_context(obs)
         e = self.engine
-        e.ingest(obs)
-        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
-        q = e.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
         p, shift = e.mixture(q, active, self.temperature)
-        m = int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right"))
-        m = min(m, e.n - 1)
+        m = min(int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right")), e.n - 1)
         sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
         return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
-
-    def _stateless_act(self, obs: Mapping) -> np.ndarray:
-        self.engine.clear()
-        return self.act(obs)
 
 
 class TreeCVAESampler(_MixedSampler):
@@ -307,7 +320,7 @@ class TreeCVAESampler(_MixedSampler):
         return self._queue.pop()
 
 
-class TreeGNNCVAESampler(_MixedSampler):
+class TreeGNNCVAESampler(_TreeContextSampler):
     """The GNN-CVAE: the causal GNN summarises the tree (incrementally, as the GNN sampler),
     the decoder turns a latent draw and that context into the next sample."""
 
@@ -316,26 +329,13 @@ class TreeGNNCVAESampler(_MixedSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.gnn.periodic.numpy())
         self.model = model.eval()
-        self.engine = IncrementalTreeGNN(model.gnn)
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        if hasattr(self, "engine"):
-            self.engine.clear()
+        self._attach(model.gnn)
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        e = self.engine
-        e.ingest(obs)
-        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
-        q = torch.as_tensor(e.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64),
-                                      active), dtype=torch.float32)
+        q, _ = self.tree_context(obs)
         z = torch.as_tensor(self.rng.standard_normal(self.model.latent_channels), dtype=torch.float32)
         with torch.no_grad():
-            return self.model.decode(z[None], q[None])[0].double().numpy()
-
-    def _stateless_act(self, obs: Mapping) -> np.ndarray:
-        self.engine.clear()
-        return self.act(obs)
+            return self.model.decode(z[None], torch.as_tensor(q, dtype=torch.float32)[None])[0].double().numpy()
 
 
 def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
@@ -362,14 +362,18 @@ def reference_embeddings(model: TreeGNN, obs: Mapping) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------------- registry
-#: Checkpoint kind -> (sampler class, the sampling settings a checkpoint's ``meta["sampler"]`` may carry).
-KIND_SAMPLERS: dict[str, tuple[type, tuple[str, ...]]] = {
+#: Checkpoint kind -> (sampler class or ``"module:Class"`` imported on first use, the sampling
+#: settings a checkpoint's ``meta["sampler"]`` may carry).
+KIND_SAMPLERS: dict[str, tuple[type | str, tuple[str, ...]]] = {
     "tree/gnn": (TreeGNNSampler, ("uniform_mix", "goal_bias", "temperature", "sigma_scale")),
+    "tree/gnn-scorer": ("agents.samplers.tree_scorer:TreeScorerSampler",   # builds on _MixedSampler above
+                        ("uniform_mix", "goal_bias", "candidates", "temperature")),
     "tree/cvae": (TreeCVAESampler, ("uniform_mix", "goal_bias", "proposals")),
     "tree/gnn-cvae": (TreeGNNCVAESampler, ("uniform_mix", "goal_bias")),
 }
-#: Sampler name -> the checkpoint kinds it accepts (a task ships the GNN head that works best for it).
-NAME_KINDS: dict[str, tuple[str, ...]] = {"gnn": ("tree/gnn",), "cvae": ("tree/cvae",),
+#: Sampler name -> the checkpoint kinds it accepts (a task ships the GNN head that works best for it:
+#: the node mixture ``tree/gnn``, or the sample scorer ``tree/gnn-scorer`` on the pendulum).
+NAME_KINDS: dict[str, tuple[str, ...]] = {"gnn": ("tree/gnn", "tree/gnn-scorer"), "cvae": ("tree/cvae",),
                                           "gnn-cvae": ("tree/gnn-cvae",)}
 
 
@@ -393,6 +397,9 @@ def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | 
                                     f"train them with `gnn-mp train sampler --task {task} --model {name}`")
     model, record = load_checkpoint(checkpoint, expected_kind=NAME_KINDS[name])
     cls, allowed = KIND_SAMPLERS[record["kind"]]
+    if isinstance(cls, str):
+        module, _, attr = cls.partition(":")
+        cls = getattr(importlib.import_module(module), attr)
     meta = record.get("meta") or {}
     unknown = sorted(set(settings) - set(allowed))
     if unknown:

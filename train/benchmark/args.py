@@ -46,7 +46,10 @@ class BenchmarkArgs:
     seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=non_negative_int)
     max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
     scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
-    workers: int = arg(1, "worker processes over problems", parse=positive_int)
+    workers: int = arg(1, "worker processes over problems (with --ray: Ray actors)", parse=positive_int)
+    ray: str | None = arg(None, "run the jobs as Ray actors: no ADDRESS starts a local Ray instance with "
+                          "--workers CPUs; 'auto' or ray://HOST:10001 joins a running cluster (pip install "
+                          "'gnn-mp-envs[ray]')", metavar="ADDRESS", const="local")
     json: Path | None = arg(None, "write the results as JSON (schema: docs/results.md)")
     plot: Path | None = arg(None, "write box plots (PNG)")
     render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")

@@ -18,7 +18,10 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    panels = [("nodes_expanded", "nodes expanded", False), ("path_length", "path length (solved)", True)]
+    from gnn_mp_envs.registration import TASK_SPECS
+    spec = TASK_SPECS.get(report["task"])
+    unit = f" [{spec.path_unit}]" if spec is not None else ""
+    panels = [("nodes_expanded", "nodes expanded", False), ("path_length", f"path length{unit}, solved", True)]
     if report["task"] == "arm":
         panels.append(("collision_checks", "collision checks", False))
     names = list(report["results"])
@@ -53,7 +56,7 @@ def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(snapshots), figsize=(2.6 * len(snapshots), 2.9), squeeze=False)
+    fig, axes = plt.subplots(1, len(snapshots), figsize=(3.6 * len(snapshots), 3.6), squeeze=False)
     for ax, (iteration, nodes, image) in zip(axes[0], snapshots):
         ax.imshow(image)
         ax.set_title(f"iter {iteration}, {nodes} nodes", fontsize=8)
@@ -61,7 +64,7 @@ def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
 
 

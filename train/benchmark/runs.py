@@ -103,11 +103,12 @@ def _die_with_parent() -> None:
 
 
 def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
-                    samplers: list[tuple[str, str | None]], modules: list[str]) -> None:
+                    samplers: list[tuple[str, str | None]], modules: list[str], die_with_parent: bool = True) -> None:
     """Worker initializer: die with the parent, import plugin modules, build the env and
     samplers and run one inference each, so that lazy imports and first-call costs stay out
     of the measured wall time (as in a serial run)."""
-    _die_with_parent()
+    if die_with_parent:
+        _die_with_parent()
     import_modules(modules)
     env = cached_env(env_id, env_kwargs)
     obs, _ = env.reset(seed=0, options={"index": 0})
@@ -170,7 +171,9 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
 
     reason = None
     try:
-        if args.workers == 1:
+        if args.ray is not None:
+            _run_on_ray(args, env_id, env_kwargs, learned, jobs, finished)
+        elif args.workers == 1:
             for job in jobs:
                 finished(_run_episode_job(job))
         else:
@@ -202,6 +205,49 @@ class BenchmarkIncomplete(BenchmarkError):
         super().__init__(message)
         self.report = report
         self.interrupted = interrupted
+
+
+class _EpisodeActor:
+    """A Ray actor: one worker process with its env and samplers, warmed up as the local workers."""
+
+    def __init__(self, task, env_id, env_kwargs, samplers, modules) -> None:
+        _warm_up_worker(task, env_id, env_kwargs, samplers, modules, die_with_parent=False)
+
+    def run(self, job: tuple) -> dict[str, Any]:
+        return _run_episode_job(job)
+
+
+def _run_on_ray(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
+                learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
+    """Run ``jobs`` on ``args.workers`` Ray actors, locally (``--ray``) or on a cluster
+    (``--ray auto`` / ``ray://HOST:10001``). Results equal a local run for the same seed."""
+    try:
+        import ray
+        from ray.util import ActorPool
+    except ImportError:
+        raise BenchmarkError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
+    local = args.ray == "local"
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(address=None if local else args.ray, num_cpus=args.workers if local else None,
+                     include_dashboard=False, log_to_driver=False, configure_logging=False)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise BenchmarkError(f"cannot reach Ray at {args.ray}: {str(exc).splitlines()[0]}") from None
+    try:
+        actor = ray.remote(num_cpus=1)(_EpisodeActor)
+        pool = ActorPool([actor.remote(args.task, env_id, env_kwargs, learned, args.modules)
+                          for _ in range(args.workers)])
+        for record in pool.map_unordered(lambda a, job: a.run.remote(job), jobs):
+            finished(record)
+    except ray.exceptions.RayTaskError as exc:
+        cause = exc.cause if isinstance(getattr(exc, "cause", None), BenchmarkError) else None
+        raise cause or BenchmarkError(f"a Ray task failed: {str(exc).splitlines()[0]}") from None
+    except ray.exceptions.RayActorError:
+        raise BrokenProcessPool("a Ray actor died") from None
+    finally:
+        if started:
+            ray.shutdown()
 
 
 def _run_in_workers(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],

@@ -34,6 +34,11 @@ def format_table(report: dict[str, Any]) -> str:
              + (f", scene={report['scene']}" if report.get("scene") else "")
              + f"): {report['problems']} {'held-out' if report.get('split', 'test') == 'test' else report['split']} "
                f"problems, seed {report['seed']}")
-    note = ("median [q25, q75]; *path length over successful runs only; "
-            "wall time = planning loop incl. sampler inference (OMPL: solve time)")
-    return "\n".join([title, *lines, note])
+    from gnn_mp_envs.registration import TASK_SPECS
+    spec = TASK_SPECS.get(report["task"])
+    unit = f" ({spec.path_unit})" if spec is not None else ""
+    notes = [f"median [q25, q75] over the problems; *path length{unit} over successful runs only",
+             "edges = extensions checked, blocked ones and goal connections included (so they can exceed nodes)",
+             "wall time = planning loop incl. sampler inference (OMPL: solve time); it varies with machine load, "
+             "the counters do not"]
+    return "\n".join([title, *lines, *notes])

@@ -26,7 +26,6 @@ import json
 import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -47,16 +46,19 @@ class TreeDataConfig:
     task: str = "pendulum"
     split: str = "train"
     scene: str | None = None          # tasks with scenes: default "train" (both training families)
-    problems: int = 300               # problem indices 0..problems-1 of the split
-    seed: int = 0                     # uniform sampler seed of problem i: problem_seed(seed, i)
+    problems: int = 300               # problem indices first_problem..first_problem+problems-1 of the split
+    seed: int = 0                     # sampler seed of problem i: problem_seed(seed, i)
     max_nodes: int | None = None      # node budget (default: the task's)
+    first_problem: int = 0
+    sampler: str = "uniform"          # who plans: uniform (Algorithm 1) or a learned sampler (DAgger)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
 
     def file_name(self) -> str:
         scene = f"-{self.scene}" if self.scene else ""
-        return f"{self.task}{scene}-{self.split}-{self.problems}p-seed{self.seed}.npz"
+        first = f"-from{self.first_problem}" if self.first_problem else ""
+        return f"{self.task}{scene}-{self.split}-{self.sampler}-{self.problems}p{first}-seed{self.seed}.npz"
 
 
 @dataclass
@@ -83,6 +85,23 @@ class TreeDataset:
 
     def __len__(self) -> int:
         return len(self.start)
+
+    def subset(self, problems: list[int]) -> "TreeDataset":
+        """The dataset of the given problems only (offsets rebuilt)."""
+        def ragged(ptr: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+            pieces = [[a[ptr[p]:ptr[p + 1]] for p in problems] for a in arrays]
+            sizes = [ptr[p + 1] - ptr[p] for p in problems]
+            return (np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+                    *[np.concatenate(ps) for ps in pieces])
+        node_ptr, states, feats, parent, tree_id = ragged(self.node_ptr, self.states, self.node_features,
+                                                          self.parent, self.tree_id)
+        path_ptr, path_nodes = ragged(self.path_ptr, self.path_nodes)
+        iter_ptr, nodes, active, sample, created = ragged(self.iter_ptr, self.iter_nodes, self.iter_active,
+                                                          self.iter_sample, self.iter_created)
+        idx = np.asarray(problems, dtype=np.int64)
+        return TreeDataset(self.config, node_ptr, states, feats, parent, tree_id, path_ptr, path_nodes,
+                           self.start[idx], self.goal[idx], self.obstacles[idx], self.problem_index[idx],
+                           iter_ptr, nodes, active, sample, created)
 
     def tree(self, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b = self.node_ptr[p], self.node_ptr[p + 1]
@@ -124,8 +143,9 @@ def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return np.where(sub >= 0, remap[np.maximum(sub, 0)], -1).astype(np.int32)
 
 
-def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
-    """Solve problems ``0..problems-1`` of the split with the uniform sampler; keep the solved ones."""
+def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None) -> TreeDataset:
+    """Solve the config's problems with its sampler (uniform, or a learned one from
+    ``checkpoint`` for DAgger); keep the solved ones."""
     import gymnasium as gym
 
     import gnn_mp_envs  # noqa: F401  (registers the environments)
@@ -142,11 +162,14 @@ def generate(config: TreeDataConfig, progress: bool = True) -> TreeDataset:
         kwargs["scene"] = config.scene
     env = gym.make(spec.env_id, disable_env_checker=True, **kwargs)
     base = env.unwrapped
-    sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
+    extra = {} if checkpoint is None else {"checkpoint": checkpoint}
+    sampler = load_sampler(config.sampler, env.action_space.low, env.action_space.high, task=config.task, seed=0,
+                           **extra)
     trees, paths, starts, goals, obstacles, indices, iters = [], [], [], [], [], [], []
     try:
-        for i in tqdm(range(config.problems), desc=f"{config.task} uniform solutions", unit="problem",
-                      disable=not progress):
+        first = config.first_problem
+        for i in tqdm(range(first, first + config.problems), desc=f"{config.task} {config.sampler} solutions",
+                      unit="problem", disable=not progress):
             seed = problem_seed(config.seed, i)
             sampler.reset(seed)
             last: dict = {}

@@ -33,7 +33,7 @@ class ArmTask(Task):
 
     def __init__(self, scene: str = "train-a", step_size: float = STEP_SIZE,
                  resolution: float = RESOLUTION, require_blocked: bool = True,
-                 render_size: tuple[int, int] = (320, 240)) -> None:
+                 render_size: tuple[int, int] = (480, 360)) -> None:
         if scene != "train" and scene not in SCENE_FAMILIES:
             raise ValueError(f"unknown arm scene {scene!r}; known: {sorted(SCENE_FAMILIES) + ['train']}")
         self.scene = scene

@@ -1,0 +1,114 @@
+"""Learned tree samplers: exact incremental inference, a tiny training run end to end, reloads."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from agents.checkpoints import load_checkpoint, save_checkpoint
+from agents.models.tree_samplers import TreeGNN, causal_knn
+from agents.samplers import load_sampler
+from agents.samplers.tree import IncrementalTreeGNN, reference_embeddings
+from gnn_mp_envs.rollout import rollout
+from tests.helpers import uniform_policy
+from train.tree_samplers.data import TreeDataConfig, generate
+from train.tree_samplers.models import adapter_for
+from train.tree_samplers.training import evaluate_loss, fit
+
+
+def grown_observation(env_id: str, steps: int, **kwargs):
+    env = gym.make(env_id, split="val", copy_observations=False, disable_env_checker=True, **kwargs)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    policy = uniform_policy(env, 0)
+    snapshots = []
+    for _ in range(steps):
+        obs, _, terminated, truncated, _ = env.step(policy(obs))
+        snapshots.append({k: np.array(v) for k, v in obs.items()})
+        if terminated or truncated:
+            break
+    return env, snapshots
+
+
+@pytest.mark.parametrize("env_id,periodic,trees", [("GNNMP/PendulumRRT-v0", (0,), 1), ("GNNMP/Maze2DBiRRT-v0", (), 2)])
+def test_incremental_inference_equals_the_model(env_id, periodic, trees):
+    """Embedding each new node once from cached older nodes gives the full forward pass's
+    result (the GNN is causal), including duplicate states (ties go to the earlier node)."""
+    env, snapshots = grown_observation(env_id, 250)
+    low, high = env.action_space.low, env.action_space.high
+    torch.manual_seed(0)
+    model = TreeGNN(len(low), periodic=periodic, num_trees=trees, state_center=(low + high) / 2,
+                    state_scale=(high - low) / 2, step_scale=np.full(len(low), 0.3)).double()
+    engine = IncrementalTreeGNN(model, capacity=8)      # also exercises growing the caches
+    for obs in snapshots[::7] + [snapshots[-1]]:
+        engine.ingest(obs)
+    reference = reference_embeddings(model, snapshots[-1])
+    with torch.no_grad():
+        keys = model.key(reference).numpy()
+    assert engine.n == int(snapshots[-1]["num_nodes"][0]) > 50
+    np.testing.assert_allclose(engine.keys[:engine.n], keys, atol=1e-6)
+    counts = np.bincount(snapshots[-1]["node_features"][:engine.n, -1].astype(int), minlength=trees)
+    np.testing.assert_array_equal(engine.counts, counts)
+
+
+def test_causal_knn_only_looks_back_within_a_tree():
+    nodes = torch.tensor([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.1, 0.0], [0.2, 0.0]])
+    tree_id = torch.tensor([0, 1, 0, 0, 1])
+    knn = causal_knn(nodes, tree_id, 2, torch.ones(2), torch.zeros(2, dtype=torch.bool))
+    assert knn.tolist() == [[-1, -1], [-1, -1], [0, -1], [0, 2], [1, -1]]
+
+
+@pytest.mark.parametrize("model", ["gnn", "cvae", "gnn-cvae"])
+def test_a_briefly_trained_sampler_plans_and_reloads_identically(model, tmp_path):
+    data = generate(TreeDataConfig(task="maze2d", problems=6, max_nodes=1500), progress=False)
+    env = gym.make("GNNMP/Maze2DRRT-v0", split="val", max_nodes=1500, copy_observations=False,
+                   disable_env_checker=True)
+    adapter = adapter_for(model, "maze2d")
+    net, ctor_args = adapter.build("maze2d", env.observation_space)
+    items = adapter.items(net, data, "grown", np.random.default_rng(0), 16)
+    before = evaluate_loss(net, adapter, items)
+    fit(net, adapter, items, items, minutes=0.05, lr=3e-3, batch_size=4, seed=0, writer=None, phase="t",
+        progress=False)
+    assert evaluate_loss(net, adapter, items) < before            # it learned something
+    path = save_checkpoint(tmp_path / "m.pt", net, adapter.kind, ctor_args,
+                           meta={"task": "maze2d", "sampler": {"uniform_mix": 0.3}})
+    low, high = env.action_space.low, env.action_space.high
+    runs = []
+    for _ in range(2):
+        sampler = load_sampler(model, low, high, task="maze2d", seed=5, checkpoint=str(path))
+        assert sampler.uniform_mix == 0.3
+        actions = []
+        record = rollout(env, lambda obs: actions.append(sampler.act(obs)) or actions[-1], seed=5,
+                         options={"index": 1})
+        runs.append((record.success, record.nodes_expanded, np.array(actions)))
+    assert runs[0][:2] == runs[1][:2]                         # same outcome and tree size ...
+    np.testing.assert_array_equal(runs[0][2], runs[1][2])     # ... from the same proposals
+    assert load_checkpoint(path)[1]["kind"] == adapter.kind
+
+
+def test_a_checkpoint_for_another_task_is_refused(tmp_path):
+    env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=50)
+    adapter = adapter_for("gnn", "maze2d")
+    net, ctor_args = adapter.build("maze2d", env.observation_space)
+    path = save_checkpoint(tmp_path / "m.pt", net, adapter.kind, ctor_args, meta={"task": "maze2d"})
+    with pytest.raises(ValueError, match="trained for task 'maze2d'"):
+        load_sampler("gnn", env.action_space.low, env.action_space.high, task="arm", checkpoint=str(path))
+
+
+def test_training_resumes_from_its_state(tmp_path):
+    from agents.checkpoints import load_training_state
+    data = generate(TreeDataConfig(task="maze2d", problems=4, max_nodes=1500), progress=False)
+    env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=50)
+    adapter = adapter_for("gnn", "maze2d")
+    net, _ = adapter.build("maze2d", env.observation_space)
+    items = adapter.items(net, data, "grown", np.random.default_rng(0), 8)
+    state_path = tmp_path / "resume.pt"
+    first = fit(net, adapter, items, items, minutes=0.02, lr=1e-3, batch_size=2, seed=0, writer=None, phase="a",
+                progress=False, resume_path=state_path)
+    state = load_training_state(state_path)
+    assert state["epoch"] == first["epochs"] == len(state["history"])
+    fresh, _ = adapter.build("maze2d", env.observation_space)
+    second = fit(fresh, adapter, items, items, minutes=0.3, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
+                 progress=False, resume=state)
+    assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]

@@ -1,0 +1,32 @@
+"""``gnn-mp train sampler``: flags from :class:`~train.tree_samplers.training.TrainArgs`."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Sequence
+
+from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from agents.checkpoints import CheckpointError
+    from gnn_mp_envs.utils.npz import DatasetCacheError
+    from train.tree_samplers.training import TrainArgs, TrainError, train
+    parser = OneLineParser(prog="gnn-mp train sampler",
+                           description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
+                           "evaluate it against uniform on validation problems.")
+    add_dataclass_arguments(parser, TrainArgs)
+    args = from_namespace(TrainArgs, parser.parse_args(argv))
+    try:
+        summary = train(args)
+    except (TrainError, CheckpointError, DatasetCacheError) as exc:
+        print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps({k: summary[k] for k in ("run_dir", "items", "train_seconds", "validation", "shipped")
+                      if k in summary}, indent=2, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

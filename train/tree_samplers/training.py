@@ -1,0 +1,309 @@
+"""``gnn-mp train sampler``: the offline part of Algorithm 1 plus DAgger, read top to bottom.
+
+1. Solve ``--problems`` seeded training problems with the uniform sampler (cached dataset).
+2. Train the model on snapshots of those trees (``--view grown``, the remedy; ``prefix`` is
+   the paper's path-prefix graphs), ``--minutes`` of Adam with a cosine schedule; the
+   held-out tenth of the problems is the validation loss; the best epoch is kept.
+3. ``--dagger-rounds`` times: plan fresh training problems with the current sampler, label
+   its own trees with the paths it found, and fine-tune on everything.
+4. Plan ``--eval-problems`` validation problems with the sampler and with uniform (the same
+   problems and seeds) and report both; save the checkpoint (sampling settings and config in
+   its meta, the config beside it as JSON), TensorBoard events and a learning-curve figure.
+
+Everything goes to a run directory (``runs/tree/<task>-<model>-seed<S>-<time>/``); ``--ship``
+copies the checkpoint into the package (``agents/checkpoints/tree_<model>_<task>.pt``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from agents.checkpoints import (SHIPPED_DIR, load_checkpoint, load_training_state, save_checkpoint,
+                                save_training_state)
+from gnn_mp_envs.utils.io import atomic_path, atomic_write_text
+from train.args import arg, non_negative_int, positive_float, positive_int
+from train.tree_samplers.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
+from train.tree_samplers.models import TASKS, adapter_for
+
+MODELS = ("gnn", "cvae", "gnn-cvae")
+
+
+@dataclass
+class TrainArgs:
+    """Flags of ``gnn-mp train sampler``."""
+
+    task: str = arg("pendulum", "task", choices=tuple(TASKS))
+    model: str = arg("gnn", "model", choices=MODELS)
+    problems: int = arg(400, "training problems solved by the uniform sampler (split train)", parse=positive_int)
+    view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
+                    "start + path prefix)", choices=VIEWS)
+    minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)
+    dagger_rounds: int = arg(1, "DAgger rounds: plan with the sampler, relabel its own trees, fine-tune",
+                             parse=non_negative_int)
+    dagger_problems: int = arg(400, "fresh training problems planned per DAgger round", parse=positive_int)
+    dagger_minutes: float = arg(6.0, "fine-tuning time per DAgger round (minutes)", parse=positive_float)
+    batch_size: int = arg(8, "runs (solved problems) per optimisation step", parse=positive_int)
+    lr: float = arg(2e-3, "Adam learning rate (cosine-annealed)", parse=positive_float)
+    eval_problems: int = arg(60, "validation problems planned at the end (sampler and uniform)",
+                             parse=non_negative_int)
+    seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=non_negative_int)
+    data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
+    out: Path | None = arg(None, "run directory (default: runs/tree/<task>-<model>-seed<S>-<time>)")
+    ship: bool = arg(False, "also copy the checkpoint into the package (agents/checkpoints/)")
+    resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
+    threads: int = arg(1, "torch threads", parse=positive_int)
+    progress: bool = arg(True, "hide progress bars")
+
+
+class TrainError(Exception):
+    """A user-facing error (one line)."""
+
+
+def run_dir(args: TrainArgs) -> Path:
+    if args.out is not None:
+        return args.out
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / "tree" / f"{args.task}-{args.model}-seed{args.seed}-{stamp}"
+
+
+def scene_of(task: str) -> str | None:
+    from gnn_mp_envs.registration import task_spec
+    return "train" if task_spec(task).scenes else None
+
+
+def observation_space_of(task: str):
+    import gymnasium as gym
+
+    import gnn_mp_envs  # noqa: F401
+    from gnn_mp_envs.registration import task_spec
+    env = gym.make(task_spec(task).env_id, max_nodes=2, disable_env_checker=True)
+    try:
+        return env.observation_space, env.action_space
+    finally:
+        env.close()
+
+
+# ---------------------------------------------------------------------------- one phase
+def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, minutes: float, lr: float,
+        batch_size: int, seed: int, writer, phase: str, progress: bool,
+        resume: dict | None = None, resume_path: Path | None = None) -> dict[str, Any]:
+    """Adam on ``train_items`` for ``minutes``; returns the history and leaves the best
+    validation epoch's weights in ``model``."""
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    history: list[dict[str, float]] = []
+    best = (math.inf, None)
+    epoch, elapsed = 0, 0.0
+    if resume is not None:
+        model.load_state_dict(resume["model"])
+        opt.load_state_dict(resume["optimizer"])
+        history, epoch, elapsed = list(resume["history"]), int(resume["epoch"]), float(resume["elapsed"])
+        best = (float(resume["best_loss"]), resume["best_state"])
+    gen = torch.Generator().manual_seed(seed)
+    budget = 60.0 * minutes
+    bar = tqdm(total=round(budget), desc=f"{phase}", unit="s", disable=not progress, file=sys.stderr,
+               initial=min(round(elapsed), round(budget)))
+    t0 = time.perf_counter() - elapsed
+    while time.perf_counter() - t0 < budget:
+        order = np.random.default_rng([seed, epoch]).permutation(len(train_items))
+        model.train()
+        losses = []
+        for k in range(0, len(order), batch_size):
+            frac = (time.perf_counter() - t0) / budget
+            if frac >= 1:
+                break
+            for group in opt.param_groups:
+                group["lr"] = lr * 0.5 * (1 + math.cos(math.pi * min(frac, 1.0)))
+            loss, _, _ = adapter.loss(model, [train_items[i] for i in order[k:k + batch_size]], gen)
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            opt.step()
+            losses.append(loss.item())
+            bar.n = min(round(time.perf_counter() - t0), round(budget))
+            bar.refresh()
+        val = evaluate_loss(model, adapter, val_items)
+        epoch += 1
+        row = {"epoch": epoch, "seconds": time.perf_counter() - t0, "train": float(np.mean(losses)) if losses else math.nan,
+               "val": val}
+        history.append(row)
+        if writer is not None:
+            writer.add_scalar(f"{phase}/train_loss", row["train"], epoch)
+            writer.add_scalar(f"{phase}/val_loss", val, epoch)
+        if val < best[0]:
+            best = (val, {k: v.detach().clone() for k, v in model.state_dict().items()})
+        bar.set_postfix(train=f"{row['train']:.3f}", val=f"{val:.3f}")
+        if resume_path is not None:
+            save_training_state(resume_path, {"model": model.state_dict(), "optimizer": opt.state_dict(),
+                                              "history": history, "epoch": epoch, "elapsed": time.perf_counter() - t0,
+                                              "best_loss": best[0], "best_state": best[1]})
+    bar.close()
+    if best[1] is not None:
+        model.load_state_dict(best[1])
+    return {"history": history, "best_val": best[0], "epochs": epoch}
+
+
+@torch.no_grad()
+def evaluate_loss(model: torch.nn.Module, adapter, items: list, batch_size: int = 16) -> float:
+    model.eval()
+    total, count = 0.0, 0
+    gen = torch.Generator().manual_seed(0)
+    for k in range(0, len(items), batch_size):
+        loss, n, _ = adapter.loss(model, items[k:k + batch_size], gen)
+        total, count = total + float(loss) * n, count + n
+    return total / max(count, 1)
+
+
+def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDataset]:
+    """(training, validation) problems: a fixed tenth (at least one) held out."""
+    order = np.random.default_rng(seed).permutation(len(data))
+    cut = max(1, len(data) // 10)
+    return data.subset(sorted(order[cut:].tolist())), data.subset(sorted(order[:cut].tolist()))
+
+
+# ---------------------------------------------------------------------------- the whole job
+def train(args: TrainArgs) -> dict[str, Any]:
+    """Data, training, DAgger, evaluation, checkpoint; returns the run's summary."""
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    out = run_dir(args)
+    if args.resume and args.out is None:
+        raise TrainError("--resume needs --out RUN_DIR (the run to continue)")
+    out.mkdir(parents=True, exist_ok=True)
+    adapter = adapter_for(args.model, args.task)
+    observation_space, action_space = observation_space_of(args.task)
+    model, ctor_args = adapter.build(args.task, observation_space)
+    scene = scene_of(args.task)
+    started = time.perf_counter()
+
+    # 1. data: uniform solutions of training problems
+    data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
+    data = load_or_generate(data_config, args.data_dir, progress=args.progress)
+    rng = np.random.default_rng(args.seed)
+    snapshots = TASKS[args.task].max_snapshots
+    if len(data) < 2:
+        raise TrainError(f"only {len(data)} solved problem(s) in {data_config.file_name()}; raise --problems")
+    train_data, val_data = split_problems(data, args.seed)
+    train_items = adapter.items(model, train_data, args.view, rng, snapshots)
+    val_items = adapter.items(model, val_data, args.view, rng, snapshots)
+
+    from torch.utils.tensorboard import SummaryWriter
+    writer = SummaryWriter(str(out / "tb"))
+    resume_path = out / "resume.pt"
+    if args.resume and not resume_path.exists():
+        raise TrainError(f"--resume: {resume_path} does not exist")
+    resume = load_training_state(resume_path) if args.resume else None
+    summary: dict[str, Any] = {"config": _plain(asdict(args)), "dataset": data_config.file_name(),
+                               "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
+    # 2. the first phase
+    phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed, writer,
+                  "phase0", args.progress, resume=resume, resume_path=resume_path)]
+    # 3. DAgger
+    settings = dict(TASKS[args.task].sampler.get(args.model, {}))
+    for r in range(args.dagger_rounds):
+        own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r),
+                                            args.seed + r + 1)
+        train_items += adapter.items(model, own_train, "grown", rng, snapshots)
+        val_items += adapter.items(model, own_val, "grown", rng, snapshots)
+        phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
+                          args.batch_size, args.seed + r + 1, writer, f"dagger{r + 1}", args.progress))
+    summary["phases"] = phases
+    summary["train_seconds"] = time.perf_counter() - started
+    # The train/online mismatch: the loss on both views of the held-out problems (online the
+    # sampler sees grown trees, whichever view it was trained on).
+    summary["validation_loss_by_view"] = {
+        view: evaluate_loss(model, adapter, adapter.items(model, val_data, view, np.random.default_rng(1), snapshots))
+        for view in VIEWS}
+
+    # 4. save, evaluate, ship
+    meta = {"task": args.task, "sampler": settings, "config": summary["config"], "dataset": summary["dataset"]}
+    ckpt = save_checkpoint(out / "model.pt", model, adapter.kind, ctor_args, meta=meta)
+    if args.eval_problems:
+        summary["validation"] = evaluate_online(args.task, ckpt, args.model, args.eval_problems, args.seed,
+                                                args.progress)
+        for name, stats in summary["validation"].items():
+            writer.add_scalar(f"validation/{name}_median_nodes", stats["median_nodes"], 0)
+    writer.close()
+    plot_learning_curve(phases, out / "learning_curve.png", f"{args.task} {args.model}",
+                        getattr(adapter, "loss_name", "NLL per snapshot"))
+    atomic_write_text(out / "config.json", json.dumps(summary, indent=2, default=float) + "\n")
+    if args.ship:
+        target = SHIPPED_DIR / f"tree_{args.model}_{args.task}.pt"
+        with atomic_path(target) as tmp:
+            shutil.copyfile(ckpt, tmp)
+        load_checkpoint(target, expected_kind=adapter.kind)
+        summary["shipped"] = str(target)
+    summary["run_dir"] = str(out)
+    return summary
+
+
+def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_index: int) -> TreeDataset:
+    """DAgger data: fresh training problems planned by the current sampler, labelled by the
+    paths it found itself."""
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        ckpt = save_checkpoint(Path(tmp) / "current.pt", model, adapter.kind, ctor_args,
+                               meta={"task": args.task, "sampler": settings})
+        config = TreeDataConfig(task=args.task, split="train", scene=scene_of(args.task), problems=args.dagger_problems,
+                                seed=args.seed + 1000 * (round_index + 1), first_problem=args.problems +
+                                round_index * args.dagger_problems, sampler=args.model)
+        from train.tree_samplers.data import generate
+        return generate(config, progress=args.progress, checkpoint=str(ckpt))
+
+
+def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed: int,
+                    progress: bool) -> dict[str, dict[str, float]]:
+    """Plan validation problems 0..N-1 with the trained sampler and with uniform (same seeds)."""
+    from train.benchmark import BenchmarkArgs, run_benchmark
+    report = run_benchmark(BenchmarkArgs(task=task, samplers=["uniform", model], problems=problems, seed=seed,
+                                         split="val", checkpoints={model: checkpoint}, progress=progress))
+    out = {}
+    for name, s in report["results"].items():
+        out[name] = {"success_rate": s["success_rate"], "median_nodes": s["nodes_expanded"]["median"],
+                     "median_collision_checks": s["collision_checks"]["median"],
+                     "median_wall_ms": 1e3 * s["wall_time_s"]["median"]}
+    return out
+
+
+def plot_learning_curve(phases: list[dict], path: Path, title: str, loss_name: str = "NLL per snapshot") -> None:
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    offset = 0.0
+    for k, phase in enumerate(phases):
+        h = phase["history"]
+        if not h:
+            continue
+        t = [offset + r["seconds"] / 60 for r in h]
+        ax.plot(t, [r["train"] for r in h], color="tab:blue", label="train" if k == 0 else None)
+        ax.plot(t, [r["val"] for r in h], color="tab:orange", label="validation" if k == 0 else None)
+        if k:
+            ax.axvline(offset, color="0.6", linestyle=":", linewidth=1)
+        offset = t[-1]
+    ax.set_xlabel("training time [min] (dotted: DAgger rounds)")
+    ax.set_ylabel(f"loss ({loss_name})")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+
+
+def _plain(d: dict) -> dict:
+    return {k: (str(v) if isinstance(v, Path) else v) for k, v in d.items()}
+
+
+__all__ = ["MODELS", "TrainArgs", "TrainError", "evaluate_online", "fit", "plot_learning_curve", "train"]
