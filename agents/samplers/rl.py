@@ -3,8 +3,9 @@
 :class:`RLSampler` is a :class:`~agents.samplers.learned.LearnedSampler` around a policy of
 :mod:`agents.models.rl`. It applies what training applied: the bounded view of the tree
 (:func:`gnn_mp_envs.envs.wrappers.tree_view`, ``view_nodes`` rows, read from the checkpoint)
-and the action scaling of :func:`~gnn_mp_envs.envs.wrappers.make_rl_env` (the policy acts in
-``[-1, 1]^d``; ``-1``/``+1`` map to ``low``/``high``). Its randomness is its own: the Normal
+and the action map of :func:`~gnn_mp_envs.envs.wrappers.make_rl_env` (the policy acts in
+``[-1, 1]^d``: offsets from the active tree's target in box spans, ``action_frame="target"``,
+or the box rescaled, ``"absolute"``; stored in the checkpoint with the periodic dimensions). Its randomness is its own: the Normal
 draw is ``torch.randn(*batch, d, generator=self.generator)`` (then, with ``uniform_mix > 0``,
 the uniform sample and the choice, as in ``LearnedSampler``), never ``model.predict``, so the
 benchmark's ``reset(seed)`` reproduces every action.
