@@ -244,7 +244,7 @@ def test_warm_start_flag_in_training(tmp_path):
     src = {k: v for k, v in read_checkpoint(first.best)["state_dict"].items() if k.startswith("encoder.")}
     args = tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "b", init_from=first.best,
                      lr=1e-12)
-    second = train(args)
+    train(args)
     after = read_checkpoint(tmp_path / "b" / "policy.pt")["state_dict"]
     for k, v in src.items():
         assert torch.allclose(after[k], v, atol=1e-6), k
