@@ -16,18 +16,19 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from agents.encoders import TreeEncoder
+from agents.encoders import encoder_from_space
 
 
 class TreeFeaturesExtractor(BaseFeaturesExtractor):
     """Observation dict -> the :class:`TreeEncoder` graph embedding ``(batch, out_channels)``.
 
-    ``features_extractor_kwargs`` go to ``TreeEncoder.from_space`` (``hidden_channels``,
+    ``features_extractor_kwargs`` go to ``TreeEncoder.from_space`` (``backbone="tree-gnn"``: the
+    GNN sampler's backbone, :class:`agents.encoders.TreeGNNEncoder`) (``hidden_channels``,
     ``num_layers``, ``out_channels``, ``conv``, ``knn``, ...).
     """
 
     def __init__(self, observation_space: spaces.Dict, **encoder_kw) -> None:
-        encoder = TreeEncoder.from_space(observation_space, **encoder_kw)
+        encoder = encoder_from_space(observation_space, **encoder_kw)
         super().__init__(observation_space, features_dim=encoder.out_channels)
         self.encoder = encoder
 

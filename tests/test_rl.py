@@ -385,3 +385,22 @@ def test_shipped_rl_checkpoints(path):
     sampler = load_sampler(name, env.action_space.low, env.action_space.high, task=task, seed=0)
     obs, _ = env.reset(seed=0)
     assert env.action_space.contains(sampler.act(obs))
+
+
+@pytest.mark.parametrize("lib", ["sb3", "torchrl"])
+def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
+    """--encoder tree-gnn builds the GNN sampler's own backbone (one module), and --init-from
+    the shipped tree_gnn checkpoint copies its weights into the policy's encoder."""
+    from agents.checkpoints import SHIPPED_DIR, read_checkpoint
+    from train.rl_sb3 import train as train_sb3
+    from train.rl_torchrl import train as train_torchrl
+    shipped = SHIPPED_DIR / "tree_gnn_maze2d.pt"
+    args = tiny_args(tmp_path, lib, "ppo", "maze2d", total_steps=128, encoder="tree-gnn", init_from=shipped,
+                     lr=1e-12)
+    (train_sb3 if lib == "sb3" else train_torchrl)(args)
+    gnn = read_checkpoint(shipped)["state_dict"]
+    policy = read_checkpoint(args.run_dir() / "policy.pt")
+    assert policy["ctor_args"]["encoder"]["class"] == "tree-gnn"
+    state = policy["state_dict"]
+    for key, value in gnn.items():
+        assert torch.allclose(state[f"encoder.gnn.{key}"], value, atol=1e-5), key

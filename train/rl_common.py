@@ -75,7 +75,11 @@ class RLArgs:
     conv: str = arg("sage", "TreeEncoder convolution", choices=("sage", "graph", "gcn", "gatv2"))
     knn: int = arg(0, "TreeEncoder k-NN edges per node (0: tree edges only)", parse=non_negative_int)
     net_arch: list[int] = arg([64, 64], "hidden widths of the policy and value heads")
-    init_from: Path | None = arg(None, "warm start: copy the TreeEncoder weights of this checkpoint (any kind)")
+    encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
+                       "sampler's causal TreeGNN, its architecture; what --init-from a tree_gnn checkpoint needs)",
+                       choices=("tree", "tree-gnn"))
+    init_from: Path | None = arg(None, "warm start: copy the backbone weights of this checkpoint (any kind holding "
+                                 "one of the same size, e.g. agents/checkpoints/tree_gnn_maze2d.pt with --encoder tree-gnn)")
     # --- optimisation
     lr: float = arg(3e-4, "Adam learning rate", parse=positive_float)
     gamma: float = arg(0.99, "discount", parse=positive_float)
@@ -117,7 +121,13 @@ class RLArgs:
         return kw
 
     def encoder_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of ``TreeEncoder.from_space``."""
+        """Keyword arguments of ``agents.encoders.encoder_from_space``."""
+        if self.encoder == "tree-gnn":   # the supervised GNN sampler's architecture, so its weights fit
+            from train.tree_samplers.models import TASKS, GNNAdapter
+            t = TASKS[self.task]
+            return {"backbone": "tree-gnn", "hidden_channels": GNNAdapter.hidden_channels,
+                    "num_layers": GNNAdapter.num_layers, "knn": GNNAdapter.knn, "step_scale": t.step_scale,
+                    "periodic": list(t.periodic), "num_trees": t.num_trees}
         return {"hidden_channels": self.hidden_channels, "num_layers": self.num_layers,
                 "out_channels": self.out_channels, "conv": self.conv, "knn": self.knn}
 

@@ -84,8 +84,8 @@ def build_model(args: RLArgs, env) -> PPO | SAC:
 
 
 def encoders_of(model: PPO | SAC) -> list:
-    """Every ``TreeEncoder`` of a model (PPO: the shared one; SAC: actor, critic, target critic)."""
-    return [m for m in model.policy.modules() if type(m).__name__ == "TreeEncoder"]
+    """Every encoder of a model (PPO: the shared one; SAC: actor, critic, target critic)."""
+    return [m for m in model.policy.modules() if type(m).__name__ in ("TreeEncoder", "TreeGNNEncoder")]
 
 
 def train(args: RLArgs) -> RunResult:

@@ -63,7 +63,7 @@ def train(args: RLArgs) -> RunResult:
                        init_scale=float(math.exp(args.log_std_init)), **args.encoder_kwargs())
     value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
     if args.init_from is not None:
-        encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ == "TreeEncoder"]
+        encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ in ("TreeEncoder", "TreeGNNEncoder")]
         print(f"encoders initialised from {args.init_from} ({warm_start_encoder(args.init_from, *encoders)})")
 
     # 3. collector, advantage, loss, optimiser, logger

@@ -34,7 +34,7 @@ import torch
 from torch import nn
 
 from agents.checkpoints import CheckpointError, read_checkpoint, register_model_kind
-from agents.encoders import ACTIVATIONS, TreeEncoder
+from agents.encoders import ACTIVATIONS, ENCODERS, TreeEncoder, TreeGNNEncoder
 
 #: SB3 SAC's clamp of the log standard deviation (``stable_baselines3.sac.policies``).
 SAC_LOG_STD_MIN, SAC_LOG_STD_MAX = -20.0, 2.0
@@ -42,8 +42,11 @@ SAC_LOG_STD_MIN, SAC_LOG_STD_MAX = -20.0, 2.0
 _ACT_NAMES = {nn.ReLU: "relu", nn.Tanh: "tanh", nn.ELU: "elu", nn.SiLU: "silu"}
 
 
-def encoder_config(encoder: TreeEncoder) -> dict[str, Any]:
-    """Constructor arguments that rebuild ``encoder`` (plain values, for a checkpoint)."""
+def encoder_config(encoder: nn.Module) -> dict[str, Any]:
+    """Constructor arguments that rebuild ``encoder`` (plain values, for a checkpoint); a
+    :class:`TreeGNNEncoder`'s carry ``"class": "tree-gnn"``."""
+    if isinstance(encoder, TreeGNNEncoder):
+        return {"class": "tree-gnn", **encoder.gnn_kwargs}
     first = encoder.tree_convs[0] if len(encoder.tree_convs) else None
     return {
         "in_channels": encoder.in_channels, "hidden_channels": encoder.hidden_channels,
@@ -78,7 +81,8 @@ class RLPolicy(nn.Module):
 
     def __init__(self, encoder: Mapping[str, Any], action_dim: int) -> None:
         super().__init__()
-        self.encoder = TreeEncoder(**dict(encoder))
+        config = dict(encoder)
+        self.encoder = ENCODERS[config.pop("class", "tree")](**config)
         self.action_dim = int(action_dim)
 
     def params(self, embed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -206,11 +210,17 @@ def policy_from_torchrl(actor: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
 
 
 # ----------------------------------------------------------------------------- warm start
-def encoder_state_from(state: Mapping[str, torch.Tensor], encoder: TreeEncoder) -> tuple[str, dict]:
+def backbone(encoder: nn.Module) -> nn.Module:
+    """The module whose weights a warm start copies: the ``TreeEncoder`` itself, or the
+    ``TreeGNN`` inside a :class:`TreeGNNEncoder` (the supervised GNN sampler's class)."""
+    return encoder.gnn if isinstance(encoder, TreeGNNEncoder) else encoder
+
+
+def encoder_state_from(state: Mapping[str, torch.Tensor], encoder: nn.Module) -> tuple[str, dict]:
     """``(prefix, encoder_state)``: the entries of ``state`` under the first prefix that holds
-    every parameter and buffer of ``encoder`` with the same shapes."""
-    own = encoder.state_dict()
-    anchor = "input.weight"
+    every parameter and buffer of ``encoder``'s backbone with the same shapes."""
+    own = backbone(encoder).state_dict()
+    anchor = next(iter(own))
     prefixes = sorted({k[: -len(anchor)] for k in state if k.endswith(anchor)}, key=lambda p: (len(p), p))
     mismatches = []
     for prefix in prefixes:
@@ -223,14 +233,15 @@ def encoder_state_from(state: Mapping[str, torch.Tensor], encoder: TreeEncoder) 
             continue
         return prefix, sub
     detail = f" (shape mismatch: {'; '.join(mismatches[:2])})" if mismatches else ""
-    raise ValueError(f"no TreeEncoder of this size in the checkpoint{detail}")
+    raise ValueError(f"no {type(backbone(encoder)).__name__} of this size in the checkpoint{detail}")
 
 
-def warm_start_encoder(path: str | Path, *encoders: TreeEncoder) -> str:
-    """Copy the ``TreeEncoder`` weights of checkpoint ``path`` into each of ``encoders``.
+def warm_start_encoder(path: str | Path, *encoders: nn.Module) -> str:
+    """Copy the backbone weights of checkpoint ``path`` into each of ``encoders``.
 
-    Works for any kind whose state dict holds a ``TreeEncoder`` of the same size under some
-    prefix (the supervised GNN sampler's, an RL policy's). Returns the checkpoint's kind and
+    Works for any kind whose state dict holds the same backbone (a ``TreeEncoder``, or the
+    ``TreeGNN`` of a ``TreeGNNEncoder``) of the same size under some prefix: the supervised
+    GNN sampler's (``tree/gnn``: at the root), a GNN-CVAE's, an RL policy's. Returns the checkpoint's kind and
     the prefix used, e.g. ``"rl/sb3-ppo:encoder."``. Raises ``CheckpointError`` for an
     unusable file and ``ValueError`` when no encoder of the right size is found.
     """
@@ -241,7 +252,7 @@ def warm_start_encoder(path: str | Path, *encoders: TreeEncoder) -> str:
             prefix, sub = encoder_state_from(record["state_dict"], encoder)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
-        encoder.load_state_dict(sub)
+        backbone(encoder).load_state_dict(sub)
     return f"{record['kind']}:{prefix}"
 
 

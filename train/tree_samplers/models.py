@@ -75,11 +75,14 @@ class GNNAdapter:
 
     kind = "tree/gnn"
     model_class = TreeGNN
+    #: The shipped architecture (also what RL's ``--encoder tree-gnn`` builds, to warm-start from it).
+    hidden_channels, num_layers, knn = 64, 2, 6
 
     def ctor_args(self, task: str, observation_space: spaces.Dict, **overrides) -> dict:
         t = TASKS[task]
         d = int(observation_space["start"].shape[0])
-        args = {"state_dim": d, "hidden_channels": 64, "num_layers": 2, "knn": 6, **space_scales(observation_space),
+        args = {"state_dim": d, "hidden_channels": self.hidden_channels, "num_layers": self.num_layers,
+                "knn": self.knn, **space_scales(observation_space),
                 "step_scale": [t.step_scale] * d, "periodic": list(t.periodic), "num_trees": t.num_trees}
         args.update(overrides)
         return args
