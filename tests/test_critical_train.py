@@ -135,5 +135,5 @@ def test_node_level_training_max_steps_and_selection(data_dir, tmp_path):
     assert {"val_accuracy", "val_hit@1", "val_hit@3", "val_hit@10", "val_score", "cpu_seconds"} <= set(h)
     assert res["best"]["val_score"] == max(x["val_score"] for x in res["history"])
     model, _, record = load_model(res["checkpoint"], "cnn")
-    assert model.readout == "heatmap" and record["meta"]["hparams"]["node_target"] == "all"
+    assert model.readout == "heatmap" and record["meta"]["hparams"]["node_target"] == "any"
     assert record["meta"]["hparams"]["max_steps"] == 3

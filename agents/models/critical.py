@@ -49,6 +49,9 @@ READOUTS = ("max", "attention")
 #: edge of the fixed r-disc graph (then the obstacle indicator reaches free nodes). The
 #: models only record the choice; :mod:`agents.critical_data` builds the edges.
 EDGE_MODES = ("valid", "all")
+#: Attention readout: what each node's score sees besides its own embedding: nothing, or the
+#: graph's max-pooled embedding (global context, like the paper's max-pool head).
+CONTEXTS = ("none", "max")
 #: Default predicted state dimension: (x, y) of the critical-sample task.
 STATE_DIM = 2
 #: Occupancy, start and goal channels of the CNN baselines.
@@ -88,11 +91,13 @@ class GraphPoolRegressor(nn.Module):
 
     def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
                  out_channels: int, head_in_extra: int = 0, readout: str = "max",
-                 edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 edges: str = "valid", centre: Centre = CENTRE, context: str = "none") -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
-        self.edges = edges
+        if context not in CONTEXTS:
+            raise ValueError(f"context must be one of {CONTEXTS}, got {context!r}")
+        self.edges, self.context = edges, context
         if readout not in READOUTS:
             raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
         self.in_channels, self.hidden_channels = in_channels, hidden_channels
@@ -103,7 +108,8 @@ class GraphPoolRegressor(nn.Module):
             for i in range(num_layers))
         self.head = _mlp(hidden_channels + head_in_extra, hidden_channels, out_channels)
         if readout == "attention":
-            self.score = _mlp(hidden_channels + head_in_extra, hidden_channels, 1)
+            ctx = hidden_channels if context == "max" else 0
+            self.score = _mlp(hidden_channels + head_in_extra + ctx, hidden_channels, 1)
             nn.init.zeros_(self.head[-1].weight)  # offset starts at 0: prediction = attention mean
             nn.init.zeros_(self.head[-1].bias)
 
@@ -139,11 +145,16 @@ class GraphPoolRegressor(nn.Module):
         if batch is None:
             batch = torch.zeros(h.shape[0], dtype=torch.long, device=h.device)
         num_graphs = int(batch.max()) + 1 if batch.numel() else 1
+        ctx = global_max_pool(h, batch, num_graphs)[batch] if self.context == "max" else None
         if extra is not None:
             if extra.dim() == 3:
                 h = h[:, None, :].expand(-1, extra.shape[1], -1)
             h = torch.cat([h, extra], -1)
-        s = self.score(h).squeeze(-1)
+        if ctx is not None:     # every node's score also sees the graph's max-pooled embedding
+            ctx = ctx[:, None, :].expand(-1, h.shape[1], -1) if h.dim() == 3 else ctx
+            s = self.score(torch.cat([h, ctx], -1)).squeeze(-1)
+        else:
+            s = self.score(h).squeeze(-1)
         a = softmax(s, batch, num_nodes=h.shape[0], dim=0)  # (N,) or (N, k)
         w = a.unsqueeze(-1)
         p = pos if a.dim() == 1 else pos[:, None, :]
@@ -188,10 +199,10 @@ class CriticalGNN(GraphPoolRegressor):
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, K: int = 3,
                  head_in_extra: int = 0, readout: str = "max", edges: str = "valid",
-                 centre: Centre = CENTRE) -> None:
+                 centre: Centre = CENTRE, context: str = "none") -> None:
         self.K = K
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra, readout,
-                         edges, centre)
+                         edges, centre, context)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         # Normalisation is done once per pass in propagation() (same result as normalize=True).
@@ -212,10 +223,11 @@ class CriticalGAT(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, heads: int = 1,
-                 readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 readout: str = "max", edges: str = "valid", centre: Centre = CENTRE,
+                 context: str = "none") -> None:
         self.heads = heads
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, readout=readout,
-                         edges=edges, centre=centre)
+                         edges=edges, centre=centre, context=context)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         return GATv2Conv(in_channels, out_channels, heads=self.heads, concat=False)
@@ -259,7 +271,8 @@ class CriticalGNNCVAE(_GaussianLatent):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, latent_channels: int = 2,
-                 K: int = 3, readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 K: int = 3, readout: str = "max", edges: str = "valid", centre: Centre = CENTRE,
+                 context: str = "none") -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
@@ -268,7 +281,8 @@ class CriticalGNNCVAE(_GaussianLatent):
         self.encoder = CriticalGNN(in_channels + out_channels, hidden_channels, num_layers,
                                    2 * latent_channels, K=K)
         self.decoder = CriticalGNN(in_channels, hidden_channels, num_layers, out_channels, K=K,
-                                   head_in_extra=latent_channels, readout=readout, centre=centre)
+                                   head_in_extra=latent_channels, readout=readout, centre=centre,
+                                   context=context)
 
     def encode(self, x: Tensor, edge_index: Tensor, y: Tensor, pos: Tensor,
                batch: Tensor | None = None) -> tuple[Tensor, Tensor]:

@@ -60,7 +60,8 @@ def cmd_evaluate(a: EvaluateArgs) -> None:
     from train.critical.evaluate import evaluate, format_table
     rep = evaluate(a.models, a.checkpoints, a.data, a.problems, a.samples, seed=a.seed,
                    json_path=a.json, plot_path=a.plot, dataset=a.dataset(), progress=a.progress,
-                   eval_seed=a.eval_seed, ks=a.ks, min_sep_r=a.min_sep, select=a.select)
+                   eval_seed=a.eval_seed, ks=a.ks, min_sep_r=a.min_sep, select=a.select,
+                   split=a.split)
     print(format_table(rep))
 
 

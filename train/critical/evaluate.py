@@ -251,7 +251,8 @@ def evaluate(models: Sequence[str] = tuple(MODELS),
              num_samples: int = EVAL_SAMPLES, seed: int = 0,
              json_path: str | Path | None = None, plot_path: str | Path | None = None,
              dataset: DatasetConfig | None = None, progress: bool = True, eval_seed: int | None = None,
-             ks: Sequence[int] = KS, min_sep_r: float = MIN_SEP_R, select: str = "top") -> dict[str, Any]:
+             ks: Sequence[int] = KS, min_sep_r: float = MIN_SEP_R, select: str = "top",
+             split: str = "eval") -> dict[str, Any]:
     """Accuracy, hit rate, distance and planning of every model in distribution and on blob maps.
 
     ``checkpoint_dir``: one directory or several (e.g. one per training seed); each
@@ -260,10 +261,13 @@ def evaluate(models: Sequence[str] = tuple(MODELS),
     fast (:class:`agents.checkpoints.CheckpointError`). Model rows are the mean over the
     directories, with ``<metric>_std`` (sample standard deviation) and the per-directory
     ``values``. ``eval_seed``: fresh evaluation problems drawn from that seed (default: the
-    shipped sets, drawn from the data seed).
+    shipped sets, drawn from the data seed). ``split="val"``: the labelled set's validation
+    problems instead (one set, ``"val"``), for tuning.
     """
     if select not in SELECTIONS:
         raise ValueError(f"select must be one of {SELECTIONS}, got {select!r}")
+    if split not in ("eval", "val"):
+        raise ValueError(f"split must be 'eval' or 'val', got {split!r}")
     dirs = [Path(checkpoint_dir)] if isinstance(checkpoint_dir, (str, Path)) else [Path(d) for d in checkpoint_dir]
     loaded: list[dict[str, torch.nn.Module]] = []
     for d in dirs:
@@ -279,15 +283,16 @@ def evaluate(models: Sequence[str] = tuple(MODELS),
     cfg = dataset or DatasetConfig()
     graph = halton_graph(cfg.graph_nodes)
     r = graph.radius
+    labelled = load_or_generate(cfg, data_dir, "labelled", progress)
     sets = {}
-    for key in ("test", "blob"):
-        probs = load_or_generate(cfg, data_dir, key, progress, eval_seed=eval_seed)
+    for key in (("test", "blob") if split == "eval" else ("val",)):
+        probs = (labelled.split_subset("val") if key == "val"
+                 else load_or_generate(cfg, data_dir, key, progress, eval_seed=eval_seed))
         n = len(probs) if num_problems is None else min(num_problems, len(probs))
         sets[key] = probs.subset(np.arange(n))
-    labelled = load_or_generate(cfg, data_dir, "labelled", progress)
     mean_label = graph.nodes[labelled.split_subset("train").label_nodes].mean(0)
     report: dict[str, Any] = {"settings": {
-        "dataset": asdict(cfg), "eval_seed": eval_config(cfg, eval_seed).seed,
+        "dataset": asdict(cfg), "eval_seed": eval_config(cfg, eval_seed).seed, "split": split,
         "problems": {k: len(v) for k, v in sets.items()}, "checkpoints": [str(d) for d in dirs],
         "models": names, "ks": list(ks), "min_sep_r": min_sep_r, "select": select, "radius": r,
         "cvae_samples": num_samples, "candidate_samples": max(num_samples, CANDIDATE_SAMPLES), "seed": seed,
@@ -301,7 +306,7 @@ def evaluate(models: Sequence[str] = tuple(MODELS),
     fixed_acc: dict[str, dict] = {}
     fixed_plan: dict[str, list] = {}
     for key, probs in sets.items():
-        rng = np.random.default_rng([seed, 7, 0 if key == "test" else 1])
+        rng = np.random.default_rng([seed, 7, {"test": 0, "blob": 1, "val": 2}[key]])
         rand = {k: rng.uniform(0, 1, (len(probs), k, 2)) for k in ks}
         rows = {"mean label": _row("mean label", 1, "point", distance_metrics(
             nearest_label_distance(np.tile(mean_label, (len(probs), 1)), probs, graph), r))}
@@ -392,7 +397,7 @@ def _cell(row: dict, key: str, fmt: str) -> str:
 
 
 def _label(key: str) -> str:
-    return "in-distribution" if key == "test" else "blob maps"
+    return {"test": "in-distribution", "blob": "blob maps", "val": "validation problems"}[key]
 
 
 def format_table(report: dict[str, Any]) -> str:

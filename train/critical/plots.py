@@ -66,7 +66,7 @@ def plot_predictions(sets: dict[str, CriticalProblems], preds: dict[str, dict[st
             if r == 0:
                 ax.set_title(name)
             if c == 0:
-                ax.set_ylabel("in-dist" if key == "test" else "blob maps")
+                ax.set_ylabel({"test": "in-dist", "blob": "blob maps"}.get(key, key))
     axes[0][0].legend(loc="lower left", fontsize=5)
     fig.tight_layout()
     try:
