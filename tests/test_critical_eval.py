@@ -56,13 +56,14 @@ def test_evaluate_end_to_end_on_a_few_problems(tmp_path):
     if not all((CHECKPOINT_DIR / f"critical_{m}.pt").exists() for m in ("gnn", "gnn-cvae")):
         pytest.skip("no shipped checkpoints")
     rep = evaluate(models=["gnn", "gnn-cvae"], data_dir=tmp_path, num_problems=2, num_samples=4,
-                   plan_samples=4, json_path=tmp_path / "r.json", plot_path=tmp_path / "p.png",
+                   json_path=tmp_path / "r.json", plot_path=tmp_path / "p.png",
                    dataset=TINY, progress=False)
     assert (tmp_path / "r.json").exists() and (tmp_path / "p.png").stat().st_size > 1000
-    assert set(rep["accuracy"]) >= {"gnn", "gnn-cvae"}
-    assert "blob_best_of_4" in rep["accuracy"]["gnn-cvae"]
+    assert {"gnn point", "gnn k=10", "gnn-cvae point", "mean label"} <= set(rep["accuracy"]["blob"])
+    assert "best_of_4_accuracy" in rep["accuracy"]["blob"]["gnn-cvae point"]
     assert rep["planning"]["test"]["dense"]["success_rate"] == 1.0
-    assert {"sparse", "sparse+gnn", "sparse+gnn-cvae"} <= set(rep["planning"]["blob"])
+    assert {"sparse", "gnn point", "gnn k=1", "gnn k=3", "gnn k=10", "gnn-cvae k=10",
+            "uniform random k=10", "oracle (labels)"} <= set(rep["planning"]["blob"])
 
 
 # ----------------------------------------------------------------------------- issue #11 item 6

@@ -122,3 +122,18 @@ def test_cli_train_errors_are_one_line(data_dir, tmp_path, monkeypatch, capsys):
     assert main(["train", "--model", "gnn", "--resume", "--data", str(data_dir)]) == 2
     assert "no run of gnn" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").rglob("*.pt"))
+
+
+def test_node_level_training_max_steps_and_selection(data_dir, tmp_path):
+    """Issue 12: the heat-map CNN trains on the label-node term; --max-steps bounds the work;
+    the best epoch is chosen on the validation hit rate and CPU time is recorded."""
+    res = train(_args(data_dir, model="cnn", hidden=4, batch_size=2, epochs=3, max_steps=3,
+                      out=tmp_path / "cnn" / "critical_cnn.pt"), dataset=TINY, progress=False)
+    steps = [h["steps"] for h in res["history"]]
+    assert steps == [3]            # 8 training problems / batch 2 = 4 steps per epoch; stopped after 3
+    h = res["history"][-1]
+    assert {"val_accuracy", "val_hit@1", "val_hit@3", "val_hit@10", "val_score", "cpu_seconds"} <= set(h)
+    assert res["best"]["val_score"] == max(x["val_score"] for x in res["history"])
+    model, _, record = load_model(res["checkpoint"], "cnn")
+    assert model.readout == "heatmap" and record["meta"]["hparams"]["node_target"] == "any"
+    assert record["meta"]["hparams"]["max_steps"] == 3

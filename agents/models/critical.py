@@ -28,6 +28,7 @@ Each model is registered with :mod:`agents.checkpoints` as kind ``critical/<name
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -48,6 +49,9 @@ READOUTS = ("max", "attention")
 #: edge of the fixed r-disc graph (then the obstacle indicator reaches free nodes). The
 #: models only record the choice; :mod:`agents.critical_data` builds the edges.
 EDGE_MODES = ("valid", "all")
+#: Attention readout: what each node's score sees besides its own embedding: nothing, or the
+#: graph's max-pooled embedding (global context, like the paper's max-pool head).
+CONTEXTS = ("none", "max")
 #: Default predicted state dimension: (x, y) of the critical-sample task.
 STATE_DIM = 2
 #: Occupancy, start and goal channels of the CNN baselines.
@@ -87,11 +91,13 @@ class GraphPoolRegressor(nn.Module):
 
     def __init__(self, in_channels: int, hidden_channels: int, num_layers: int,
                  out_channels: int, head_in_extra: int = 0, readout: str = "max",
-                 edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 edges: str = "valid", centre: Centre = CENTRE, context: str = "none") -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
-        self.edges = edges
+        if context not in CONTEXTS:
+            raise ValueError(f"context must be one of {CONTEXTS}, got {context!r}")
+        self.edges, self.context = edges, context
         if readout not in READOUTS:
             raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
         self.in_channels, self.hidden_channels = in_channels, hidden_channels
@@ -102,7 +108,8 @@ class GraphPoolRegressor(nn.Module):
             for i in range(num_layers))
         self.head = _mlp(hidden_channels + head_in_extra, hidden_channels, out_channels)
         if readout == "attention":
-            self.score = _mlp(hidden_channels + head_in_extra, hidden_channels, 1)
+            ctx = hidden_channels if context == "max" else 0
+            self.score = _mlp(hidden_channels + head_in_extra + ctx, hidden_channels, 1)
             nn.init.zeros_(self.head[-1].weight)  # offset starts at 0: prediction = attention mean
             nn.init.zeros_(self.head[-1].bias)
 
@@ -138,11 +145,16 @@ class GraphPoolRegressor(nn.Module):
         if batch is None:
             batch = torch.zeros(h.shape[0], dtype=torch.long, device=h.device)
         num_graphs = int(batch.max()) + 1 if batch.numel() else 1
+        ctx = global_max_pool(h, batch, num_graphs)[batch] if self.context == "max" else None
         if extra is not None:
             if extra.dim() == 3:
                 h = h[:, None, :].expand(-1, extra.shape[1], -1)
             h = torch.cat([h, extra], -1)
-        s = self.score(h).squeeze(-1)
+        if ctx is not None:     # every node's score also sees the graph's max-pooled embedding
+            ctx = ctx[:, None, :].expand(-1, h.shape[1], -1) if h.dim() == 3 else ctx
+            s = self.score(torch.cat([h, ctx], -1)).squeeze(-1)
+        else:
+            s = self.score(h).squeeze(-1)
         a = softmax(s, batch, num_nodes=h.shape[0], dim=0)  # (N,) or (N, k)
         w = a.unsqueeze(-1)
         p = pos if a.dim() == 1 else pos[:, None, :]
@@ -154,6 +166,22 @@ class GraphPoolRegressor(nn.Module):
                                     reduce="sum")) + s.max()
             return out, s - lse[batch]
         return out
+
+    @property
+    def has_node_scores(self) -> bool:
+        """Whether the model scores the graph's nodes (the attention readout does)."""
+        return self.readout == "attention"
+
+    def node_log_scores(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None,
+                        pos: Tensor | None = None) -> Tensor:
+        """Node-level prediction: log-probabilities (N,) over each graph's nodes (the log attention).
+
+        The critical node distribution the label-node loss trains; planning takes its top-k
+        nodes (:mod:`gnn_mp_envs.critical.selection`). Needs ``readout="attention"``.
+        """
+        if not self.has_node_scores:
+            raise ValueError("node scores need readout='attention' (the max readout only predicts a point)")
+        return self.forward(x, edge_index, batch, pos, return_log_attention=True)[1]
 
     def forward(self, x: Tensor, edge_index: Tensor, batch: Tensor | None = None,
                 pos: Tensor | None = None, return_log_attention: bool = False):
@@ -171,10 +199,10 @@ class CriticalGNN(GraphPoolRegressor):
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, K: int = 3,
                  head_in_extra: int = 0, readout: str = "max", edges: str = "valid",
-                 centre: Centre = CENTRE) -> None:
+                 centre: Centre = CENTRE, context: str = "none") -> None:
         self.K = K
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, head_in_extra, readout,
-                         edges, centre)
+                         edges, centre, context)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         # Normalisation is done once per pass in propagation() (same result as normalize=True).
@@ -195,10 +223,11 @@ class CriticalGAT(GraphPoolRegressor):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, heads: int = 1,
-                 readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 readout: str = "max", edges: str = "valid", centre: Centre = CENTRE,
+                 context: str = "none") -> None:
         self.heads = heads
         super().__init__(in_channels, hidden_channels, num_layers, out_channels, readout=readout,
-                         edges=edges, centre=centre)
+                         edges=edges, centre=centre, context=context)
 
     def init_conv(self, in_channels: int, out_channels: int) -> nn.Module:
         return GATv2Conv(in_channels, out_channels, heads=self.heads, concat=False)
@@ -242,7 +271,8 @@ class CriticalGNNCVAE(_GaussianLatent):
 
     def __init__(self, in_channels: int = NODE_FEATURES, hidden_channels: int = 32,
                  num_layers: int = 3, out_channels: int = STATE_DIM, latent_channels: int = 2,
-                 K: int = 3, readout: str = "max", edges: str = "valid", centre: Centre = CENTRE) -> None:
+                 K: int = 3, readout: str = "max", edges: str = "valid", centre: Centre = CENTRE,
+                 context: str = "none") -> None:
         super().__init__()
         if edges not in EDGE_MODES:
             raise ValueError(f"edges must be one of {EDGE_MODES}, got {edges!r}")
@@ -251,7 +281,8 @@ class CriticalGNNCVAE(_GaussianLatent):
         self.encoder = CriticalGNN(in_channels + out_channels, hidden_channels, num_layers,
                                    2 * latent_channels, K=K)
         self.decoder = CriticalGNN(in_channels, hidden_channels, num_layers, out_channels, K=K,
-                                   head_in_extra=latent_channels, readout=readout, centre=centre)
+                                   head_in_extra=latent_channels, readout=readout, centre=centre,
+                                   context=context)
 
     def encode(self, x: Tensor, edge_index: Tensor, y: Tensor, pos: Tensor,
                batch: Tensor | None = None) -> tuple[Tensor, Tensor]:
@@ -293,6 +324,27 @@ class CriticalGNNCVAE(_GaussianLatent):
         num_graphs = 1 if batch is None else int(batch.max()) + 1
         return self.decode_pooled(cond, self.prior(num_graphs, num_samples, generator))
 
+    @property
+    def has_node_scores(self) -> bool:
+        """Whether the decoder scores the graph's nodes (the attention readout does)."""
+        return self.readout == "attention"
+
+    def sample_with_node_scores(self, x: Tensor, edge_index: Tensor, batch: Tensor | None, num_samples: int,
+                                generator: torch.Generator | None = None,
+                                pos: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Decoded samples (B, k, d) and the node distribution (N,) of the same k latents.
+
+        The node distribution is the mixture over the latents z_1..z_k ~ N(0, I) of the
+        decoder's attention, ``log(mean_j p(n | z_j))``: one graph pass for both.
+        """
+        if not self.has_node_scores:
+            raise ValueError("node scores need readout='attention' (the max readout only decodes points)")
+        cond = self.condition(x, edge_index, batch, pos)
+        num_graphs = 1 if batch is None else int(batch.max()) + 1
+        out, log_a = self.decode_pooled(cond, self.prior(num_graphs, num_samples, generator),
+                                        return_log_attention=True)
+        return out, torch.logsumexp(log_a, dim=-1) - math.log(num_samples)
+
 
 class CNNTrunk(nn.Module):
     """Strided conv layers on (occupancy, start, goal) images -> flat features."""
@@ -313,19 +365,100 @@ class CNNTrunk(nn.Module):
         return self.net(image)
 
 
+class HeatmapUNet(nn.Module):
+    """A small U-Net: the :class:`CNNTrunk`'s strided convs, a global FC bottleneck (what the
+    point CNN's FC head sees), then upsampling with skip connections to one logit per pixel."""
+
+    def __init__(self, in_channels: int, hidden_channels: int, num_layers: int, image_size: int = 64,
+                 fc_channels: int = 64) -> None:
+        super().__init__()
+        widths = [hidden_channels * min(2 ** i, 4) for i in range(num_layers)]
+        self.down = nn.ModuleList()
+        c = in_channels
+        for w in widths:
+            self.down.append(nn.Sequential(nn.Conv2d(c, w, 3, stride=2, padding=1), nn.ReLU()))
+            c = w
+        side = image_size // 2 ** num_layers
+        self._bottleneck = (c, side, side)
+        self.fc = nn.Sequential(nn.Flatten(), nn.Linear(c * side * side, fc_channels), nn.ReLU(),
+                                nn.Linear(fc_channels, c * side * side))
+        self.up = nn.ModuleList()
+        skips = [in_channels] + widths[:-1]               # what each upsampled level is joined with
+        for i in reversed(range(num_layers)):
+            out = skips[i] if i > 0 else hidden_channels
+            self.up.append(nn.Sequential(nn.Conv2d(c + skips[i], out, 3, padding=1), nn.ReLU()))
+            c = out
+        self.logit = nn.Conv2d(c, 1, 1)
+
+    def forward(self, image: Tensor) -> Tensor:
+        """Logits (B, H, W), row 0 at y = 0 like the input."""
+        feats, h = [image], image
+        for layer in self.down:
+            h = layer(h)
+            feats.append(h)
+        h = h + self.fc(h).view(-1, *self._bottleneck)
+        for layer, skip in zip(self.up, reversed(feats[:-1])):
+            h = nn.functional.interpolate(h, size=skip.shape[-2:], mode="nearest")
+            h = layer(torch.cat([h, skip], 1))
+        return self.logit(h).squeeze(1)
+
+
+#: CNN readouts: the first round's FC regression to a point, or a heat map over the image.
+CNN_READOUTS = ("point", "heatmap")
+
+
 class CriticalCNN(nn.Module):
-    """Baseline: the GNN layers replaced by CNN layers on an occupancy image."""
+    """Baseline: the GNN layers replaced by CNN layers on an occupancy image.
+
+    ``readout="point"`` (the paper's): strided convs -> FC -> a state. ``readout="heatmap"``:
+    a U-Net heat map over the image, read at the fixed graph's nodes ``pos`` (bilinear), so
+    it scores the same candidate nodes as the graph models and is trained with the same
+    label-node loss; the point prediction is the softmax-weighted mean of the node positions.
+    """
 
     def __init__(self, in_channels: int = IMAGE_CHANNELS, hidden_channels: int = 16,
                  num_layers: int = 4, out_channels: int = STATE_DIM, image_size: int = 64,
-                 centre: Centre = CENTRE) -> None:
+                 centre: Centre = CENTRE, readout: str = "point") -> None:
         super().__init__()
-        self.trunk = CNNTrunk(in_channels, hidden_channels, num_layers, image_size)
-        self.head = _mlp(self.trunk.out_features, 128, out_channels)
+        if readout not in CNN_READOUTS:
+            raise ValueError(f"readout must be one of {CNN_READOUTS}, got {readout!r}")
+        self.readout, self.out_channels = readout, out_channels
+        if readout == "point":
+            self.trunk = CNNTrunk(in_channels, hidden_channels, num_layers, image_size)
+            self.head = _mlp(self.trunk.out_features, 128, out_channels)
+        else:
+            self.unet = HeatmapUNet(in_channels, hidden_channels, num_layers, image_size)
         _centre_buffer(self, centre)
 
-    def forward(self, image: Tensor) -> Tensor:
-        return self.head(self.trunk(image)) + self._centre
+    @property
+    def has_node_scores(self) -> bool:
+        return self.readout == "heatmap"
+
+    def heatmap(self, image: Tensor) -> Tensor:
+        """Logits (B, H, W) over the image (``readout="heatmap"``)."""
+        return self.unet(image)
+
+    def node_log_scores(self, image: Tensor, pos: Tensor) -> Tensor:
+        """Log-probabilities over the nodes ``pos`` (N, 2) of each image, flattened (B * N,)
+        in the graph batches' layout (problem-major)."""
+        if not self.has_node_scores:
+            raise ValueError("node scores need readout='heatmap' (the point readout only predicts a point)")
+        if pos.shape[-1] != 2:
+            raise ValueError("the heat map is read at 2-D positions in the unit square")
+        grid = (2 * pos - 1).to(image.dtype)[None, None].expand(image.shape[0], 1, -1, -1)
+        logits = nn.functional.grid_sample(self.heatmap(image)[:, None], grid, mode="bilinear",
+                                           padding_mode="border", align_corners=False)[:, 0, 0]   # (B, N)
+        return torch.log_softmax(logits, dim=-1).reshape(-1)
+
+    def forward(self, image: Tensor, pos: Tensor | None = None, return_log_attention: bool = False):
+        if self.readout == "point":
+            return self.head(self.trunk(image)) + self._centre
+        if pos is None:
+            raise ValueError("the heat-map readout needs the node positions pos")
+        log_a = self.node_log_scores(image, pos)
+        w = log_a.exp().view(image.shape[0], -1)
+        out = w @ pos.to(w.dtype)
+        return (out, log_a) if return_log_attention else out
 
 
 class CriticalCVAE(_GaussianLatent):

@@ -12,6 +12,8 @@ What is generated (defaults, see :class:`DatasetConfig`):
 * ``eval_test.npz``: 300 further in-distribution problems (one per map).
 * ``eval_blob.npz``: 300 problems whose maps also carry ``num_blobs`` random blobs, a
   corruption never seen in training (robustness).
+* ``eval_{test,blob}_seed<S>.npz``: fresh evaluation problems drawn from seed ``S``
+  (:func:`eval_config`; ``gnn-mp critical evaluate --eval-seed S``).
 
 Problem ``i`` of a stream draws everything from ``default_rng([seed, stream, i])``, so the
 same seed gives identical arrays; files are written with fixed zip timestamps so they are
@@ -30,7 +32,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -268,10 +270,36 @@ def generate_all(cfg: DatasetConfig, out_dir: str | Path, progress: bool = True,
     return paths
 
 
+def eval_config(cfg: DatasetConfig, eval_seed: int | None) -> DatasetConfig:
+    """The config whose evaluation streams give the problems of ``eval_seed``.
+
+    Evaluation problem ``i`` comes from ``default_rng([seed, stream, i])``; a fresh evaluation
+    seed S draws them from ``[S, stream, i]`` instead (same generator, other problems: the
+    labelled set uses stream 0, so no evaluation seed reproduces a training problem).
+    ``None`` or the data seed itself give the default evaluation sets.
+    """
+    return cfg if eval_seed is None else replace(cfg, seed=int(eval_seed))
+
+
+def cache_path(cfg: DatasetConfig, out_dir: str | Path, key: str, eval_seed: int | None = None) -> Path:
+    """``labelled.npz`` / ``eval_test.npz`` / ``eval_blob.npz``, or ``eval_<set>_seed<S>.npz``
+    for an evaluation seed other than the data seed."""
+    name = FILES[key]
+    if key != "labelled" and eval_seed is not None and int(eval_seed) != cfg.seed:
+        name = name.replace(".npz", f"_seed{int(eval_seed)}.npz")
+    return Path(out_dir) / name
+
+
 def load_or_generate(cfg: DatasetConfig, out_dir: str | Path, key: str,
-                     progress: bool = True) -> CriticalProblems:
-    """One cached file, generated first if missing, damaged or generated with another config."""
-    path = Path(out_dir) / FILES[key]
+                     progress: bool = True, eval_seed: int | None = None) -> CriticalProblems:
+    """One cached file, generated first if missing, damaged or generated with another config.
+
+    ``eval_seed`` (evaluation sets only): draw the problems from that seed
+    (:func:`eval_config`), cached as ``eval_<set>_seed<S>.npz``.
+    """
+    path = cache_path(cfg, out_dir, key, eval_seed)
+    if key != "labelled":
+        cfg = eval_config(cfg, eval_seed)
     problems = _cached(path, cfg)
     if problems is not None:
         return problems

@@ -24,7 +24,7 @@ PROG = "critical"
 COMMANDS: dict[str, tuple[type, str]] = {
     "generate-data": (GenerateArgs, "generate and cache the critical-sample datasets"),
     "train": (TrainArgs, "train one critical-sample model"),
-    "evaluate": (EvaluateArgs, "accuracy table, figure and planning comparison"),
+    "evaluate": (EvaluateArgs, "accuracy / hit-rate tables, figure and planning with k samples"),
 }
 
 
@@ -58,8 +58,10 @@ def cmd_train(a: TrainArgs) -> None:
 
 def cmd_evaluate(a: EvaluateArgs) -> None:
     from train.critical.evaluate import evaluate, format_table
-    rep = evaluate(a.models, a.checkpoints, a.data, a.problems, a.samples, a.plan_samples, seed=a.seed,
-                   json_path=a.json, plot_path=a.plot, dataset=a.dataset(), progress=a.progress)
+    rep = evaluate(a.models, a.checkpoints, a.data, a.problems, a.samples, seed=a.seed,
+                   json_path=a.json, plot_path=a.plot, dataset=a.dataset(), progress=a.progress,
+                   eval_seed=a.eval_seed, ks=a.ks, min_sep_r=a.min_sep, select=a.select,
+                   split=a.split)
     print(format_table(rep))
 
 

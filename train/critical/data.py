@@ -16,7 +16,8 @@ class Inputs:
 
     Graph inputs: ``x``, ``edge_index``, ``batch``, ``pos``, all labels ``y`` with ``owner``
     (the problem of each label) and ``label_index`` (the labels' node rows in the batch).
-    Image inputs: ``image``, ``y`` and ``owner``. Both carry ``size`` (problems in the batch).
+    Image inputs: ``image``, ``y``, ``owner``, the graph's node positions ``pos`` (N, 2) and
+    ``label_index`` (rows of the flattened (B * N) node scores). Both carry ``size``.
     """
 
     def __init__(self, problems: CriticalProblems, graph: HaltonGraph, kind: str,
@@ -25,20 +26,27 @@ class Inputs:
         self.with_position, self.all_edges = with_position, all_edges
         self.occupancy = occupancy_images(problems) if kind == "image" else None
 
+    def label_index(self, idx: np.ndarray) -> torch.Tensor:
+        """The label nodes of problems ``idx`` as rows of a batch of graphs (problem-major)."""
+        n, ptr = self.graph.num_nodes, self.problems.label_ptr
+        lab = [self.problems.label_nodes[ptr[i]:ptr[i + 1]] + k * n for k, i in enumerate(idx)]
+        return torch.from_numpy(np.concatenate(lab).astype(np.int64))
+
     def __call__(self, idx: np.ndarray) -> dict[str, torch.Tensor]:
         if self.kind == "graph":
             b = graph_batch(self.problems, self.graph, idx, self.with_position, self.all_edges)
-            n = self.graph.num_nodes
-            ptr = self.problems.label_ptr
-            lab = [self.problems.label_nodes[ptr[i]:ptr[i + 1]] + k * n for k, i in enumerate(idx)]
             return {"x": b.x, "edge_index": b.edge_index, "batch": b.batch, "pos": b.pos,
-                    "y": b.y, "owner": b.y_batch, "size": len(idx),
-                    "label_index": torch.from_numpy(np.concatenate(lab).astype(np.int64))}
+                    "y": b.y, "owner": b.y_batch, "size": len(idx), "label_index": self.label_index(idx)}
         ys = [label_positions(self.problems, self.graph, int(i)) for i in idx]
+        # pos / label_index: the graph's nodes, where a heat-map CNN is read and trained
         return {"image": image_batch(self.occupancy[idx], self.problems.start[idx], self.problems.goal[idx]),
                 "y": torch.from_numpy(np.concatenate(ys).astype(np.float32)),
                 "owner": torch.repeat_interleave(torch.arange(len(ys)), torch.tensor([len(v) for v in ys])),
-                "size": len(idx)}
+                "size": len(idx), "pos": self.pos, "label_index": self.label_index(idx)}
+
+    @property
+    def pos(self) -> torch.Tensor:
+        return torch.from_numpy(self.graph.nodes.astype(np.float32))
 
 
 def uses_position(model: torch.nn.Module) -> bool:

@@ -1,8 +1,11 @@
 """Training losses of the critical-sample models, one per (input family, output) pair.
 
-* deterministic models: squared error to the *nearest* label (several labels per problem;
-  the mean over labels would average two passages into a wall), minus ``node_loss_weight``
-  x the log attention mass on the label nodes for the attention readout;
+* deterministic models: ``point_loss_weight`` x the squared error to the *nearest* label
+  (several labels per problem; the mean over labels would average two passages into a
+  wall), minus ``node_loss_weight`` x a label-node term for models that score the graph's
+  nodes (attention readout, heat-map CNN): the log of the node distribution's mass on the
+  labels (``node_target="any"``) or its mean log-probability of the labels (``"all"``, a
+  cross-entropy against the uniform distribution over the labels);
 * CVAEs: reconstruction of one randomly drawn label per problem + ``kl_weight`` x KL
   (GNN-CVAE with attention: minus ``node_loss_weight`` x the drawn label node's log attention).
 
@@ -40,29 +43,57 @@ def one_label_each(y: Tensor, owner: Tensor, size: int, gen: torch.Generator,
 
 
 def label_log_likelihood(log_a: Tensor, label_index: Tensor, owner: Tensor, size: int) -> Tensor:
-    """Mean over problems of log(sum of attention on the problem's label nodes)."""
+    """Mean over problems of log(sum of attention on the problem's label nodes).
+
+    Node target ``"any"``: maximal once all mass sits on *one* of the labels.
+    """
     la = log_a[label_index]
     m = la.detach().max()
     per = torch.zeros(size).index_add(0, owner, torch.exp(la - m))
     return (torch.log(per.clamp_min(1e-30)) + m).mean()
 
 
+def label_mean_log_prob(log_a: Tensor, label_index: Tensor, owner: Tensor, size: int) -> Tensor:
+    """Mean over problems of the mean log-probability of the problem's label nodes.
+
+    Node target ``"all"``: minus the cross-entropy against the uniform distribution over the
+    labels, maximal when every label gets an equal share, so the top-k nodes cover all of
+    a problem's bottlenecks rather than one.
+    """
+    counts = torch.bincount(owner, minlength=size).clamp_min(1).to(log_a.dtype)
+    per = torch.zeros(size, dtype=log_a.dtype).index_add(0, owner, log_a[label_index])
+    return (per / counts).mean()
+
+
+#: Node targets of the label-node term (``Optim.node_target``).
+NODE_TARGETS = {"any": label_log_likelihood, "all": label_mean_log_prob}
+
+
 def _node_weight(model: nn.Module, optim: Optim) -> float:
-    return optim.node_loss_weight if getattr(model, "readout", "max") == "attention" else 0.0
+    return optim.node_loss_weight if getattr(model, "has_node_scores", False) else 0.0
+
+
+def _det_loss(pred: Tensor, log_a: Tensor | None, inp: Batch, optim: Optim, node_w: float) -> Tensor:
+    """``point_loss_weight`` x nearest-label squared error - ``node_w`` x the label-node term."""
+    out = optim.point_loss_weight * nearest_label_loss(pred, inp["y"], inp["owner"])
+    if log_a is not None:
+        out = out - node_w * NODE_TARGETS[optim.node_target](log_a, inp["label_index"], inp["owner"], inp["size"])
+    return out
 
 
 def graph_det_loss(model: nn.Module, inp: Batch, optim: Optim, gen: torch.Generator) -> Tensor:
     node_w = _node_weight(model, optim)
     if node_w > 0:
         pred, log_a = model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"], return_log_attention=True)
-        return (nearest_label_loss(pred, inp["y"], inp["owner"])
-                - node_w * label_log_likelihood(log_a, inp["label_index"], inp["owner"], inp["size"]))
-    pred = model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"])
-    return nearest_label_loss(pred, inp["y"], inp["owner"])
+        return _det_loss(pred, log_a, inp, optim, node_w)
+    return _det_loss(model(inp["x"], inp["edge_index"], inp["batch"], inp["pos"]), None, inp, optim, 0.0)
 
 
 def image_det_loss(model: nn.Module, inp: Batch, optim: Optim, gen: torch.Generator) -> Tensor:
-    return nearest_label_loss(model(inp["image"]), inp["y"], inp["owner"])
+    if getattr(model, "has_node_scores", False):     # heat-map CNN: read at the graph's nodes
+        pred, log_a = model(inp["image"], inp["pos"], return_log_attention=True)
+        return _det_loss(pred, log_a, inp, optim, optim.node_loss_weight)
+    return _det_loss(model(inp["image"]), None, inp, optim, 0.0)
 
 
 def graph_cvae_loss(model: nn.Module, inp: Batch, optim: Optim, gen: torch.Generator) -> Tensor:

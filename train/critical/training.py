@@ -14,6 +14,11 @@ Where a run writes (:func:`run_paths`):
 Everything is written atomically and read back with ``torch.load(weights_only=True)``
 (:mod:`agents.checkpoints`). Shuffles derive from ``[seed, epoch]``, so a resumed run sees
 the same batches as an uninterrupted one.
+
+The best epoch is the one with the highest validation hit rate (mean over k = 1, 3, 10,
+:data:`SELECT_ON`); the history also records the point accuracy, wall and CPU seconds.
+``--max-steps`` bounds the optimizer steps, so runs of several seeds do the same work
+whatever the machine's load (a wall-clock ``--time-budget`` does not).
 """
 
 from __future__ import annotations
@@ -37,8 +42,13 @@ from gnn_mp_envs.critical.halton import halton_graph
 from gnn_mp_envs.utils.io import atomic_write_bytes, atomic_write_text
 from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
 from train.critical.data import inputs_for
-from train.critical.evaluate import accuracy, predict
+from train.critical.evaluate import validation_scores
 from train.critical.losses import loss as loss_fn
+
+
+#: Validation metric that picks the best epoch: the mean hit rate of the k = 1, 3, 10 samples
+#: on the validation problems (``evaluate.validation_scores``).
+SELECT_ON = "val_score"
 
 
 class TrainError(ValueError):
@@ -93,7 +103,7 @@ def run_paths(args: TrainArgs, runs_dir: Path = RUNS_DIR, now: float | None = No
 
 def _hparams(ctor: dict, optim: Optim, args: TrainArgs) -> dict[str, Any]:
     return {"model": ctor, **asdict(optim), "time_budget_min": args.time_budget,
-            "max_train_problems": args.max_train_problems}
+            "max_steps": args.max_steps, "max_train_problems": args.max_train_problems}
 
 
 def _write_meta(path: Path, meta: dict) -> None:
@@ -123,13 +133,16 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
     torch.manual_seed(args.seed)
     model = build_model(name, **ctor)
     opt = torch.optim.Adam(model.parameters(), lr=optim.lr)
-    start_epoch, history, best, best_state, wall = 0, [], {"val_accuracy": -math.inf, "epoch": -1}, None, 0.0
+    start_epoch, history, best, best_state, wall = 0, [], {SELECT_ON: -math.inf, "epoch": -1}, None, 0.0
+    cpu, done_steps = 0.0, 0
     if args.resume:
         state = _load_resume(paths.resume, kind, ctor, args.seed, cfg)
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         start_epoch, history, best, wall = state["epoch"], state["history"], state["best"], state["wall"]
         best_state = state["best_state"]
+        cpu = state.get("cpu", 0.0)
+        done_steps = sum(h["steps"] for h in history)
         print(f"[{name}] resuming {paths.resume} after epoch {start_epoch}", flush=True)
     elif paths.checkpoint.exists():
         raise TrainError(f"{paths.checkpoint} exists; pass --resume to continue that run or choose another --out")
@@ -145,9 +158,13 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
 
     gen = torch.Generator().manual_seed(args.seed)
     budget_s = None if args.time_budget is None else 60.0 * args.time_budget
-    t_start = time.perf_counter() - wall
+    t_start, c_start = time.perf_counter() - wall, time.process_time() - cpu
     steps_per_epoch = math.ceil(len(train_set) / optim.batch_size)
+    total_steps = optim.epochs * steps_per_epoch if args.max_steps is None else min(
+        args.max_steps, optim.epochs * steps_per_epoch)
     for epoch in range(start_epoch, optim.epochs):
+        if done_steps >= total_steps:
+            break
         model.train()
         order = np.random.default_rng([args.seed, epoch]).permutation(len(train_set))
         gen.manual_seed(args.seed * 100003 + epoch)
@@ -156,9 +173,11 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
         out_of_time = False
         for step in bar:
             idx = order[step * optim.batch_size:(step + 1) * optim.batch_size]
-            if optim.cosine and budget_s is not None:
-                # learning rate on a cosine over the wall-clock budget (anneals to 5% of lr)
-                frac = min(1.0, (time.perf_counter() - t_start) / budget_s)
+            if optim.cosine:
+                # learning rate on a cosine over the wall-clock budget, else over the planned
+                # steps (anneals to 5% of lr)
+                frac = (min(1.0, (time.perf_counter() - t_start) / budget_s) if budget_s is not None
+                        else done_steps / total_steps)
                 for group in opt.param_groups:
                     group["lr"] = optim.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * frac)))
             loss = loss_fn(model, name, inputs(idx), optim, gen)
@@ -166,25 +185,30 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
             loss.backward()
             opt.step()
             losses.append(loss.item())
+            done_steps += 1
             bar.set_postfix(loss=f"{np.mean(losses[-20:]):.4f}")
             if budget_s is not None and time.perf_counter() - t_start > budget_s:
                 out_of_time = True
                 break
-        pred, _ = predict(model, name, val_set, graph, seed=args.seed)
-        val_acc = accuracy(pred, val_set, graph)
-        wall = time.perf_counter() - t_start
-        history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), "val_accuracy": val_acc,
-                        "steps": len(losses), "wall_seconds": wall})
-        print(f"[{name}] epoch {epoch + 1}: loss {np.mean(losses):.4f}  val accuracy {val_acc:.4f}"
-              f"  ({wall / 60:.1f} min)", flush=True)
-        if val_acc > best["val_accuracy"]:
-            best = {"val_accuracy": val_acc, "epoch": epoch + 1}
+            if done_steps >= total_steps:
+                break
+        train_cpu = time.process_time() - c_start
+        val = validation_scores(model, name, val_set, graph, seed=args.seed)
+        wall, cpu = time.perf_counter() - t_start, time.process_time() - c_start
+        history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), **val,
+                        "steps": len(losses), "wall_seconds": wall, "cpu_seconds": cpu,
+                        "train_cpu_seconds": train_cpu})
+        print(f"[{name}] epoch {epoch + 1}: loss {np.mean(losses):.4f}  val accuracy {val['val_accuracy']:.4f}  "
+              + "  ".join(f"{k[4:]} {v:.3f}" for k, v in val.items() if k.startswith("val_hit"))
+              + f"  ({wall / 60:.1f} min, {cpu / 60:.1f} CPU min)", flush=True)
+        if val[SELECT_ON] > best[SELECT_ON]:
+            best = {SELECT_ON: val[SELECT_ON], "val_accuracy": val["val_accuracy"], "epoch": epoch + 1}
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         save_training_state(paths.resume, {
             "kind": kind, "ctor_args": ctor, "seed": args.seed, "dataset": asdict(cfg),
             "model": model.state_dict(), "optimizer": opt.state_dict(), "epoch": epoch + 1,
-            "history": history, "best": best, "best_state": best_state, "wall": wall})
-        meta.update(best=best, history=history, train_wall_seconds=wall)
+            "history": history, "best": best, "best_state": best_state, "wall": wall, "cpu": cpu})
+        meta.update(best=best, history=history, train_wall_seconds=wall, train_cpu_seconds=cpu)
         if best_state is not None:
             meta["parameters"] = count_parameters(best_state)
             save_checkpoint(paths.checkpoint, best_state, kind, ctor, meta=plain(meta, "meta"))
