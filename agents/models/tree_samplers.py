@@ -55,6 +55,14 @@ def mlp(in_channels: int, hidden_channels: int, out_channels: int, layers: int =
     return nn.Sequential(*mods, nn.Linear(width, out_channels))
 
 
+def fixed_vector(values: Sequence[float] | Tensor | None, default: float, n: int) -> Tensor:
+    """``n`` float32 values (``default`` everywhere when ``values`` is None); refuses another length."""
+    t = torch.full((n,), default) if values is None else torch.as_tensor(values, dtype=torch.float32)
+    if t.shape != (n,):
+        raise ValueError(f"expected {n} values, got {tuple(t.shape)}")
+    return t.float()
+
+
 def wrap_periodic(delta: Tensor, periodic: Tensor) -> Tensor:
     """Wrap the periodic columns (a bool mask) of a state difference into ``[-pi, pi)``."""
     if not bool(periodic.any()):
@@ -138,16 +146,10 @@ class TreeGNN(nn.Module):
         self.state_dim, self.hidden_channels, self.num_layers, self.knn = d, int(hidden_channels), int(num_layers), int(knn)
         self.num_trees, self.use_parent, self.use_knn, self.use_context = int(num_trees), use_parent, use_knn, use_context
 
-        def vec(values, default: float, n: int) -> Tensor:
-            t = torch.full((n,), default) if values is None else torch.as_tensor(values, dtype=torch.float32)
-            if t.shape != (n,):
-                raise ValueError(f"expected {n} values, got {tuple(t.shape)}")
-            return t.float()
-
-        self.register_buffer("state_center", vec(state_center, 0.0, d))
-        self.register_buffer("state_scale", vec(state_scale, 1.0, d))
-        self.register_buffer("feature_scale", vec(feature_scale, 1.0, 2 * d + 1))
-        self.register_buffer("step_scale", vec(step_scale, 1.0, d))
+        self.register_buffer("state_center", fixed_vector(state_center, 0.0, d))
+        self.register_buffer("state_scale", fixed_vector(state_scale, 1.0, d))
+        self.register_buffer("feature_scale", fixed_vector(feature_scale, 1.0, 2 * d + 1))
+        self.register_buffer("step_scale", fixed_vector(step_scale, 1.0, d))
         mask = torch.zeros(d, dtype=torch.bool)
         mask[list(periodic)] = True
         self.register_buffer("periodic", mask)

@@ -40,7 +40,13 @@ from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
 
 from agents.checkpoints import register_model_kind
-from agents.models.tree_samplers import RelativeConv, causal_knn, mlp, wrap_periodic
+from agents.models.tree_samplers import (
+    RelativeConv,
+    causal_knn,
+    fixed_vector,
+    mlp,
+    wrap_periodic,
+)
 
 #: Edge types of the causal graph: parent -> child, and k-NN (an earlier node -> a later one).
 EDGE_TYPES = 2
@@ -140,17 +146,11 @@ class TreeGNNScorer(nn.Module):
         self.num_layers, self.knn = int(num_layers), int(knn)
         self.depth_scale = float(depth_scale)
 
-        def vec(values, default: float, n: int) -> Tensor:
-            t = torch.full((n,), default) if values is None else torch.as_tensor(values, dtype=torch.float32)
-            if t.shape != (n,):
-                raise ValueError(f"expected {n} values, got {tuple(t.shape)}")
-            return t.float()
-
-        self.register_buffer("state_center", vec(state_center, 0.0, d))
-        self.register_buffer("state_scale", vec(state_scale, 1.0, d))
-        self.register_buffer("feature_scale", vec(feature_scale, 1.0, 2 * d + 1))
-        self.register_buffer("step_scale", vec(step_scale, 1.0, d))
-        self.register_buffer("metric_weights", vec(metric_weights, 1.0, d))
+        self.register_buffer("state_center", fixed_vector(state_center, 0.0, d))
+        self.register_buffer("state_scale", fixed_vector(state_scale, 1.0, d))
+        self.register_buffer("feature_scale", fixed_vector(feature_scale, 1.0, 2 * d + 1))
+        self.register_buffer("step_scale", fixed_vector(step_scale, 1.0, d))
+        self.register_buffer("metric_weights", fixed_vector(metric_weights, 1.0, d))
         mask = torch.zeros(d, dtype=torch.bool)
         mask[list(periodic)] = True
         self.register_buffer("periodic", mask)

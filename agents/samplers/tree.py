@@ -45,6 +45,14 @@ def _linears(seq: torch.nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
             for m in seq if isinstance(m, torch.nn.Linear)]
 
 
+def _layer_norm(norms: list[tuple[np.ndarray, np.ndarray, float]], x: np.ndarray, layer: int) -> np.ndarray:
+    """``torch.nn.LayerNorm`` of layer ``layer`` in numpy (``norms``: its weight, bias, eps)."""
+    g, b, eps = norms[layer]
+    mu = x.mean(-1, keepdims=True)
+    var = ((x - mu) ** 2).mean(-1, keepdims=True)
+    return (x - mu) / np.sqrt(var + eps) * g + b
+
+
 def _run_mlp(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
     for i, (w, b) in enumerate(layers):
         x = x @ w + b
@@ -117,12 +125,6 @@ class IncrementalTreeGNN:
         self.counts = np.zeros(self.trees)
         self.start = None
 
-    def _layer_norm(self, x: np.ndarray, layer: int) -> np.ndarray:
-        g, b, eps = self.norms[layer]
-        mu = x.mean(-1, keepdims=True)
-        var = ((x - mu) ** 2).mean(-1, keepdims=True)
-        return (x - mu) / np.sqrt(var + eps) * g + b
-
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:
         """Embed the observation's rows not seen yet (a new episode restarts the cache)."""
         n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
@@ -170,7 +172,7 @@ class IncrementalTreeGNN:
                 g = _gelu(pre) * near_ok[..., None]
                 count = near_ok.sum(1, keepdims=True)
                 mk = np.where(count > 0, (g.sum(1) / np.maximum(count, 1)) @ wk2 + bk2, 0.0)
-            h = self._layer_norm(h + _run_mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)), layer)
+            h = _layer_norm(self.norms, h + _run_mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)), layer)
         w, b = self.key
         self.keys[i0:n] = h @ w + b
         w, b = self.node_head

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from agents.models.tree_scorer import EDGE_TYPES, TreeGNNScorer
-from agents.samplers.tree import _linears, _MixedSampler, _run_mlp, _wrap
+from agents.samplers.tree import _layer_norm, _linears, _MixedSampler, _run_mlp, _wrap
 
 
 class IncrementalTreeScorer:
@@ -92,12 +92,6 @@ class IncrementalTreeScorer:
         a = x[..., self.angle_cols]
         return [np.sin(a), np.cos(a)]
 
-    def _layer_norm(self, x: np.ndarray, layer: int) -> np.ndarray:
-        g, b, eps = self.norms[layer]
-        mu = x.mean(-1, keepdims=True)
-        var = ((x - mu) ** 2).mean(-1, keepdims=True)
-        return (x - mu) / np.sqrt(var + eps) * g + b
-
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:
         """Embed the observation's rows not seen yet (a new episode restarts the caches)."""
         n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
@@ -144,7 +138,7 @@ class IncrementalTreeScorer:
             mp = np.where(has_parent[:, None], mp, 0.0)
             msg = _run_mlp(self.knn_convs[layer], np.concatenate([self.h[layer][near], rel_k], -1))
             mk = np.where(count > 0, (msg * near_ok[..., None]).sum(1) / np.maximum(count, 1), 0.0)
-            h = self._layer_norm(h + _run_mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)), layer)
+            h = _layer_norm(self.norms, h + _run_mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)), layer)
             self.h[layer + 1, i0:n] = h
         # frontier: every new row is a newer node pointing at its parent (type 0) and its nearest (type 1)
         receivers = np.concatenate([par[has_parent], near[near_ok]])
