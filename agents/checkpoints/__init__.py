@@ -60,6 +60,22 @@ class CheckpointError(ValueError):
     """A checkpoint file that cannot be used; the message is one line naming the file."""
 
 
+def resolve_checkpoint(name: str, task: str | None, checkpoint: str | Path | None, shipped: Path | None,
+                       train_command: str) -> Path:
+    """The file a sampler loads: ``checkpoint`` if given, else its ``shipped`` file for ``task``;
+    a missing one is refused with the command that trains it."""
+    if checkpoint is not None:
+        if not Path(checkpoint).is_file():
+            raise FileNotFoundError(f"{checkpoint}: no such checkpoint file")
+        return Path(checkpoint)
+    if task is None or shipped is None:
+        raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=PATH")
+    if not shipped.is_file():
+        raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({shipped.name}); "
+                                f"train them with `{train_command}` and pass checkpoint=")
+    return shipped
+
+
 def register_model_kind(kind: str, cls: Callable[..., nn.Module], *, overwrite: bool = False) -> None:
     """Make ``kind`` loadable: :func:`load_checkpoint` builds it as ``cls(**ctor_args)``."""
     if not isinstance(kind, str) or not kind:
@@ -322,4 +338,4 @@ def count_parameters(state: Mapping[str, torch.Tensor]) -> int:
 
 __all__ = ["FORMAT_VERSION", "SHIPPED_DIR", "CheckpointError", "register_model_kind", "model_kinds",
            "save_checkpoint", "load_checkpoint", "read_checkpoint", "save_training_state",
-           "load_training_state", "plain", "count_parameters"]
+           "load_training_state", "plain", "count_parameters", "resolve_checkpoint"]

@@ -30,7 +30,12 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 
-from agents.checkpoints import SHIPPED_DIR, load_checkpoint, save_checkpoint
+from agents.checkpoints import (
+    SHIPPED_DIR,
+    load_checkpoint,
+    resolve_checkpoint,
+    save_checkpoint,
+)
 from agents.encoders import EncoderModule
 from agents.models.rl import POLICY_KINDS, RLPolicy
 from agents.samplers.base import batch_shape_of
@@ -218,15 +223,8 @@ def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | No
     if threads is not None and torch.get_num_threads() != int(threads):
         torch.set_num_threads(int(threads))
     kind = RL_SAMPLERS[name]
-    if checkpoint is None:
-        if task is None:
-            raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=")
-        checkpoint = shipped_checkpoint(name, task)
-        if not checkpoint.exists():
-            raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({checkpoint.name}); "
-                                    f"train them with `gnn-mp train rl --task {task}` and pass checkpoint=")
-    elif not Path(checkpoint).exists():
-        raise FileNotFoundError(str(checkpoint))
+    checkpoint = resolve_checkpoint(name, task, checkpoint, shipped_checkpoint(name, task) if task else None,
+                                    f"gnn-mp train rl --task {task}")
     return sampler_from_checkpoint(checkpoint, low, high, seed=seed, kind=kind, task=task,
                                    uniform_mix=uniform_mix, deterministic=deterministic)
 

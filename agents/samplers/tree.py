@@ -389,14 +389,9 @@ def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | 
                       seed: int | None = None, checkpoint: str | None = None, **settings) -> _MixedSampler:
     """A tree sampler with its weights (``checkpoint`` or the shipped file for ``task``) and the
     sampling settings stored with them (``meta["sampler"]``), which ``settings`` override."""
-    from agents.checkpoints import load_checkpoint
-    if checkpoint is None:
-        if task is None:
-            raise ValueError(f"sampler {name!r} needs a task (for its shipped weights) or checkpoint=PATH")
-        checkpoint = shipped_checkpoint(name, task)
-        if not checkpoint.is_file():
-            raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({checkpoint}); "
-                                    f"train them with `gnn-mp train sampler --task {task} --model {name}`")
+    from agents.checkpoints import load_checkpoint, resolve_checkpoint
+    checkpoint = resolve_checkpoint(name, task, checkpoint, shipped_checkpoint(name, task) if task else None,
+                                    f"gnn-mp train sampler --task {task} --model {name}")
     model, record = load_checkpoint(checkpoint, expected_kind=NAME_KINDS[name])
     cls, allowed = KIND_SAMPLERS[record["kind"]]
     if isinstance(cls, str):
