@@ -218,7 +218,8 @@ def train(args: TrainArgs) -> dict[str, Any]:
         phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
                           args.batch_size, args.seed + r + 1, writer, f"dagger{r + 1}", args.progress))
     summary["phases"] = phases
-    summary["train_seconds"] = time.perf_counter() - started
+    # a resumed run counts the first phase's time spent before the interruption too
+    summary["train_seconds"] = time.perf_counter() - started + (float(resume["elapsed"]) if resume else 0.0)
     # The train/online mismatch: the loss on both views of the held-out problems (online the
     # sampler sees grown trees, whichever view it was trained on).
     summary["validation_loss_by_view"] = {
