@@ -107,3 +107,16 @@ def test_ray_actors_give_the_counters_of_local_workers():
     local = bm.run_benchmark(tiny_args(workers=2, problems=3))
     assert without_wall_time(on_ray) == without_wall_time(local)
 
+
+
+def test_an_ompl_runner_timeout_is_one_error_naming_the_row(monkeypatch):
+    import subprocess
+
+    from gnn_mp_envs.baselines import ompl_runner
+    from train.benchmark.ompl_rows import run_ompl_rows
+
+    def hung(*args, **kwargs):
+        raise subprocess.TimeoutExpired(cmd="ompl_runner", timeout=42.0)
+    monkeypatch.setattr(ompl_runner, "run_ompl", hung)
+    with pytest.raises(bm.BenchmarkError, match=r"ompl-rrt on maze2d: the OMPL runner did not finish within 42 s"):
+        run_ompl_rows(tiny_args(samplers=["ompl-rrt"]), "ompl-rrt", [0, 1])

@@ -141,3 +141,38 @@ def test_json_over_an_existing_file_stays_whole_when_the_write_fails(tmp_path, m
     assert info.value.filename == str(target)
     assert json.loads(target.read_text()) == {"old": True}
     assert [p.name for p in tmp_path.iterdir()] == ["report.json"]   # no temporary file left
+
+
+def test_a_killed_worker_is_one_line_and_the_finished_runs_are_written(tmp_path):
+    """A worker killed mid-run (SIGKILL, out of memory) breaks the pool: the benchmark says so
+    in one line and writes the runs that finished, marked partial."""
+    plugin = tmp_path / "killer_sampler.py"
+    plugin.write_text(
+        "import os, signal\n"
+        "from agents.samplers import register_sampler\n"
+        "from agents.samplers.baselines import UniformSampler\n"
+        "class KillerSampler(UniformSampler):\n"
+        "    def act(self, obs):\n"
+        "        if int(obs['num_nodes'][0]) > 3 and abs(float(obs['goal'][0]) - self.victim_goal) < 1e-5:\n"
+        "            os.kill(os.getpid(), signal.SIGKILL)\n"
+        "        return super().act(obs)\n"
+        "def make(low, high, task=None, seed=None, **kw):\n"
+        "    s = KillerSampler(low, high, seed)\n"
+        "    import gnn_mp_envs\n"
+        "    s.victim_goal = float(gnn_mp_envs.make_task('maze2d').problem('test', 5).goal[0])\n"
+        "    return s\n"
+        "register_sampler('killer', make)\n")
+    out = tmp_path / "report.json"
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    result = subprocess.run([sys.executable, "-c", code, "benchmark", "--import", "killer_sampler", "--samplers",
+                             "uniform,killer", "--problems", "8", "--workers", "2", "--no-progress",
+                             "--json", str(out)], cwd=ROOT, capture_output=True, text=True,
+                            env={**os.environ, "PYTHONPATH": f"{tmp_path}:{ROOT}"}, timeout=300)
+    assert result.returncode not in (0, 130) and "Traceback" not in result.stderr, result.stderr
+    lines = [line for line in result.stderr.strip().splitlines() if line.strip()]
+    assert lines[-1].startswith("gnn-mp: error: benchmark: a worker process died"), result.stderr
+    report = json.loads(out.read_text())
+    assert report["partial"] is True
+    finished = sum(map(len, report["runs"].values()))
+    assert 0 < finished < 16
+    assert all(r["problem"] != 5 for r in report["runs"]["killer"])

@@ -85,6 +85,8 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["benchmark", "--problems", "1", "--checkpoint", "uniform=/no/such/file.pt"], ["missing checkpoint"]),
     (["benchmark", "--samplers", "ompl-kpiece", "--task", "maze2d"], ["ompl-kpiece"]),
     (["benchmark", "--suite", "no-such-suite"], ["no-such-suite"]),
+    (["benchmark", "--samplers", "ompl-rrt", "--ompl-time-limit", "inf"], ["--ompl-time-limit", "finite"]),
+    (["benchmark", "--samplers", "uniform,ompl-rrt", "--seed", str(2**70)], ["--seed"]),
     (["benchmark", "--problems", "1", "--json", "/"], ["--json", "expected a file"]),
     (["train", "no-such-model"], ["train"]),
     (["no-such-command"], ["no-such-command"]),
