@@ -356,3 +356,16 @@ def test_bench_sampler_reports_both_measurements(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench-sampler", "--samplers", "nope"])
     assert exc.value.code == 2 and "unknown sampler" in capsys.readouterr().err
+
+
+def test_bench_sampler_skips_a_task_whose_planner_solves_before_the_tree_size(capsys):
+    """BiRRT ends when its trees connect whatever the goal test says: the arm never reaches
+    1,000 nodes, and the timing says so instead of looping forever."""
+    from train.cli import main
+    code = main(["bench-sampler", "--skip-to-pyg", "--rounds", "1", "--act-nodes", "1000", "--window", "5",
+                 "--tasks", "maze2d,arm", "--samplers", "uniform", "--clock", "cpu"])
+    captured = capsys.readouterr()
+    assert code == 0
+    assert "skipping arm: arm problem 0: the planner solved at" in captured.err
+    rows = {line.split()[0]: line.split()[1:] for line in captured.out.splitlines() if line.startswith("  ")}
+    assert float(rows["uniform"][0]) > 0 and rows["uniform"][1] == "n/a"

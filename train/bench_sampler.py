@@ -19,6 +19,7 @@ Run: ``gnn-mp bench-sampler`` (or ``python -m train.bench_sampler``).
 from __future__ import annotations
 
 import importlib
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +31,13 @@ import torch
 import gnn_mp_envs  # noqa: F401  (registers the environments)
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 from gnn_mp_envs.registration import TASK_SPECS, task_spec
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+from train.args import (
+    OneLineParser,
+    add_dataclass_arguments,
+    arg,
+    from_namespace,
+    positive_int,
+)
 
 SPLIT = "val"   # problems the trees are grown on (timing only; never the held-out split)
 
@@ -77,9 +84,12 @@ def grow(task: str, nodes: int, index: int, seed: int, max_nodes: int | None = N
     rng = np.random.default_rng([seed, index])
     low, high = env.action_space.low, env.action_space.high
     while int(obs["num_nodes"][0]) < nodes:
-        obs, _, _, truncated, _ = env.step(rng.uniform(low, high).astype(np.float32))
-        if truncated and int(obs["num_nodes"][0]) < nodes:
-            raise RuntimeError(f"{task} problem {index}: stopped at {int(obs['num_nodes'][0])} nodes")
+        obs, _, terminated, truncated, _ = env.step(rng.uniform(low, high).astype(np.float32))
+        if (terminated or truncated) and int(obs["num_nodes"][0]) < nodes:
+            # BiRRT (the arm) ends when its two trees connect, whatever the goal test says
+            why = "solved" if terminated else "stopped"
+            raise RuntimeError(f"{task} problem {index}: the planner {why} at {int(obs['num_nodes'][0])} "
+                               f"nodes, before {nodes}")
     env.close()
     return obs
 
@@ -159,7 +169,12 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
     checkpoints = dict(_checkpoint_pair(text) for text in args.checkpoint)
     out: dict[tuple[str, str], float | None] = {}
     for task in args.tasks:
-        obs = grow(task, args.act_nodes, 0, args.seed, max_nodes=args.act_nodes)
+        try:
+            obs = grow(task, args.act_nodes, 0, args.seed, max_nodes=args.act_nodes)
+        except RuntimeError as exc:
+            print(f"act(): skipping {task}: {exc}", file=sys.stderr)
+            out.update({(name, task): None for name in samplers})
+            continue
         space = gym.make(task_spec(task).env_id).action_space
         for name in samplers:
             kwargs = {"checkpoint": checkpoints[name]} if name in checkpoints else {}
