@@ -70,7 +70,10 @@ class LearnedSampler(Sampler):
 
     def log_prob(self, loc: torch.Tensor, scale: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """``log((1 - m) p_model(action) + m / volume)``, ``(*batch,)``."""
-        model = self.distribution(loc, scale).log_prob(action)
+        return self.mix_log_prob(self.distribution(loc, scale).log_prob(action))
+
+    def mix_log_prob(self, model: torch.Tensor) -> torch.Tensor:
+        """The model's log-density ``model`` mixed with the uniform one at rate ``uniform_mix``."""
         if self.uniform_mix == 0.0:
             return model
         log_uniform = -torch.log(self.span).sum()
@@ -79,20 +82,25 @@ class LearnedSampler(Sampler):
         return torch.logaddexp(model + math.log1p(-self.uniform_mix),
                                log_uniform + math.log(self.uniform_mix))
 
+    def mix_uniform(self, action: torch.Tensor) -> torch.Tensor:
+        """``action`` with each row replaced by a uniform sample at rate ``uniform_mix`` (drawn
+        from the sampler's generator: the uniform states first, then the coin flips)."""
+        if self.uniform_mix == 0.0 or self.deterministic:
+            return action
+        shape = action.shape[:-1]
+        uniform = self.uniform(shape)
+        pick = torch.rand(*shape, 1, generator=self.generator) < self.uniform_mix
+        return torch.where(pick, uniform, action)
+
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         self.encoder(tensordict)
         self.head(tensordict)
         loc_key, scale_key = self.head.out_keys
         loc, scale = tensordict.get(loc_key), tensordict.get(scale_key)
-        shape = loc.shape[:-1]
         z = loc if self.deterministic else loc + scale * torch.randn(loc.shape, generator=self.generator)
         # Same map as TanhNormal's transform: center + half-span * tanh(z).
         action = (self.low + self.high) / 2 + self.span / 2 * torch.tanh(z)
-        action = torch.minimum(torch.maximum(action, self.low), self.high)
-        if self.uniform_mix > 0.0 and not self.deterministic:
-            uniform = self.uniform(shape)
-            pick = torch.rand(*shape, 1, generator=self.generator) < self.uniform_mix
-            action = torch.where(pick, uniform, action)
+        action = self.mix_uniform(torch.minimum(torch.maximum(action, self.low), self.high))
         tensordict.set("action", action)
         tensordict.set(self.log_prob_key, self.log_prob(loc, scale, action))
         return tensordict

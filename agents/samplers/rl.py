@@ -89,6 +89,12 @@ class RLSampler(LearnedSampler):
         self.register_buffer("periodic", torch.tensor(periodic, dtype=torch.bool), persistent=False)
 
     # ------------------------------------------------------------------ distribution
+    @staticmethod
+    def _target(view: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """The active tree's target per observation: the start for tree 1, else the goal."""
+        active = view["active_tree"].reshape(*view["start"].shape[:-1], 1)
+        return torch.where(active == 1, view["start"], view["goal"])
+
     def to_box(self, u: torch.Tensor, view: Mapping[str, torch.Tensor]) -> torch.Tensor:
         """``[-1, 1]^d`` -> a state, as ``make_rl_env`` maps actions: ``RescaleAction`` (absolute
         frame) or ``TargetRelativeAction`` (offsets from the active tree's target, periodic
@@ -96,18 +102,14 @@ class RLSampler(LearnedSampler):
         if self.action_frame == "absolute":
             a = self.low + self.span * (u - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
         else:
-            shape = u.shape[:-1]
-            target = torch.where(view["active_tree"].reshape(*shape, 1) == 1, view["start"], view["goal"])
-            a = target.to(u.dtype) + u * self.span
+            a = self._target(view).to(u.dtype) + u * self.span
             a = torch.where(self.periodic, self.low + torch.remainder(a - self.low, self.span), a)
         return torch.minimum(torch.maximum(a, self.low), self.high)
 
     def log_prob(self, loc, scale, action, view=None):
         """Log-density of the mixture at ``action`` (approximate where the box clips or wraps)."""
         if self.action_frame == "target":
-            shape = action.shape[:-1]
-            target = torch.where(view["active_tree"].reshape(*shape, 1) == 1, view["start"], view["goal"])
-            u = ((action - target) / self.span).clamp(ACTION_LOW, ACTION_HIGH)
+            u = ((action - self._target(view)) / self.span).clamp(ACTION_LOW, ACTION_HIGH)
             jac = torch.log(self.span).sum()
         else:
             u = (action - self.low) / self.span * (ACTION_HIGH - ACTION_LOW) + ACTION_LOW
@@ -117,28 +119,16 @@ class RLSampler(LearnedSampler):
             model = (torch.distributions.Normal(loc, scale).log_prob(torch.atanh(u)) - torch.log1p(-u * u)).sum(-1) - jac
         else:   # "clip": the Normal's density inside the box (the clipped mass on the border is ignored)
             model = torch.distributions.Normal(loc, scale).log_prob(u).sum(-1) - jac
-        if self.uniform_mix == 0.0:
-            return model
-        log_uniform = -torch.log(self.span).sum()
-        if self.uniform_mix == 1.0:
-            return log_uniform.expand_as(model)
-        return torch.logaddexp(model + float(np.log1p(-self.uniform_mix)),
-                               log_uniform + float(np.log(self.uniform_mix)))
+        return self.mix_log_prob(model)
 
     def sample(self, view: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
         """``(embed, loc, scale, action)`` for viewed observations (a dict of tensors, no TensorDict:
         building one costs more than the encoder on a single observation)."""
         embed = self.policy.encoder(view)[1]
         loc, scale = self.policy.params(embed)
-        shape = loc.shape[:-1]
         z = loc if self.deterministic else loc + scale * torch.randn(loc.shape, generator=self.generator)
         u = torch.clamp(z, ACTION_LOW, ACTION_HIGH) if self.squash == "clip" else torch.tanh(z)
-        action = self.to_box(u, view)
-        if self.uniform_mix > 0.0 and not self.deterministic:
-            uniform = self.uniform(shape)
-            pick = torch.rand(*shape, 1, generator=self.generator) < self.uniform_mix
-            action = torch.where(pick, uniform, action)
-        return embed, loc, scale, action
+        return embed, loc, scale, self.mix_uniform(self.to_box(u, view))
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Full observations in; ``"embed"``, ``"loc"``, ``"scale"``, ``"action"`` and the log-prob out."""
