@@ -1,15 +1,19 @@
-"""The one registration table: every task, its environment ids and the facts tools need about it.
+"""The one registration table: every task, its environment ids and every fact tools need about it.
 
 A :class:`TaskSpec` says where a task family's class lives, which environment ids plan it
 (with which planner and node budget), which of them the benchmark uses, which scene the
-benchmark plans by default and which OMPL planners can run it. The environment, the
-benchmark, the OMPL runner and the CLI all read these facts from here; adding a task (inside
-or outside this package) is one :func:`register_task` call::
+benchmark plans by default, which OMPL planners can run it, what its path length counts in,
+and what learned samplers need to know that the observation space does not say (the state
+scale of one extension, the periodic coordinates, the planner's metric, the sampling settings
+shipped with each model). The environment, the benchmark, the OMPL runner, the sampler registry
+and the training commands all read these facts from here; adding a task (inside or outside
+this package) is one :func:`register_task` call::
 
     from gnn_mp_envs.registration import TaskSpec, register_task
     register_task(TaskSpec("corridor", "my_pkg.corridor:CorridorTask",
                            envs={"My/CorridorRRT-v0": {"planner": "rrt"}}, max_nodes=2000))
     env = gym.make("My/CorridorRRT-v0")       # and: gnn-mp benchmark --task corridor --import my_pkg.corridor
+                                              #      gnn-mp train sampler --task corridor --import my_pkg.corridor
 """
 
 from __future__ import annotations
@@ -19,8 +23,15 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import gymnasium as gym
+import numpy as np
 
 ENTRY_POINT = "gnn_mp_envs.envs.tree_env:TreePlanningEnv"
+#: Sampling settings of a learned sampler when its task names none (see ``TaskSpec.sampler_settings``).
+DEFAULT_SAMPLER_SETTINGS: dict[str, dict[str, Any]] = {
+    "gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
+    "cvae": {"uniform_mix": 0.5},
+    "gnn-cvae": {"uniform_mix": 0.5},
+}
 
 
 @dataclass(frozen=True)
@@ -43,13 +54,50 @@ class TaskSpec:
     benchmark_scene: str | None = None
     #: OMPL planners the isolated runner can run on this task (rows ``ompl-<planner>``).
     ompl_planners: tuple[str, ...] = ()
+    #: ``"module:function"`` building the OMPL control-space setup of a kinodynamic task
+    #: (``function(problem, planner) -> setup``, see ``gnn_mp_envs.baselines.ompl_runner``);
+    #: None: geometric planning (RRTConnect / RRT over the state space).
+    ompl_control_setup: str | None = None
     #: What a path length counts in (the sum of edge costs), for tables and plots.
     path_unit: str = "state-space length"
+    # --- what learned samplers need (the models' scales and the shipped sampling settings)
+    #: About one tree extension in state units: the unit of relative positions and offsets of
+    #: the tree models (None: the problems' ``step_size``).
+    step_scale: float | None = None
+    #: Indices of the angle coordinates (wrapped with period ``high - low``).
+    periodic: tuple[int, ...] = ()
+    #: Per-coordinate weights of the planner's nearest-neighbour metric,
+    #: ``||w * wrap(a - b)||`` (None: Euclidean).
+    metric_weights: tuple[float, ...] | None = None
+    #: The head the ``gnn`` sampler uses: ``"mixture"`` (a Gaussian mixture over the tree's
+    #: nodes) or ``"scorer"`` (a scorer of uniform candidates: kinodynamic tasks, RRT only).
+    gnn_head: str = "mixture"
+    #: Learned sampler name -> the sampling settings stored with its weights at training
+    #: (chosen on split ``val``); missing names get :data:`DEFAULT_SAMPLER_SETTINGS`.
+    sampler_settings: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def env_id(self) -> str:
         """The environment id the benchmark uses."""
         return self.benchmark_env or next(iter(self.envs))
+
+    def env_id_for(self, planner: str | None = None) -> str:
+        """The environment id of ``planner`` (``None``: the benchmark's); ValueError naming the known ones."""
+        if planner is None:
+            return self.env_id
+        for env_id, variant in self.envs.items():
+            if variant.get("planner") == planner:
+                return env_id
+        known = ", ".join(sorted(str(v.get("planner", "?")) for v in self.envs.values()))
+        raise ValueError(f"task {self.name!r} has no {planner!r} planner environment; known: {known}")
+
+    def planner(self, env_id: str | None = None) -> str:
+        """The planner of an environment id of this task (default: the benchmark's)."""
+        return str(self.envs[env_id or self.env_id].get("planner", "rrt"))
+
+    def num_trees(self, env_id: str | None = None) -> int:
+        """Trees the planner of ``env_id`` grows: 2 for BiRRT, 1 for RRT."""
+        return 2 if self.planner(env_id) == "birrt" else 1
 
     def default_scene(self, split: str) -> str | None:
         """The scene an environment of ``split`` plans when none is named: the held-out family
@@ -60,17 +108,45 @@ class TaskSpec:
             return self.benchmark_scene
         return "train" if "train" in self.scenes else self.scenes[0]
 
+    def training_scene(self) -> str | None:
+        """The scene training problems come from (tasks with scenes: the training families)."""
+        return self.default_scene("train")
+
     def task_class(self) -> Callable[..., Any]:
         if not isinstance(self.entry_point, str):
             return self.entry_point
         module, _, cls = self.entry_point.partition(":")
         return getattr(importlib.import_module(module), cls)
 
+    def sampler_defaults(self, name: str) -> dict[str, Any]:
+        """The sampling settings stored with a newly trained ``name`` sampler for this task."""
+        return dict(self.sampler_settings.get(name, DEFAULT_SAMPLER_SETTINGS.get(name, {})))
+
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sampling bounds of every problem of the task as float32 arrays: exactly the
+        environments' action box. Read once from a task instance and cached per process (the
+        arm's costs a simulator start, ~0.1 s)."""
+        if self.name not in _BOUNDS:
+            task = self.task_class()(**({"scene": self.default_scene("test")} if self.scenes else {}))
+            try:
+                low, high = task.state_bounds()
+            finally:
+                task.close()
+            _BOUNDS[self.name] = (np.asarray(low, np.float32).copy(), np.asarray(high, np.float32).copy())
+        low, high = _BOUNDS[self.name]
+        return low.copy(), high.copy()
+
+    def periodic_mask(self, state_dim: int) -> np.ndarray:
+        """``(state_dim,)`` bool: which coordinates wrap."""
+        mask = np.zeros(state_dim, dtype=bool)
+        mask[list(self.periodic)] = True
+        return mask
+
 
 #: Task name -> spec. Filled by :func:`register_task`; the built-in tasks are below.
 TASK_SPECS: dict[str, TaskSpec] = {}
-#: Environment id -> ``TreePlanningEnv`` kwargs (derived from the specs, kept for reference).
-ENVIRONMENTS: dict[str, dict[str, Any]] = {}
+_BOUNDS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+GNN_HEADS = ("mixture", "scorer")
 
 
 def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
@@ -79,14 +155,18 @@ def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
         raise ValueError(f"task {spec.name!r} registers no environment id")
     if spec.benchmark_env is not None and spec.benchmark_env not in spec.envs:
         raise ValueError(f"task {spec.name!r}: benchmark_env {spec.benchmark_env!r} is not one of its envs")
+    if spec.gnn_head not in GNN_HEADS:
+        raise ValueError(f"task {spec.name!r}: gnn_head must be one of {GNN_HEADS}, got {spec.gnn_head!r}")
+    if spec.step_scale is not None and not spec.step_scale > 0:
+        raise ValueError(f"task {spec.name!r}: step_scale must be > 0, got {spec.step_scale}")
     if spec.name in TASK_SPECS and not replace:
         if TASK_SPECS[spec.name] == spec:
             return spec
         raise ValueError(f"task {spec.name!r} is already registered")
     TASK_SPECS[spec.name] = spec
+    _BOUNDS.pop(spec.name, None)
     for env_id, variant in spec.envs.items():
         kwargs = {"task": spec.name, "max_nodes": spec.max_nodes, **variant}
-        ENVIRONMENTS[env_id] = kwargs
         if env_id in gym.registry and replace:
             del gym.registry[env_id]
         if env_id not in gym.registry:
@@ -98,7 +178,7 @@ def task_spec(name: str) -> TaskSpec:
     """The spec of a registered task; ``ValueError`` naming the known ones otherwise."""
     try:
         return TASK_SPECS[name]
-    except KeyError:
+    except (KeyError, TypeError):
         raise ValueError(f"unknown task {name!r}; known: {', '.join(sorted(TASK_SPECS))}") from None
 
 
@@ -108,18 +188,26 @@ def make_task(name: str, **kwargs: Any):
 
 
 BUILTIN_TASKS = (
+    # maze2d: step_scale is the extension length (tasks/maze2d.py STEP_SIZE).
     TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d:Maze2DTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
-             max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length"),
+             max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length",
+             step_scale=0.05),
+    # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by
+    # tasks/pendulum.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",
              envs={"GNNMP/PendulumRRT-v0": {"planner": "rrt"}},
-             max_nodes=20000, ompl_planners=("rrt", "kpiece"), path_unit="seconds of motion"),
+             max_nodes=20000, ompl_planners=("rrt", "kpiece"),
+             ompl_control_setup="gnn_mp_envs.baselines.ompl_runner:pendulum_setup",
+             path_unit="seconds of motion", step_scale=0.4, periodic=(0,), metric_weights=(1.0, 0.4),
+             gnn_head="scorer",
+             sampler_settings={"gnn": {"uniform_mix": 0.2, "goal_bias": 0.05, "candidates": 16, "temperature": 1.0}}),
     # Held-out arm problems solve in < 500 nodes; 5,000 keeps the per-step observation copy
-    # small (pass max_nodes=20000 for a 20,000-node budget).
+    # small (pass max_nodes=20000 for a 20,000-node budget). step_scale: tasks/arm STEP_SIZE (rad).
     TaskSpec("arm", "gnn_mp_envs.tasks.arm:ArmTask",
              envs={"GNNMP/ArmBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, scenes=("train-a", "train-b", "train", "test"), benchmark_scene="test",
-             ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2"),
+             ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4),
 )
 
 

@@ -18,7 +18,7 @@ from torch import nn
 from agents.checkpoints import (FORMAT_VERSION, SHIPPED_DIR, CheckpointError, load_checkpoint,
                                 load_training_state, model_kinds, read_checkpoint, register_model_kind,
                                 save_checkpoint, save_training_state)
-from agents.models.critical import MODELS, CriticalGAT, CriticalGNN, kind_of
+from agents.critical.models import MODELS, CriticalGAT, CriticalGNN, kind_of
 from gnn_mp_envs.utils.io import atomic_path, atomic_write_bytes, atomic_write_text
 
 torch.set_num_threads(1)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from agents.critical_data import graph_batch, image_batch, node_features
-from agents.models.critical import (CriticalCNN, CriticalCVAE, CriticalGAT, CriticalGNN,
+from agents.critical.data import graph_batch, image_batch, node_features
+from agents.critical.models import (CriticalCNN, CriticalCVAE, CriticalGAT, CriticalGNN,
                                     CriticalGNNCVAE, build_model)
 from gnn_mp_envs.critical.dataset import CriticalProblems
 from gnn_mp_envs.critical.halton import halton_graph

@@ -105,7 +105,7 @@ def test_label_cross_entropy_terms():
 
 
 def test_heatmap_cnn_reads_the_map_at_the_nodes(monkeypatch):
-    from agents.models.critical import CriticalCNN
+    from agents.critical.models import CriticalCNN
     g = halton_graph()
     model = CriticalCNN(readout="heatmap").eval()
     heat = torch.zeros(1, 64, 64)
@@ -124,7 +124,7 @@ def test_heatmap_cnn_reads_the_map_at_the_nodes(monkeypatch):
 
 
 def test_graph_models_node_distributions_normalise_per_graph():
-    from agents.models.critical import CriticalGNN, CriticalGNNCVAE
+    from agents.critical.models import CriticalGNN, CriticalGNNCVAE
     torch.manual_seed(0)
     g = halton_graph(150)
     n = g.num_nodes

@@ -104,7 +104,7 @@ def test_shipping_needs_the_flag(data_dir, tmp_path, monkeypatch):
         run_paths(_args(data_dir, out=SHIPPED_DIR / "critical_gnn.pt"))
     shipped = tmp_path / "shipped"
     shipped.mkdir()
-    monkeypatch.setattr("train.critical.training.CHECKPOINT_DIR", shipped)
+    monkeypatch.setattr("agents.checkpoints.SHIPPED_DIR", shipped)
     res = train(_args(data_dir, out=tmp_path / "run" / "x.pt", ship=True), dataset=TINY, progress=False)
     assert res["shipped"] == str(shipped / "critical_gnn.pt")
     assert sorted(p.name for p in shipped.iterdir()) == ["critical_gnn.json", "critical_gnn.pt"]

@@ -1,4 +1,4 @@
-"""The policy interface: vectorised to_pyg, k-NN edges, TreeEncoder, LearnedSampler, SB3 and TorchRL."""
+"""The policy interface: vectorised to_pyg, k-NN edges, TreeEncoder, the ModelSampler hook, SB3 and TorchRL."""
 
 import gymnasium as gym
 import numpy as np
@@ -7,7 +7,8 @@ import torch
 from tensordict import TensorDict
 from torch_geometric.data import Batch, Data
 
-from agents.encoders import CONVS, EncoderModule, TreeEncoder
+from agents.encoders import CONVS, TreeEncoder
+from agents.rl.backbones import EncoderModule
 from agents.graph import knn_edge_index, to_pyg
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS, observation_space
 
@@ -235,19 +236,21 @@ def test_encoder_module_writes_embed():
 
 
 # ---------------------------------------------------------------------------- the learned-sampler hook
-def make_learned(space, low, high, seed=0, **kw):
-    from agents.samplers import LearnedSampler
-    from agents.torchrl import make_gaussian_head
-    encoder = EncoderModule.from_space(space, hidden_channels=8, out_channels=8)
-    head = make_gaussian_head(encoder.out_channels, len(low), hidden=8)
-    return LearnedSampler(low, high, seed, encoder=encoder, head=head, **kw).eval()
+def make_offset_sampler(low, high, seed=0, **kw):
+    """A learned sampler of one's own: ``model_sample`` puts a Gaussian at the goal."""
+    from agents.samplers import ModelSampler
+
+    class GoalGaussian(ModelSampler):
+        def model_sample(self, obs):
+            return np.asarray(obs["goal"], np.float64) + 1e-3 * self.rng.standard_normal(self.state_dim)
+
+    return GoalGaussian(low, high, seed, **kw)
 
 
-def test_learned_sampler_is_seeded_bounded_and_writes_its_keys():
+def test_model_sampler_is_seeded_bounded_and_mixes_at_its_rates():
     env = gym.make("GNNMP/Maze2DBiRRT-v0", max_nodes=200)
     low, high = env.action_space.low, env.action_space.high
-    torch.manual_seed(0)
-    sampler = make_learned(env.observation_space, low, high, seed=3, uniform_mix=0.3)
+    sampler = make_offset_sampler(low, high, seed=3, uniform_mix=0.3, goal_bias=0.2)
     runs = []
     for _ in range(2):
         sampler.reset(3)
@@ -262,35 +265,33 @@ def test_learned_sampler_is_seeded_bounded_and_writes_its_keys():
     np.testing.assert_array_equal(runs[0], runs[1])
     sampler.reset(4)
     assert not np.array_equal(np.array([sampler.act(obs) for _ in range(30)]), runs[0])
-
+    # the rates: a target sample equals the active tree's target exactly, a model sample lies near the goal
+    obs, _ = env.reset(seed=1)
+    draws = np.array([sampler.act(obs) for _ in range(4000)])
+    target = np.all(draws == obs["goal"], axis=1)
+    near = ~target & (np.linalg.norm(draws - obs["goal"], axis=1) < 0.01)
+    assert abs(target.mean() - 0.2) < 0.025 and abs(near.mean() - 0.5) < 0.03
     td = TensorDict({k: torch.as_tensor(np.stack([obs[k]] * 3)) for k in OBSERVATION_KEYS}, batch_size=[3])
-    with torch.no_grad():
-        out = sampler(td)
-    assert set(sampler.out_keys) == {"embed", "loc", "scale", "action", "sample_log_prob"}
-    assert out["embed"].shape == (3, 8) and out["loc"].shape == out["scale"].shape == (3, 2)
-    assert out["action"].shape == (3, 2) and out["sample_log_prob"].shape == (3,)
-    assert torch.isfinite(out["sample_log_prob"]).all()
-    plain = {k: torch.as_tensor(obs[k]) for k in OBSERVATION_KEYS}
-    assert sampler.propose(plain).shape == (2,) and set(plain) == set(OBSERVATION_KEYS)
+    out = sampler(td)
+    assert out["action"].shape == (3, 2) and out["action"].dtype == torch.float32
+    with pytest.raises(ValueError, match="3-D states"):
+        sampler.act({**obs, "start": np.zeros(3, np.float32)})
 
 
-def test_learned_sampler_uniform_mix_one_is_uniform_in_density():
+def test_model_sampler_uniform_mix_one_is_uniform():
     low, high = np.array([0.0, -2.0], np.float32), np.array([1.0, 2.0], np.float32)
-    sampler = make_learned(MAZE_SPACE, low, high, uniform_mix=1.0)
-    td = TensorDict(as_tensors(random_tree_obs(MAZE_SPACE, [4] * 500, np.random.default_rng(5))), batch_size=[500])
-    with torch.no_grad():
-        out = sampler(td)
-    torch.testing.assert_close(out["sample_log_prob"], torch.full((500,), -np.log(4.0), dtype=torch.float32))
-    a = out["action"]
-    assert torch.all(a >= torch.as_tensor(low)) and torch.all(a <= torch.as_tensor(high))
-    assert abs(float(a[:, 1].mean())) < 0.25            # spread over the box, not at the model's mean
+    sampler = make_offset_sampler(low, high, uniform_mix=1.0)
+    obs = random_tree_obs(MAZE_SPACE, [4], np.random.default_rng(5))
+    a = np.array([sampler.act({k: v[0] for k, v in obs.items()}) for _ in range(2000)])
+    assert np.all(a >= low) and np.all(a <= high)
+    assert abs(float(a[:, 1].mean())) < 0.15 and a[:, 1].std() > 1.0     # spread over the box
 
 
 # ---------------------------------------------------------------------------- SB3 and TorchRL
 def test_sb3_ppo_learns_with_the_tree_features_extractor():
     from stable_baselines3 import PPO
 
-    from agents.sb3 import TreeFeaturesExtractor
+    from agents.rl.sb3 import TreeFeaturesExtractor
     torch.manual_seed(0)
     env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=200)
     model = PPO("MultiInputPolicy", env, n_steps=128, batch_size=64, n_epochs=1, seed=0, device="cpu",
@@ -312,8 +313,8 @@ def test_torchrl_actor_rollout_and_shared_value_head():
     import torchrl
     from torchrl.envs import GymEnv
 
-    import agents.torchrl as agents_torchrl
-    from agents.torchrl import make_actor, make_value
+    import agents.rl.torchrl as agents_torchrl
+    from agents.rl.torchrl import make_actor, make_value
     assert torchrl.__file__ != agents_torchrl.__file__ and hasattr(torchrl, "envs")   # no shadowing
 
     torch.manual_seed(0)
@@ -342,10 +343,10 @@ def test_torchrl_actor_rollout_and_shared_value_head():
     assert isinstance(other[0], EncoderModule) and other[0] is not encoder
 
 
-# ---------------------------------------------------------------------------- gnn-mp bench-sampler
+# ---------------------------------------------------------------------------- tools/bench_sampler.py
 def test_bench_sampler_reports_both_measurements(capsys):
-    from train.cli import main
-    code = main(["bench-sampler", "--batch", "6", "--nodes", "40", "--trees", "2", "--conversions", "2",
+    from tools.bench_sampler import main
+    code = main(["--batch", "6", "--nodes", "40", "--trees", "2", "--conversions", "2",
                  "--rounds", "1", "--act-nodes", "30", "--window", "20", "--tasks", "maze2d",
                  "--samplers", "uniform,goal-bias", "--clock", "cpu"])
     out = capsys.readouterr().out
@@ -354,15 +355,15 @@ def test_bench_sampler_reports_both_measurements(capsys):
     rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.startswith("  ")}
     assert float(rows["uniform"][0]) > 0 and float(rows["goal-bias"][0]) > 0
     with pytest.raises(SystemExit) as exc:
-        main(["bench-sampler", "--samplers", "nope"])
+        main(["--samplers", "nope"])
     assert exc.value.code == 2 and "unknown sampler" in capsys.readouterr().err
 
 
 def test_bench_sampler_skips_a_task_whose_planner_solves_before_the_tree_size(capsys):
     """BiRRT ends when its trees connect whatever the goal test says: the arm never reaches
     1,000 nodes, and the timing says so instead of looping forever."""
-    from train.cli import main
-    code = main(["bench-sampler", "--skip-to-pyg", "--rounds", "1", "--act-nodes", "1000", "--window", "5",
+    from tools.bench_sampler import main
+    code = main(["--skip-to-pyg", "--rounds", "1", "--act-nodes", "1000", "--window", "5",
                  "--tasks", "maze2d,arm", "--samplers", "uniform", "--clock", "cpu"])
     captured = capsys.readouterr()
     assert code == 0

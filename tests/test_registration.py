@@ -20,7 +20,7 @@ from train import benchmark as bm
 def test_an_outside_task_runs_through_gym_make():
     env = gym.make("Tiny/TinyRRT-v0", split="test")
     assert env.unwrapped.max_nodes == 400
-    sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
+    sampler = load_sampler("uniform", bounds=(env.action_space.low, env.action_space.high), seed=0)
     record = rollout(env, sampler.act, seed=0, options={"index": 0})
     assert record.success and record.nodes_expanded <= 400
 
@@ -56,7 +56,7 @@ def test_builtin_specs_know_their_facts():
 @pytest.mark.parametrize("env_id", ["GNNMP/Maze2DRRT-v0", "GNNMP/Maze2DBiRRT-v0", "GNNMP/PendulumRRT-v0"])
 def test_path_nodes_are_the_path_through_the_tree(env_id):
     env = gym.make(env_id, split="test", copy_observations=False)
-    sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=1)
+    sampler = load_sampler("uniform", bounds=(env.action_space.low, env.action_space.high), seed=1)
     record = rollout(env, sampler.act, seed=1, options={"index": 2})
     assert record.success
     tree = env.unwrapped.planner.tree
@@ -71,7 +71,7 @@ def test_path_nodes_are_the_path_through_the_tree(env_id):
 def test_run_steps_stops_where_asked_and_times_the_env():
     env = gym.make("GNNMP/Maze2DRRT-v0", split="test")
     obs, _ = env.reset(seed=0, options={"index": 0})
-    sampler = load_sampler("uniform", env.action_space.low, env.action_space.high, seed=0)
+    sampler = load_sampler("uniform", bounds=(env.action_space.low, env.action_space.high), seed=0)
     result = run_steps(env, sampler.act, obs, max_steps=7)
     assert result.steps == 7 and result.info["iterations"] == 7
     assert 0 < result.env_time_s <= result.wall_time_s

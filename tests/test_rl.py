@@ -124,7 +124,7 @@ def test_make_rl_env_scales_actions():
 def test_buffer_formula_matches_sb3_buffers():
     from stable_baselines3.common.buffers import DictReplayBuffer, DictRolloutBuffer
 
-    from train.rl_common import memory_table, sb3_buffer_bytes, sb3_buffer_nbytes
+    from train.rl.memory import sb3_buffer_bytes, sb3_buffer_nbytes
     for k in (None, 32):
         env = make_rl_env("maze2d", view_nodes=k, max_nodes=200)
         space, act = env.observation_space, env.action_space
@@ -132,15 +132,16 @@ def test_buffer_formula_matches_sb3_buffers():
         replay = DictReplayBuffer(100, space, act, n_envs=1)
         assert sb3_buffer_nbytes(rollout) == sb3_buffer_bytes(space, 2, 64, 2, "rollout")
         assert sb3_buffer_nbytes(replay) == sb3_buffer_bytes(space, 2, 100, 1, "replay")
-    full, view = memory_table("maze2d", 64)
-    assert full["sac_replay_bytes"] > 30 * 2**30          # ~34 GiB for 100k transitions, full padding
-    assert view["sac_replay_bytes"] < 600 * 2**20          # a few hundred MiB with the 64-row view
-    assert view["ppo_rollout_bytes"] < 20 * 2**20
+    # the figures of docs/rl.md: SAC's 100k-transition buffer and a 2,048-step PPO rollout on maze2d
+    full, view = (make_rl_env("maze2d", view_nodes=k).observation_space for k in (None, 64))
+    assert sb3_buffer_bytes(full, 2, 100_000, 1, "replay") > 30 * 2**30     # ~34 GiB, full padding
+    assert sb3_buffer_bytes(view, 2, 100_000, 1, "replay") < 600 * 2**20    # a few hundred MiB, 64-row view
+    assert sb3_buffer_bytes(view, 2, 2048, 1, "rollout") < 20 * 2**20
 
 
 # ----------------------------------------------------------------------------- training
 def tiny_args(tmp_path, lib, algo, task, **kw):
-    from train.rl_common import RLArgs
+    from train.rl.args import RLArgs
     defaults = dict(lib=lib, algo=algo, task=task, total_steps=256, n_envs=2, n_steps=64, batch_size=32,
                     n_epochs=1, view_nodes=16, hidden_channels=8, num_layers=1, out_channels=16, net_arch=[16],
                     buffer_size=500, learning_starts=64, eval_every=10_000, eval_problems=1, eval_max_steps=100,
@@ -152,17 +153,18 @@ def tiny_args(tmp_path, lib, algo, task, **kw):
 @pytest.mark.parametrize("task", ["maze2d", "pendulum"])
 @pytest.mark.parametrize("lib,algo", [("sb3", "ppo"), ("sb3", "sac"), ("torchrl", "ppo")])
 def test_short_training_runs(tmp_path, lib, algo, task):
-    from train.rl import main  # noqa: F401  (the CLI module imports)
-    from train.rl_sb3 import train as train_sb3
-    from train.rl_torchrl import train as train_torchrl
+    from train.rl.cli import main  # noqa: F401  (the CLI module imports)
+    from train.rl.sb3 import train as train_sb3
+    from train.rl.torchrl import train as train_torchrl
     args = tiny_args(tmp_path, lib, algo, task)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = (train_sb3 if lib == "sb3" else train_torchrl)(args)
     assert result.steps >= 256
     assert 0 < result.buffer_bytes < 8 * 2**20     # bounded: the full padding would be 100-1000x more
-    run = args.run_dir()
-    for name in ("config.json", "policy.pt", "best.pt", "evaluations.json", "learning_curve.png"):
+    run = result.run_dir
+    assert run == args.out
+    for name in ("config.json", "policy.pt", "best.pt", "policy.json", "evaluations.json", "learning_curve.png"):
         assert (run / name).exists(), name
     assert json.loads((run / "config.json").read_text())["algo"] == algo
     rows = json.loads((run / "evaluations.json").read_text())
@@ -171,7 +173,7 @@ def test_short_training_runs(tmp_path, lib, algo, task):
     # the policy is a sampler of the benchmark
     from agents.samplers import load_sampler
     env = gym.make(f"GNNMP/{'Maze2D' if task == 'maze2d' else 'Pendulum'}RRT-v0", copy_observations=False)
-    sampler = load_sampler(args.sampler_name, env.action_space.low, env.action_space.high, task=task, seed=0,
+    sampler = load_sampler(args.sampler_name, task=task, seed=0,
                            checkpoint=result.best)
     obs, _ = env.reset(seed=0)
     assert env.action_space.contains(sampler.act(obs))
@@ -179,10 +181,10 @@ def test_short_training_runs(tmp_path, lib, algo, task):
 
 def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
     """Same seed -> same actions, for every policy kind, after a save/load round trip."""
-    from agents.models.rl import SB3PPOPolicy, SB3SACPolicy, TorchRLPPOPolicy, encoder_config
+    from agents.rl.policies import SB3PPOPolicy, SB3SACPolicy, TorchRLPPOPolicy, encoder_config
     from agents.encoders import TreeEncoder
     from agents.samplers import load_sampler
-    from agents.samplers.rl import RL_SAMPLERS, save_policy
+    from agents.rl.sampler import RL_SAMPLERS, save_policy
     env = gym.make("GNNMP/Maze2DRRT-v0", copy_observations=False)
     low, high = env.action_space.low, env.action_space.high
     view_space = make_rl_env("maze2d", view_nodes=16).observation_space
@@ -198,8 +200,8 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         args = {"encoder": enc, "action_dim": 2, **extra}
         path = save_policy(tmp_path / f"{name}.pt", cls(**args), kind, args, task="maze2d", view_nodes=16,
                            low=low, high=high, uniform_mix=0.25)
-        a = load_sampler(name, low, high, task="maze2d", seed=7, checkpoint=path)
-        b = load_sampler(name, low, high, task="maze2d", seed=7, checkpoint=path)
+        a = load_sampler(name, task="maze2d", seed=7, checkpoint=path)
+        b = load_sampler(name, task="maze2d", seed=7, checkpoint=path)
         assert a.uniform_mix == 0.25 and a.view_nodes == 16
         first = [a.act(obs) for _ in range(20)]
         assert np.array_equal(first, [b.act(obs) for _ in range(20)])
@@ -208,21 +210,21 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         a.reset(8)
         assert not np.array_equal(first, [a.act(obs) for _ in range(20)])
         assert all(np.all(x >= low) and np.all(x <= high) for x in first)
-        # batched TorchRL use: full observations in, actions and log-probs out
+        # batched TorchRL use: full observations in, actions out
         from tensordict import TensorDict
         td = TensorDict({k: torch.as_tensor(np.stack([v] * 3)) for k, v in obs.items()}, batch_size=[3])
         out = a(td)
-        assert out["action"].shape == (3, 2) and torch.isfinite(out["sample_log_prob"]).all()
+        assert out["action"].shape == (3, 2) and torch.isfinite(out["action"]).all()
         with pytest.raises(ValueError, match="task"):
-            load_sampler(name, low, high, task="pendulum", checkpoint=path)
+            load_sampler(name, task="pendulum", checkpoint=path)
     with pytest.raises(FileNotFoundError):
-        load_sampler("rl-sac", low, high, task="arm", seed=0)
+        load_sampler("rl-sac", task="arm", seed=0)
 
 
 def test_warm_start_copies_the_encoder(tmp_path):
     from agents.checkpoints import save_checkpoint
     from agents.encoders import TreeEncoder
-    from agents.models.rl import SB3PPOPolicy, encoder_config, warm_start_encoder
+    from agents.rl.policies import SB3PPOPolicy, encoder_config, warm_start_encoder
     space = make_rl_env("maze2d", view_nodes=16).observation_space
     source = SB3PPOPolicy(encoder_config(TreeEncoder.from_space(space, hidden_channels=8, num_layers=1,
                                                                 out_channels=16)), 2, hidden=[16])
@@ -239,7 +241,7 @@ def test_warm_start_copies_the_encoder(tmp_path):
 
 def test_warm_start_flag_in_training(tmp_path):
     from agents.checkpoints import read_checkpoint
-    from train.rl_sb3 import train
+    from train.rl.sb3 import train
     first = train(tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "a"))
     src = {k: v for k, v in read_checkpoint(first.best)["state_dict"].items() if k.startswith("encoder.")}
     args = tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "b", init_from=first.best,
@@ -261,8 +263,8 @@ def test_cli_train_rl_flags(tmp_path, capsys):
 def test_arm_view_and_sampler(tmp_path):
     """BiRRT on the arm: both roots stay in the view, and a policy acts for the active tree."""
     from agents.encoders import TreeEncoder
-    from agents.models.rl import SB3PPOPolicy, encoder_config
-    from agents.samplers.rl import sampler_from_checkpoint, save_policy
+    from agents.rl.policies import SB3PPOPolicy, encoder_config
+    from agents.rl.sampler import sampler_from_checkpoint, save_policy
     env = make_rl_env("arm", view_nodes=8, max_nodes=300)
     obs, _ = env.reset(seed=0)
     assert obs["parent"][:2].tolist() == [-1, -1] and obs["node_features"].shape == (8, 13)
@@ -286,27 +288,30 @@ def test_arm_view_and_sampler(tmp_path):
 
 @pytest.mark.parametrize("task", ["maze2d", "pendulum"])
 def test_sampler_maps_actions_as_the_training_env(task):
-    """TargetRelativeAction (training) and RLSampler.to_box (benchmark) give the same state."""
+    """TargetRelativeAction (training) and the RL sampler (benchmark) turn a policy action into the
+    same state: one map (policy_action_to_state), wrapped and clipped alike."""
+    from agents.rl.sampler import RLSampler
+    from agents.rl.policies import SB3PPOPolicy, encoder_config
     from agents.encoders import TreeEncoder
-    from agents.models.rl import SB3PPOPolicy, encoder_config
-    from agents.samplers.rl import RLSampler
-    from gnn_mp_envs.envs.wrappers import TargetRelativeAction, periodic_dims
+    from agents.samplers import active_target
+    from gnn_mp_envs.envs.wrappers import TargetRelativeAction, policy_action_to_state
+    from gnn_mp_envs.registration import task_spec
     env = make_rl_env(task, view_nodes=8, action_frame="target")
     env.reset(seed=3)
     box = env.unwrapped.action_space
-    periodic = periodic_dims(env.unwrapped.problem, box.low, box.high)
-    assert periodic == ([True, False] if task == "pendulum" else [False, False])
+    periodic = task_spec(task).periodic_mask(2)
     enc = encoder_config(TreeEncoder.from_space(env.observation_space, hidden_channels=8, num_layers=1,
                                                 out_channels=8))
     sampler = RLSampler(box.low, box.high, 0, policy=SB3PPOPolicy(enc, 2, hidden=[8]), view_nodes=8,
                         action_frame="target", periodic=periodic)
-    full = {k: torch.as_tensor(v) for k, v in env.unwrapped._obs.as_dict().items()}
+    full = env.unwrapped._obs.as_dict()
     wrapper = env
     while not isinstance(wrapper, TargetRelativeAction):
         wrapper = wrapper.env
     assert np.allclose(wrapper.action(np.zeros(2)), env.unwrapped.problem.goal, atol=1e-6)   # 0 = the goal
     for u in np.random.default_rng(0).uniform(-1, 1, (100, 2)).astype(np.float32):
-        np.testing.assert_allclose(wrapper.action(u), sampler.to_box(torch.as_tensor(u), full).numpy(), atol=1e-5)
+        mine = sampler.finish(policy_action_to_state(u, "target", sampler.low, sampler.high, active_target(full)))
+        np.testing.assert_allclose(wrapper.action(u), mine, atol=1e-5)
 
 
 def test_training_wrappers():
@@ -376,13 +381,13 @@ def test_shipped_rl_checkpoints(path):
     """Shipped RL policies: current format, a policy kind, a sidecar, loadable by name for their task."""
     from agents.checkpoints import FORMAT_VERSION, read_checkpoint
     from agents.samplers import load_sampler
-    from agents.samplers.rl import RL_SAMPLERS
+    from agents.rl.sampler import RL_SAMPLERS
     name, task = path.stem.split("_")
     record = read_checkpoint(path, expected_kind=RL_SAMPLERS[name])
     assert record["format_version"] == FORMAT_VERSION and record["meta"]["task"] == task
     assert json.loads(path.with_suffix(".json").read_text())["task"] == task
     env = gym.make(f"GNNMP/{'Maze2D' if task == 'maze2d' else 'Pendulum'}RRT-v0", copy_observations=False)
-    sampler = load_sampler(name, env.action_space.low, env.action_space.high, task=task, seed=0)
+    sampler = load_sampler(name, task=task, seed=0)
     obs, _ = env.reset(seed=0)
     assert env.action_space.contains(sampler.act(obs))
 
@@ -390,16 +395,16 @@ def test_shipped_rl_checkpoints(path):
 @pytest.mark.parametrize("lib", ["sb3", "torchrl"])
 def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     """--encoder tree-gnn builds the GNN sampler's own backbone (one module), and --init-from
-    the shipped tree_gnn checkpoint copies its weights into the policy's encoder."""
+    the shipped gnn checkpoint copies its weights into the policy's encoder."""
     from agents.checkpoints import SHIPPED_DIR, read_checkpoint
-    from train.rl_sb3 import train as train_sb3
-    from train.rl_torchrl import train as train_torchrl
-    shipped = SHIPPED_DIR / "tree_gnn_maze2d.pt"
+    from train.rl.sb3 import train as train_sb3
+    from train.rl.torchrl import train as train_torchrl
+    shipped = SHIPPED_DIR / "gnn_maze2d.pt"
     args = tiny_args(tmp_path, lib, "ppo", "maze2d", total_steps=128, encoder="tree-gnn", init_from=shipped,
                      lr=1e-12)
     (train_sb3 if lib == "sb3" else train_torchrl)(args)
     gnn = read_checkpoint(shipped)["state_dict"]
-    policy = read_checkpoint(args.run_dir() / "policy.pt")
+    policy = read_checkpoint(args.out / "policy.pt")
     assert policy["ctor_args"]["encoder"]["class"] == "tree-gnn"
     state = policy["state_dict"]
     for key, value in gnn.items():

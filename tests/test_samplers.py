@@ -20,7 +20,7 @@ def test_sampler_in_gym_loop_stays_in_bounds_and_is_seeded(name):
     env, low, high = _bounds("GNNMP/PendulumRRT-v0")
     actions = []
     for _ in range(2):
-        sampler = load_sampler(name, low, high, seed=3)
+        sampler = load_sampler(name, bounds=(low, high), seed=3)
         obs, _ = env.reset(seed=0)
         run = []
         for _ in range(50):
@@ -34,7 +34,7 @@ def test_sampler_in_gym_loop_stays_in_bounds_and_is_seeded(name):
 
 def test_goal_bias_targets_the_active_trees_root():
     env, low, high = _bounds()
-    sampler = load_sampler("goal-bias", low, high, seed=0, goal_bias=1.0)
+    sampler = load_sampler("goal-bias", bounds=(low, high), seed=0, goal_bias=1.0)
     obs, _ = env.reset(seed=0)
     np.testing.assert_allclose(sampler.act(obs), obs["goal"])
     obs, *_ = env.step(sampler.act(obs))
@@ -44,7 +44,7 @@ def test_goal_bias_targets_the_active_trees_root():
 
 def test_goal_bias_rate():
     env, low, high = _bounds("GNNMP/Maze2DRRT-v0")
-    sampler = load_sampler("goal-bias", low, high, seed=0, goal_bias=0.2)
+    sampler = load_sampler("goal-bias", bounds=(low, high), seed=0, goal_bias=0.2)
     obs, _ = env.reset(seed=0)
     hits = np.mean([np.allclose(sampler.act(obs), obs["goal"]) for _ in range(2000)])
     assert 0.17 < hits < 0.23
@@ -52,7 +52,7 @@ def test_goal_bias_rate():
 
 def test_tensordict_module_batched():
     env, low, high = _bounds()
-    module = load_sampler("uniform", low, high, seed=0).as_module()
+    module = load_sampler("uniform", bounds=(low, high), seed=0)
     assert list(module.in_keys) == list(SAMPLER_IN_KEYS) and list(module.out_keys) == ["action"]
     obs, _ = env.reset(seed=0)
     td = TensorDict({k: torch.as_tensor(np.stack([obs[k]] * 4)) for k in SAMPLER_IN_KEYS}, batch_size=[4])
@@ -63,7 +63,7 @@ def test_tensordict_module_batched():
 
 def test_unknown_sampler_lists_known_names():
     with pytest.raises(ValueError, match="uniform"):
-        load_sampler("nope", np.zeros(2), np.ones(2))
+        load_sampler("nope", bounds=(np.zeros(2), np.ones(2)))
     assert {"uniform", "goal-bias"} <= set(available_samplers())
 
 
@@ -106,7 +106,7 @@ def _reference_goal_bias(g, low, high, obs, goal_bias, batch=()):
 def test_uniform_stream_is_pinned():
     env, low, high = _bounds("GNNMP/PendulumRRT-v0")
     obs, _ = env.reset(seed=0)
-    sampler = load_sampler("uniform", low, high, seed=7)
+    sampler = load_sampler("uniform", bounds=(low, high), seed=7)
     first = np.array([sampler.act(obs) for _ in range(3)])
     # Literal values (torch's CPU Mersenne Twister): a torch upgrade that changed them would
     # change every benchmark table too.
@@ -133,7 +133,7 @@ def test_uniform_stream_is_pinned():
 def test_goal_bias_stream_is_pinned(goal_bias):
     env, low, high = _bounds("GNNMP/Maze2DBiRRT-v0")
     obs, _ = env.reset(seed=0)
-    sampler = load_sampler("goal-bias", low, high, seed=5, goal_bias=goal_bias)
+    sampler = load_sampler("goal-bias", bounds=(low, high), seed=5, goal_bias=goal_bias)
     g = torch.Generator().manual_seed(5)
     hits = {0: 0, 1: 0}
     for _ in range(300):
@@ -161,7 +161,7 @@ def test_act_returns_a_fresh_array_not_a_view_of_the_observation():
     env, low, high = _bounds("GNNMP/Maze2DRRT-v0")
     obs, _ = env.reset(seed=0)
     goal = obs["goal"].copy()
-    sampler = load_sampler("goal-bias", low, high, seed=0, goal_bias=1.0)
+    sampler = load_sampler("goal-bias", bounds=(low, high), seed=0, goal_bias=1.0)
     a = sampler.act(obs)
     a += 1.0
     np.testing.assert_array_equal(obs["goal"], goal)
@@ -172,10 +172,9 @@ def test_samplers_are_tensordict_modules_reading_only_what_they_need():
     env, low, high = _bounds()
     obs, _ = env.reset(seed=0)
     for name in ["uniform", "goal-bias"]:
-        sampler = load_sampler(name, low, high, seed=0)
+        sampler = load_sampler(name, bounds=(low, high), seed=0)
         assert isinstance(sampler, TensorDictModuleBase)
         assert list(sampler.in_keys) == list(SAMPLER_IN_KEYS) and list(sampler.out_keys) == ["action"]
-        assert sampler.as_module() is sampler
         # propose() needs only the keys in `reads` (any batch shape)
         needed = {k: torch.as_tensor(np.stack([obs[k]] * 3)) for k in sampler.reads}
         assert set(needed) <= {"start", "goal", "active_tree"}

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gnn_mp_envs.utils.npz import DatasetCacheError
-from train.tree_samplers.data import TreeDataConfig, TreeDataset, generate, load, load_or_generate, save
+from train.tree.data import TreeDataConfig, TreeDataset, generate, load, load_or_generate, save
 
 
 def hand_made(iterations=((1, 0), (2, 0), (3, 0), (4, 0), (5, 0))) -> TreeDataset:

@@ -8,14 +8,27 @@ import pytest
 import torch
 
 from agents.checkpoints import load_checkpoint, save_checkpoint
-from agents.models.tree_samplers import TreeGNN, causal_knn
+from agents.tree.models import TreeGNN, causal_knn
 from agents.samplers import load_sampler
-from agents.samplers.tree import IncrementalTreeGNN, reference_embeddings
+from agents.tree.engine import IncrementalTreeGNN
 from gnn_mp_envs.rollout import rollout
 from tests.helpers import uniform_policy
-from train.tree_samplers.data import TreeDataConfig, generate
-from train.tree_samplers.models import adapter_for
-from train.tree_samplers.training import evaluate_loss, fit
+from train.tree.adapters import adapter_for, task_scales
+from train.tree.data import TreeDataConfig, generate
+from train.tree.training import evaluate_loss, fit
+
+
+def reference_embeddings(model: TreeGNN, obs) -> torch.Tensor:
+    """The torch model's node embeddings of one padded observation."""
+    n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
+    d = model.state_dim
+    nodes = torch.as_tensor(np.asarray(obs["nodes"][:n])).to(model.state_scale.dtype)
+    feats = torch.as_tensor(np.asarray(obs["node_features"][:n])).to(model.state_scale.dtype)
+    tid = feats[:, 2 * d].long()
+    parent = torch.as_tensor(np.asarray(obs["parent"][:n])).long()
+    knn = causal_knn(nodes, tid, model.knn, model.step_scale, model.periodic)
+    with torch.no_grad():
+        return model.embed(nodes, feats, parent, knn)
 
 
 def grown_observation(env_id: str, steps: int, **kwargs):
@@ -65,7 +78,7 @@ def test_a_briefly_trained_sampler_plans_and_reloads_identically(model, tmp_path
     env = gym.make("GNNMP/Maze2DRRT-v0", split="val", max_nodes=1500, copy_observations=False,
                    disable_env_checker=True)
     adapter = adapter_for(model, "maze2d")
-    net, ctor_args = adapter.build("maze2d", env.observation_space)
+    net, ctor_args = adapter.build(task_scales("maze2d"))
     items = adapter.items(net, data, "grown", np.random.default_rng(0), 16)
     before = evaluate_loss(net, adapter, items)
     fit(net, adapter, items, items, minutes=0.05, lr=3e-3, batch_size=4, seed=0, writer=None, phase="t",
@@ -76,7 +89,7 @@ def test_a_briefly_trained_sampler_plans_and_reloads_identically(model, tmp_path
     low, high = env.action_space.low, env.action_space.high
     runs = []
     for _ in range(2):
-        sampler = load_sampler(model, low, high, task="maze2d", seed=5, checkpoint=str(path))
+        sampler = load_sampler(model, task="maze2d", seed=5, checkpoint=str(path))
         assert sampler.uniform_mix == 0.3
         actions = []
         record = rollout(env, lambda obs: actions.append(sampler.act(obs)) or actions[-1], seed=5,
@@ -90,10 +103,10 @@ def test_a_briefly_trained_sampler_plans_and_reloads_identically(model, tmp_path
 def test_a_checkpoint_for_another_task_is_refused(tmp_path):
     env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=50)
     adapter = adapter_for("gnn", "maze2d")
-    net, ctor_args = adapter.build("maze2d", env.observation_space)
+    net, ctor_args = adapter.build(task_scales("maze2d"))
     path = save_checkpoint(tmp_path / "m.pt", net, adapter.kind, ctor_args, meta={"task": "maze2d"})
     with pytest.raises(ValueError, match="trained for task 'maze2d'"):
-        load_sampler("gnn", env.action_space.low, env.action_space.high, task="arm", checkpoint=str(path))
+        load_sampler("gnn", task="arm", checkpoint=str(path))
 
 
 def test_training_resumes_from_its_state(tmp_path):
@@ -101,14 +114,14 @@ def test_training_resumes_from_its_state(tmp_path):
     data = generate(TreeDataConfig(task="maze2d", problems=4, max_nodes=1500), progress=False)
     env = gym.make("GNNMP/Maze2DRRT-v0", max_nodes=50)
     adapter = adapter_for("gnn", "maze2d")
-    net, _ = adapter.build("maze2d", env.observation_space)
+    net, _ = adapter.build(task_scales("maze2d"))
     items = adapter.items(net, data, "grown", np.random.default_rng(0), 8)
     state_path = tmp_path / "resume.pt"
     first = fit(net, adapter, items, items, minutes=0.02, lr=1e-3, batch_size=2, seed=0, writer=None, phase="a",
                 progress=False, resume_path=state_path)
     state = load_training_state(state_path)
     assert state["epoch"] == first["epochs"] == len(state["history"])
-    fresh, _ = adapter.build("maze2d", env.observation_space)
+    fresh, _ = adapter.build(task_scales("maze2d"))
     second = fit(fresh, adapter, items, items, minutes=0.3, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
                  progress=False, resume=state)
     assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]

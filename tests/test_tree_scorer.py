@@ -9,26 +9,27 @@ import pytest
 import torch
 
 from agents.checkpoints import save_checkpoint
-from agents.models.tree_scorer import TreeGNNScorer, frontier_edges, tree_depth
+from agents.tree.scorer import TreeGNNScorer, frontier_edges, tree_depth
 from agents.samplers import load_sampler
-from agents.samplers.tree_scorer import IncrementalTreeScorer, TreeScorerSampler, reference_logits
-from train.tree_samplers.data import TreeDataConfig, TreeDataset, generate
-from train.tree_samplers.models import TASKS, adapter_for
-from train.tree_samplers.runs import make_scorer_run, sample_labels
-from train.tree_samplers.training import observation_space_of
+from agents.tree.engine import IncrementalTreeScorer
+from agents.tree.samplers import TreeScorerSampler
+from gnn_mp_envs.registration import task_spec
+from train.tree.adapters import adapter_for, task_scales
+from train.tree.data import TreeDataConfig, TreeDataset, generate
+from train.tree.items import make_scorer_run, sample_labels
 
-LOW, HIGH = np.array([-np.pi, -8.0]), np.array([np.pi, 8.0])
+LOW, HIGH = task_spec("pendulum").state_bounds()     # the action box (float32), as load_sampler takes it
 
 
 @pytest.fixture(scope="module")
 def adapter_and_space():
-    return adapter_for("gnn", "pendulum"), observation_space_of("pendulum")[0]
+    return adapter_for("gnn", "pendulum"), task_scales("pendulum")
 
 
 def random_scorer(adapter_and_space, seed: int = 0) -> TreeGNNScorer:
-    adapter, space = adapter_and_space
+    adapter, scales = adapter_and_space
     torch.manual_seed(seed)
-    model, _ = adapter.build("pendulum", space, hidden_channels=32)
+    model, _ = adapter.build(scales, hidden_channels=32)
     with torch.no_grad():   # larger weights than the initialisation: logits that differ visibly
         for p in model.parameters():
             if p.dim() == 2:
@@ -52,6 +53,19 @@ def grown_obs():
     n = int(obs["num_nodes"][0])
     obs["nodes"][1:n] += rng.normal(0.0, 1e-3, (n - 1, 2)).astype(np.float32)
     return obs
+
+
+def reference_logits(model: TreeGNNScorer, obs: dict, samples: np.ndarray) -> torch.Tensor:
+    """The torch model's scores of candidate ``samples`` at one padded observation."""
+    n = int(obs["num_nodes"][0])
+    nodes = torch.as_tensor(obs["nodes"][:n])
+    feats = torch.as_tensor(obs["node_features"][:n])
+    parent = torch.as_tensor(obs["parent"][:n]).long()
+    s = torch.as_tensor(samples, dtype=torch.float32)
+    with torch.no_grad():
+        knn = model.causal_knn(nodes, feats[:, 2 * model.state_dim].long())
+        near = model.nearest(s, nodes)
+        return model(nodes, feats, parent, knn, torch.as_tensor(obs["goal"]), near, torch.full_like(near, n), s)
 
 
 def prefix(obs: dict, n: int) -> dict:
@@ -133,10 +147,10 @@ def test_labels_mark_the_samples_that_created_path_nodes(adapter_and_space):
 @pytest.fixture(scope="module")
 def trained_checkpoint(adapter_and_space, tmp_path_factory):
     """A scorer trained a few steps on three uniform pendulum solutions, saved as a checkpoint."""
-    adapter, space = adapter_and_space
+    adapter, scales = adapter_and_space
     data = generate(TreeDataConfig(task="pendulum", problems=3, max_nodes=1500, first_problem=5), progress=False)
     torch.manual_seed(0)
-    model, ctor_args = adapter.build("pendulum", space, hidden_channels=16, num_layers=1)
+    model, ctor_args = adapter.build(scales, hidden_channels=16, num_layers=1)
     items = adapter.items(model, data, "grown", np.random.default_rng(0), 32)
     opt = torch.optim.Adam(model.parameters(), lr=3e-3)
     first = None
@@ -147,7 +161,7 @@ def trained_checkpoint(adapter_and_space, tmp_path_factory):
         loss.backward()
         opt.step()
     assert count == sum(len(r.labels) for r in items) and loss.item() < first
-    settings = dict(TASKS["pendulum"].sampler["gnn"])
+    settings = task_spec("pendulum").sampler_defaults("gnn")
     path = save_checkpoint(tmp_path_factory.mktemp("scorer") / "model.pt", model, adapter.kind, ctor_args,
                            meta={"task": "pendulum", "sampler": settings})
     return path, model.eval()
@@ -157,7 +171,7 @@ def test_trained_scorer_plans_through_the_registry(trained_checkpoint):
     path, _ = trained_checkpoint
     env = gym.make("GNNMP/PendulumRRT-v0", split="val", copy_observations=False, disable_env_checker=True,
                    max_nodes=3000)
-    sampler = load_sampler("gnn", env.action_space.low, env.action_space.high, task="pendulum", checkpoint=str(path))
+    sampler = load_sampler("gnn", task="pendulum", checkpoint=str(path))
     assert isinstance(sampler, TreeScorerSampler)
     assert (sampler.uniform_mix, sampler.goal_bias, sampler.candidates) == (0.2, 0.05, 16)
     sampler.reset(3)
@@ -171,13 +185,13 @@ def test_trained_scorer_plans_through_the_registry(trained_checkpoint):
     assert 100 < sampler.engine.n <= int(obs["num_nodes"][0])     # the engine read the tree as it grew
     env.close()
     with pytest.raises(ValueError, match="takes"):
-        load_sampler("gnn", LOW, HIGH, task="pendulum", checkpoint=str(path), sigma_scale=1.0)
+        load_sampler("gnn", task="pendulum", checkpoint=str(path), sigma_scale=1.0)
 
 
 def test_save_load_gives_identical_proposals(trained_checkpoint, grown_obs):
     path, model = trained_checkpoint
     direct = TreeScorerSampler(LOW, HIGH, model=model, uniform_mix=0.2, goal_bias=0.05, candidates=16)
-    loaded = [load_sampler("gnn", LOW, HIGH, task="pendulum", checkpoint=str(path)) for _ in range(2)]
+    loaded = [load_sampler("gnn", task="pendulum", checkpoint=str(path)) for _ in range(2)]
     runs = []
     for sampler in [direct] + loaded:
         sampler.reset(11)
@@ -188,6 +202,6 @@ def test_save_load_gives_identical_proposals(trained_checkpoint, grown_obs):
 
 
 def test_shipped_pendulum_gnn_is_the_scorer():
-    sampler = load_sampler("gnn", LOW, HIGH, task="pendulum", seed=0)
+    sampler = load_sampler("gnn", task="pendulum", seed=0)
     assert isinstance(sampler, TreeScorerSampler)
     assert (sampler.uniform_mix, sampler.goal_bias, sampler.candidates, sampler.temperature) == (0.2, 0.05, 16, 1.0)

@@ -3,11 +3,13 @@
     gnn-mp samplers                       # registered samplers with descriptions
     gnn-mp benchmark --task maze2d --samplers uniform,goal-bias --problems 20 --seed 0
     gnn-mp benchmark --suite default --out results/     # what `make benchmark` runs
-    gnn-mp bench-env [args]               # env steps/s at tree sizes   (train.bench_env)
-    gnn-mp bench-arm [args]               # arm planning benchmark      (train.bench_arm)
     gnn-mp critical {train,evaluate,generate-data} [args]              (train.critical)
     gnn-mp train critical [args]          # = gnn-mp critical train [args]
+    gnn-mp train sampler --task maze2d --model gnn       # learned tree sampler (train.tree)
     gnn-mp train rl --algo ppo --lib sb3 --task maze2d   # RL sampler          (train.rl)
+
+Speed probes live outside the package: ``python tools/bench_env.py``, ``tools/bench_sampler.py``,
+``tools/bench_arm.py``.
 
 Bad input exits with status 2 and one line on stderr (no traceback).
 """
@@ -26,16 +28,13 @@ PROG = "gnn-mp"
 
 #: Subcommands handled by another module's ``main(argv)``; imported only when used.
 PASSTHROUGH: dict[str, tuple[str, str]] = {
-    "bench-env": ("train.bench_env", "environment steps/s at several tree sizes"),
-    "bench-arm": ("train.bench_arm", "arm planning benchmark"),
-    "bench-sampler": ("train.bench_sampler", "sampler speed: to_pyg conversions/s, act() us per call"),
     "critical": ("train.critical", "critical samples: train / evaluate / generate-data"),
 }
 #: ``gnn-mp train NAME ...`` -> (module, argv prefix).
 TRAIN_TARGETS: dict[str, tuple[str, list[str]]] = {
     "critical": ("train.critical", ["train"]),
-    "sampler": ("train.tree_samplers.cli", []),
-    "rl": ("train.rl", []),   # RL samplers (issue #10): gnn-mp train rl --algo ppo|sac --lib sb3|torchrl
+    "sampler": ("train.tree.cli", []),
+    "rl": ("train.rl.cli", []),
 }
 TRAIN_HELP = {"critical": "critical-sample models on the fixed Halton graph (GNN, GAT, GNN-CVAE, CNN, CVAE)",
               "sampler": "learned tree samplers, the paper's Algorithm 1 (GNN, CVAE, GNN-CVAE)",
@@ -89,14 +88,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------------- commands
 def cmd_samplers() -> int:
-    from agents.samplers import DESCRIPTIONS, available_samplers
+    from agents.registry import available_samplers, descriptions
     from gnn_mp_envs.baselines.ompl_runner import ompl_available
     from gnn_mp_envs.registration import TASK_SPECS
     from train.benchmark.args import OMPL_PREFIX
     names = available_samplers()
+    about = descriptions()
     width = max(len(n) for n in names + ["ompl-rrtconnect"])
     for name in names:
-        print(f"{name.ljust(width)}  {DESCRIPTIONS.get(name, '')}")
+        print(f"{name.ljust(width)}  {about.get(name, '')}")
     planner_tasks: dict[str, list[str]] = {}
     for task, spec in TASK_SPECS.items():
         for planner in spec.ompl_planners:

@@ -1,7 +1,7 @@
 """Checkpoints of every learned model: one file format, loaded with ``weights_only=True`` only.
 
-This package is also where the small shipped weights live (``critical_*.pt`` with a
-``.json`` sidecar each, :data:`SHIPPED_DIR`).
+This package is also where the small shipped weights live (``<sampler>_<task>.pt`` and
+``critical_<model>.pt``, a ``.json`` sidecar each, :data:`SHIPPED_DIR`, :func:`shipped_checkpoint`).
 
 A checkpoint is a ``torch.save`` of a dict holding plain types and tensors only, so that
 ``torch.load(weights_only=True)`` reads it and no pickled code ever runs::
@@ -17,8 +17,8 @@ A checkpoint is a ``torch.save`` of a dict holding plain types and tensors only,
     model, record = load_checkpoint(path, expected_kind="critical/gnn")   # eval mode, CPU
 
 Model kinds are registered with :func:`register_model_kind` by the module that defines the
-model (``agents.models.critical`` registers ``critical/<name>`` on import); the loader
-imports :mod:`agents.models` first, so every built-in kind is known. Anything wrong with a
+model (``agents.critical.models`` registers ``critical/<name>`` on import); the loader
+imports :data:`BUILTIN_KIND_MODULES` first, so every built-in kind is known. Anything wrong with a
 file (missing, empty, truncated, random bytes, not a checkpoint, newer format, unknown kind,
 another kind than expected, weights that do not fit) raises :class:`CheckpointError` with
 one line naming the file. Files are written atomically (a temporary file beside the target,
@@ -51,7 +51,7 @@ RECORD_KEYS = ("format_version", "kind", "ctor_args", "obs_spec", "state_dict", 
 #: Where the shipped weights live (this package's directory).
 SHIPPED_DIR = Path(__file__).resolve().parent
 #: Modules imported before a kind is looked up; each registers its kinds on import.
-BUILTIN_KIND_MODULES = ("agents.models", "agents.models.rl")   # agents.models.rl: RL policies (issue #10)
+BUILTIN_KIND_MODULES = ("agents.tree.models", "agents.tree.scorer", "agents.rl.policies", "agents.critical.models")
 
 _KINDS: dict[str, Callable[..., nn.Module]] = {}
 
@@ -60,16 +60,22 @@ class CheckpointError(ValueError):
     """A checkpoint file that cannot be used; the message is one line naming the file."""
 
 
-def resolve_checkpoint(name: str, task: str | None, checkpoint: str | Path | None, shipped: Path | None,
-                       train_command: str) -> Path:
-    """The file a sampler loads: ``checkpoint`` if given, else its ``shipped`` file for ``task``;
-    a missing one is refused with the command that trains it."""
+def shipped_checkpoint(name: str, task: str | None = None) -> Path:
+    """Where the package ships the weights of ``name`` (a sampler, ``critical_<model>``) for
+    ``task``: ``<name>_<task>.pt`` (``<name>.pt`` without a task), a ``.json`` sidecar beside it."""
+    return SHIPPED_DIR / (f"{name}_{task}.pt" if task else f"{name}.pt")
+
+
+def resolve_checkpoint(name: str, task: str | None, checkpoint: str | Path | None, train_command: str) -> Path:
+    """The file a learned sampler loads: ``checkpoint`` if given, else its shipped file for
+    ``task``; a missing one is refused with the command that trains it."""
     if checkpoint is not None:
         if not Path(checkpoint).is_file():
             raise FileNotFoundError(f"{checkpoint}: no such checkpoint file")
         return Path(checkpoint)
-    if task is None or shipped is None:
+    if task is None:
         raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=PATH")
+    shipped = shipped_checkpoint(name, task)
     if not shipped.is_file():
         raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({shipped.name}); "
                                 f"train them with `{train_command}` and pass checkpoint=")
@@ -336,6 +342,6 @@ def count_parameters(state: Mapping[str, torch.Tensor]) -> int:
     return int(sum(math.prod(v.shape) for v in state.values()))
 
 
-__all__ = ["FORMAT_VERSION", "SHIPPED_DIR", "CheckpointError", "register_model_kind", "model_kinds",
-           "save_checkpoint", "load_checkpoint", "read_checkpoint", "save_training_state",
-           "load_training_state", "plain", "count_parameters", "resolve_checkpoint"]
+__all__ = ["FORMAT_VERSION", "SHIPPED_DIR", "CheckpointError", "count_parameters", "load_checkpoint",
+           "load_training_state", "model_kinds", "plain", "read_checkpoint", "register_model_kind",
+           "resolve_checkpoint", "save_checkpoint", "save_training_state", "shipped_checkpoint"]

@@ -1,21 +1,25 @@
-"""The sampler interface: observation in, next sample out.
+"""The sampler interface and its one base: observation in, next sample out.
 
-Every sampler (uniform, goal-biased, GNN, GAT, CVAE, GNN-CVAE, RL policy) is a
-``tensordict.nn.TensorDictModuleBase``: ``in_keys`` are the observation keys
-(:data:`SAMPLER_IN_KEYS`), ``out_keys`` start with ``"action"``. The one method a sampler
-implements is :meth:`Sampler.propose`, ``Mapping[str, Tensor] -> Tensor`` over any leading
-batch shape, reading only the keys it needs (listed in :attr:`Sampler.reads`):
+Every sampler (uniform, goal-biased, GNN, CVAE, GNN-CVAE, RL policy) is a :class:`Sampler`,
+which is a ``tensordict.nn.TensorDictModuleBase``: ``in_keys`` are the observation keys
+(:data:`SAMPLER_IN_KEYS`), ``out_keys`` are ``["action"]``.
 
-* ``sampler(td)`` (``forward``) writes ``td["action"]``, so a sampler drops into TorchRL
-  (``env.rollout(n, sampler)``, collectors) as it is;
 * ``sampler.act(obs)`` serves plain Gymnasium loops: one numpy observation in, a float32
-  numpy action out, converting only the keys in :attr:`Sampler.reads`;
-* ``sampler.reset(seed)`` reseeds the sampler's own ``torch.Generator`` (the benchmark
-  calls it before every problem); all randomness is drawn from it.
+  numpy action out;
+* ``sampler(td)`` (``forward``) writes ``td["action"]`` for observations with any leading
+  batch shape (:meth:`Sampler.propose`), so a sampler drops into TorchRL
+  (``env.rollout(n, sampler)``, collectors) as it is;
+* ``sampler.reset(seed)`` reseeds the sampler's one random stream, ``self.rng`` (a numpy
+  ``Generator``; the benchmark calls it before every problem). All randomness comes from it.
 
-Learned samplers derive from :class:`LearnedSampler` (encoder -> ``"embed"`` -> head ->
-``"loc"``/``"scale"`` -> bounded distribution, mixed with uniform samples), which also
-writes ``"embed"``, ``"loc"``, ``"scale"`` and ``"sample_log_prob"``.
+The learned samplers derive from :class:`ModelSampler`, the one mixture of sample sources::
+
+    with probability uniform_mix       -> uniform over the bounds
+    with probability goal_bias         -> the active tree's target (:func:`active_target`)
+    otherwise                          -> model_sample(obs), wrapped (periodic coordinates) and clipped
+
+A uniform share never reaches zero unless asked (``uniform_mix=0``), so the planner stays
+probabilistically complete. A new learned sampler implements :meth:`ModelSampler.model_sample`.
 """
 
 from __future__ import annotations
@@ -33,69 +37,134 @@ SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
 
 
-class Sampler(TensorDictModuleBase):
-    """Base class: holds the sampling bounds and a seeded ``torch.Generator``.
+def active_target(obs: Mapping) -> np.ndarray:
+    """The active tree's target of one observation: the start for BiRRT's goal tree (tree 1),
+    the goal otherwise (RRT, BiRRT's start tree). The one place this rule is written."""
+    return obs["start"] if int(np.asarray(obs["active_tree"]).reshape(-1)[0]) == 1 else obs["goal"]
 
-    Subclasses implement :meth:`propose` and set :attr:`reads` to the observation keys it
-    reads. Randomness must come from ``self.generator`` (``self.uniform(shape)``,
-    ``torch.rand(..., generator=self.generator)``) so that runs are reproducible.
+
+def wrap_periodic(x: np.ndarray, periodic: np.ndarray) -> np.ndarray:
+    """``x`` with the periodic coordinates (a bool mask) wrapped into ``[-pi, pi)``."""
+    if not periodic.any():
+        return x
+    return np.where(periodic, (x + np.pi) % (2 * np.pi) - np.pi, x)
+
+
+class Sampler(TensorDictModuleBase):
+    """Base class: the sampling bounds and one seeded numpy stream, ``self.rng``.
+
+    Subclasses implement :meth:`act` (one observation) and may override :meth:`propose`
+    (a batch; the default calls ``act`` per observation in batch order) and
+    :meth:`make_stream` (the generator ``reset`` builds).
     """
 
-    #: Observation keys :meth:`propose` reads; :meth:`act` converts only these.
+    #: Observation keys the sampler reads.
     reads: tuple[str, ...] = SAMPLER_IN_KEYS
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
         super().__init__()
         self.in_keys = list(SAMPLER_IN_KEYS)
         self.out_keys = list(SAMPLER_OUT_KEYS)
-        low = torch.as_tensor(np.asarray(low, dtype=np.float32))
-        high = torch.as_tensor(np.asarray(high, dtype=np.float32))
-        if low.shape != high.shape or low.dim() != 1 or not torch.all(high > low):
-            raise ValueError(f"sampler bounds must be 1-D with high > low, got {low} and {high}")
-        self.register_buffer("low", low)
-        self.register_buffer("high", high)
-        self.register_buffer("span", high - low, persistent=False)
-        self.generator = torch.Generator()
+        low64, high64 = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+        if low64.shape != high64.shape or low64.ndim != 1 or not np.all(high64 > low64):
+            raise ValueError(f"sampler bounds must be 1-D with high > low, got {low64} and {high64}")
+        self.low, self.high = low64, high64
+        self.low32, self.high32 = low64.astype(np.float32), high64.astype(np.float32)
+        self.span32 = self.high32 - self.low32
         self.reset(seed)
 
     @property
     def state_dim(self) -> int:
         return int(self.low.shape[0])
 
-    def reset(self, seed: int | None = None) -> None:
-        """Reseed the sampler's random stream (None draws a fresh seed from the OS)."""
-        if seed is None:
-            self.generator.seed()
-        else:
-            self.generator.manual_seed(int(seed))
+    def make_stream(self, seed: int | None) -> np.random.Generator:
+        """The random stream ``reset(seed)`` starts (None: fresh entropy from the OS)."""
+        return np.random.default_rng(None if seed is None else int(seed))
 
-    def uniform(self, batch_shape: torch.Size | tuple = ()) -> torch.Tensor:
-        """``(*batch_shape, d)`` uniform samples in the bounds: one ``torch.rand`` call."""
-        u = torch.rand(*batch_shape, self.state_dim, generator=self.generator)
-        return self.low + u * self.span
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed the sampler's random stream and forget per-episode state."""
+        self.rng = self.make_stream(seed)
+
+    def check_observation(self, obs: Mapping) -> None:
+        """Refuse an observation of another state dimension (a sampler built for another task)."""
+        d = np.shape(obs["start"])[-1]
+        if d != self.state_dim:
+            raise ValueError(f"this sampler samples {self.state_dim}-D states (bounds {self.low.tolist()}.."
+                             f"{self.high.tolist()}); the observation has {d}-D states (another task?)")
 
     # ------------------------------------------------------------------ the core
-    def propose(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """Next samples ``(*batch, d)`` for observations with leading batch shape ``batch``."""
+    def act(self, obs: Mapping) -> np.ndarray:
+        """Next sample ``(d,)`` float32 for one (unbatched) numpy observation."""
         raise NotImplementedError
+
+    def propose(self, obs: Mapping) -> torch.Tensor:
+        """Next samples ``(*batch, d)`` for observations with leading batch shape ``batch``:
+        one :meth:`act` per observation, in batch order, from the same stream."""
+        arrays = {k: np.asarray(v.detach().cpu() if isinstance(v, torch.Tensor) else v) for k, v in obs.items()
+                  if k in SAMPLER_IN_KEYS}
+        shape = arrays["start"].shape[:-1]
+        flat = {k: v.reshape(-1, *v.shape[len(shape):]) for k, v in arrays.items()}
+        out = [self.act_stateless({k: v[i] for k, v in flat.items()}) for i in range(int(np.prod(shape)))]
+        return torch.as_tensor(np.stack(out).reshape(*shape, self.state_dim) if out
+                               else np.zeros((*shape, self.state_dim), np.float32))
+
+    def act_stateless(self, obs: Mapping) -> np.ndarray:
+        """:meth:`act` on an observation unrelated to the previous one (the batched path; samplers
+        with per-episode caches clear them first)."""
+        return self.act(obs)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """TensorDict in (observation keys), the same TensorDict out with ``"action"`` set."""
         tensordict.set("action", self.propose(tensordict))
         return tensordict
 
-    # ------------------------------------------------------------------ adapters
-    def as_module(self) -> TensorDictModuleBase:
-        """The sampler as a TorchRL policy (it already is one; kept for older callers)."""
-        return self
+
+class ModelSampler(Sampler):
+    """The one uniform / goal / model mixture (see the module docstring).
+
+    Args:
+        low, high, seed: as for every :class:`Sampler`.
+        uniform_mix: probability of a uniform sample.
+        goal_bias: probability of the active tree's target.
+        periodic: ``(d,)`` bool, coordinates wrapped into ``[-pi, pi)`` before clipping.
+
+    Per call, ``act`` draws one ``rng.random()`` (the choice), then either ``rng.uniform(low,
+    high)`` or whatever :meth:`model_sample` draws from ``self.rng``.
+    """
+
+    #: Sampling settings a checkpoint's ``meta["sampler"]`` may carry (the constructor's keywords).
+    settings: tuple[str, ...] = ("uniform_mix", "goal_bias")
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, uniform_mix: float = 0.25,
+                 goal_bias: float = 0.0, periodic: np.ndarray | None = None) -> None:
+        if not (0.0 <= uniform_mix <= 1.0 and 0.0 <= goal_bias <= 1.0 and uniform_mix + goal_bias <= 1.0):
+            raise ValueError(f"uniform_mix and goal_bias must be in [0, 1] with a sum <= 1, got {uniform_mix}, "
+                             f"{goal_bias}")
+        self.uniform_mix, self.goal_bias = float(uniform_mix), float(goal_bias)
+        super().__init__(low, high, seed)
+        self.periodic = np.zeros(self.state_dim, dtype=bool) if periodic is None else np.asarray(periodic, dtype=bool)
+        if self.periodic.shape != (self.state_dim,):
+            raise ValueError(f"periodic must have {self.state_dim} entries, got {self.periodic.shape}")
 
     def act(self, obs: Mapping) -> np.ndarray:
-        """Next sample for one (unbatched) numpy observation, for plain Gymnasium loops."""
-        with torch.no_grad():
-            out = self.propose({k: torch.as_tensor(obs[k]) for k in self.reads})
-        return np.asarray(out.cpu().numpy(), dtype=np.float32)
+        if np.shape(obs["start"])[-1] != self.state_dim:
+            self.check_observation(obs)
+        u = self.rng.random()
+        if u < self.uniform_mix:
+            return self.rng.uniform(self.low, self.high).astype(np.float32)
+        if u < self.uniform_mix + self.goal_bias:
+            return np.asarray(active_target(obs), dtype=np.float32).copy()   # a copy: obs may be live views
+        return self.finish(self.model_sample(obs))
+
+    def finish(self, x: np.ndarray) -> np.ndarray:
+        """A model's state as an action: periodic coordinates wrapped, clipped to the bounds, float32."""
+        return np.clip(wrap_periodic(np.asarray(x, np.float64), self.periodic), self.low, self.high).astype(np.float32)
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        """The model's next state ``(d,)`` for one observation (random draws from ``self.rng``)."""
+        raise NotImplementedError
 
 
-def batch_shape_of(start: torch.Tensor | np.ndarray) -> torch.Size:
+def batch_shape_of(start: torch.Tensor | np.ndarray) -> tuple[int, ...]:
     """Leading batch dimensions of an observation, read off its ``start`` entry."""
-    return torch.Size(start.shape[:-1])
+    return tuple(start.shape[:-1])

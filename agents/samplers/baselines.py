@@ -1,8 +1,11 @@
 """Classical samplers: uniform and goal-biased.
 
 Their random streams are part of the benchmark's contract (same seed, same samples, same
-counters): uniform draws one ``torch.rand(*batch, d)`` per call; goal-bias draws that, then
-one ``torch.rand(*batch, 1)``. ``tests/test_samplers.py`` pins both.
+counters since the first benchmark): the stream is the Mersenne Twister that
+``torch.manual_seed(seed)`` starts, read as ``torch.rand`` reads it (a 32-bit draw's low 24
+bits times ``2**-24``, float32), but drawn in numpy: uniform takes ``d`` draws per call
+(``low + u * (high - low)`` in float32), goal-bias takes those, then one for the choice.
+``tests/test_samplers.py`` pins both against ``torch.rand`` itself.
 """
 
 from __future__ import annotations
@@ -12,23 +15,57 @@ from typing import Mapping
 import numpy as np
 import torch
 
-from agents.samplers.base import Sampler, batch_shape_of
+from agents.samplers.base import Sampler, active_target
+
+_MASK24 = np.uint64(0xFFFFFF)
+_UNIT24 = np.float32(2.0 ** -24)
 
 
-class UniformSampler(Sampler):
+def torch_compatible_stream(seed: int | None) -> np.random.Generator:
+    """A numpy Generator on the MT19937 state ``torch.manual_seed(seed)`` gives torch's CPU
+    generator (the classic ``init_genrand`` of the seed's low 32 bits)."""
+    legacy = np.random.RandomState(None if seed is None else int(seed) & 0xFFFFFFFF)
+    _, key, pos, *_ = legacy.get_state(legacy=True)
+    bits = np.random.MT19937()
+    bits.state = {"bit_generator": "MT19937", "state": {"key": key, "pos": pos}}
+    return np.random.Generator(bits)
+
+
+class _TorchCompatible(Sampler):
+    """Draws float32 uniforms exactly as ``torch.rand`` does from the same seed."""
+
+    def make_stream(self, seed: int | None) -> np.random.Generator:
+        return torch_compatible_stream(seed)
+
+    def unit(self, n: int) -> np.ndarray:
+        """``n`` float32 uniforms in ``[0, 1)``: ``torch.rand(n)``'s values."""
+        return (self.rng.bit_generator.random_raw(n) & _MASK24).astype(np.float32) * _UNIT24
+
+    def uniform(self, batch_shape: tuple = ()) -> np.ndarray:
+        """``(*batch_shape, d)`` float32 uniform states in the bounds."""
+        n = int(np.prod(batch_shape, dtype=np.int64)) * self.state_dim
+        return self.low32 + self.unit(n).reshape(*batch_shape, self.state_dim) * self.span32
+
+    def batch_shape(self, obs: Mapping) -> tuple:
+        shape = np.shape(obs["start"])
+        if shape[-1] != self.state_dim:
+            self.check_observation(obs)
+        return tuple(shape[:-1])
+
+
+class UniformSampler(_TorchCompatible):
     """Uniform over the sampling bounds: the RRT/BiRRT default."""
 
     reads = ("start",)
 
-    def propose(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        return self.uniform(batch_shape_of(obs["start"]))
-
     def act(self, obs: Mapping) -> np.ndarray:
-        # No tensor conversion at all: only the batch shape of ``start`` is needed.
-        return self.uniform(np.shape(obs["start"])[:-1]).numpy()
+        return self.uniform(self.batch_shape(obs))
+
+    def propose(self, obs: Mapping) -> torch.Tensor:
+        return torch.as_tensor(self.uniform(self.batch_shape(obs)))
 
 
-class GoalBiasSampler(Sampler):
+class GoalBiasSampler(_TorchCompatible):
     """Uniform, but with probability ``goal_bias`` the target of the active tree.
 
     For RRT (and BiRRT's start tree) the target is the goal; for BiRRT's goal tree it is
@@ -36,39 +73,34 @@ class GoalBiasSampler(Sampler):
     """
 
     reads = ("start", "goal", "active_tree")
+    settings = ("goal_bias",)
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None,
                  goal_bias: float = 0.05) -> None:
         if not 0.0 <= goal_bias <= 1.0:
             raise ValueError(f"goal_bias must be in [0, 1], got {goal_bias}")
         super().__init__(low, high, seed)
-        self.goal_bias = goal_bias
-
-    @property
-    def goal_bias(self) -> float:
-        return self._goal_bias
-
-    @goal_bias.setter
-    def goal_bias(self, value: float) -> None:
-        self._goal_bias = float(value)
-        # torch compares a float32 tensor with a Python float in float32; act() compares
-        # Python floats, so it uses the float32-rounded rate to pick exactly the same samples.
-        self._goal_bias32 = float(np.float32(value))
-
-    def propose(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        start = obs["start"]
-        shape = batch_shape_of(start)
-        sample = self.uniform(shape)
-        target = torch.where(obs["active_tree"].reshape(*shape, 1) == 1, start, obs["goal"])
-        pick = torch.rand(*shape, 1, generator=self.generator) < self.goal_bias
-        return torch.where(pick, target.to(sample.dtype), sample)
+        # The choice compares float32 draws with the float32-rounded rate, as torch did.
+        self.goal_bias = float(goal_bias)
+        self._goal_bias32 = np.float32(goal_bias)
 
     def act(self, obs: Mapping) -> np.ndarray:
-        if np.ndim(obs["start"]) != 1:
-            return super().act(obs)
-        # Unbatched fast path: the same two draws as propose(), the choice made in Python.
+        shape = self.batch_shape(obs)
+        if shape:
+            return self.propose(obs).numpy()
         sample = self.uniform(())
-        if torch.rand(1, generator=self.generator).item() < self._goal_bias32:
-            target = obs["start"] if int(np.asarray(obs["active_tree"]).reshape(-1)[0]) == 1 else obs["goal"]
-            return np.array(target, dtype=np.float32)   # a copy: obs may be live views
-        return sample.numpy()
+        if self.unit(1)[0] < self._goal_bias32:
+            return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
+        return sample
+
+    def propose(self, obs: Mapping) -> torch.Tensor:
+        """All uniform states of the batch first, then all the choices (one ``unit`` call each)."""
+        shape = self.batch_shape(obs)
+        sample = self.uniform(shape)
+        start, goal = (np.asarray(obs[k].cpu() if isinstance(obs[k], torch.Tensor) else obs[k], np.float32)
+                       for k in ("start", "goal"))
+        active = np.asarray(obs["active_tree"].cpu() if isinstance(obs["active_tree"], torch.Tensor)
+                            else obs["active_tree"]).reshape(*shape, 1)
+        target = np.where(active == 1, start, goal)
+        pick = self.unit(int(np.prod(shape, dtype=np.int64))).reshape(*shape, 1) < self._goal_bias32
+        return torch.as_tensor(np.where(pick, target, sample).astype(np.float32))

@@ -19,7 +19,7 @@ which writes its results to ``OUT``, flushes, and leaves with ``os._exit(0)``.
 
 Kinodynamic tasks use OMPL's control planners (``oc.RRT`` as ``"rrt"``, ``oc.KPIECE1`` as
 ``"kpiece"``) through :data:`SETUP_BUILDERS` (keyed by ``problem.geometric``) and a per-task
-entry in :data:`CONTROL_BUILDERS` (the pendulum; see :func:`_pendulum_setup`): the state
+builder named by its task's ``TaskSpec.ompl_control_setup`` (the pendulum: :func:`pendulum_setup`): the state
 space, a propagator integrating the task's own dynamics, ``problem.check_state`` as the
 validity checker (counted) and a goal satisfied exactly when ``problem.in_goal`` holds.
 A planner that does not fit the problem (``rrtconnect`` on the pendulum, ``kpiece`` on a
@@ -30,6 +30,7 @@ the settings that make edges comparable to ours: ``docs/ompl.md``.
 from __future__ import annotations
 
 import argparse
+import importlib
 import importlib.util
 import json
 import os
@@ -211,7 +212,7 @@ PENDULUM_CELL_SIZES = (0.2, 0.5)
 GOAL_THRESHOLD, GOAL_MIN_OUTSIDE = 1e-9, 1e-6
 
 
-def _pendulum_setup(problem: Any, planner: str) -> _Setup:
+def pendulum_setup(problem: Any, planner: str) -> _Setup:
     """Control-based SimpleSetup for :class:`~gnn_mp_envs.tasks.pendulum.PendulumProblem`.
 
     * State space SO(2) x R (weights 1 and ``VELOCITY_WEIGHT``, as our distance), omega
@@ -379,15 +380,16 @@ def _control_path_valid(problem: Any, states: np.ndarray, controls: np.ndarray, 
 
 
 def _control_setup(problem: Any, planner: str) -> _Setup:
-    builder = CONTROL_BUILDERS.get(problem.task)
-    if builder is None:
-        raise ValueError(f"no control-based OMPL setup for the kinodynamic {problem.task!r} problem yet "
-                         f"(known: {sorted(CONTROL_BUILDERS)}; add one to CONTROL_BUILDERS)")
-    return builder(problem, planner)
+    """The control-based setup its task's ``TaskSpec.ompl_control_setup`` names."""
+    from gnn_mp_envs.registration import task_spec
+    target = task_spec(problem.task).ompl_control_setup
+    if target is None:
+        raise ValueError(f"no control-based OMPL setup for the kinodynamic {problem.task!r} problem "
+                         "(set TaskSpec.ompl_control_setup to 'module:function')")
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)(problem, planner)
 
 
-#: problem.task -> control-based setup builder (kinodynamic tasks).
-CONTROL_BUILDERS: dict[str, Callable[[Any, str], _Setup]] = {"pendulum": _pendulum_setup}
 #: problem.geometric -> setup builder.
 SETUP_BUILDERS: dict[bool, Callable[[Any, str], _Setup]] = {True: _geometric_setup, False: _control_setup}
 

@@ -225,14 +225,31 @@ class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         return action
 
 
+def policy_action_to_state(action: np.ndarray, frame: str, low: np.ndarray, high: np.ndarray,
+                           target: np.ndarray | None = None) -> np.ndarray:
+    """A policy action in ``[-1, 1]^d`` -> a state (float64, before wrapping and clipping): the
+    one action map of training (:func:`make_rl_env`) and of the RL sampler.
+
+    ``frame="absolute"``: the box rescaled (``RescaleAction``'s map); ``frame="target"``: an
+    offset from ``target`` (the active tree's) in units of the box span, ``target + a * (high - low)``.
+    """
+    a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
+    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    if frame == "absolute":
+        return low + (high - low) * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
+    if frame == "target":
+        return np.asarray(target, np.float64) + a * (high - low)
+    raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {frame!r}")
+
+
 class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """Actions in ``[-1, 1]^d`` as offsets from the active tree's target, in units of the box span.
 
-    ``state = clip(normalize(target + a * (high - low)))``, ``target`` the goal (RRT, BiRRT's
-    start tree) or the start (BiRRT's goal tree), ``normalize`` the problem's (wraps the
-    pendulum's angle). ``a = 0`` samples the target itself, so an untrained policy
-    (``loc = 0``) starts as a Gaussian goal bias and RL learns the spread and where else to
-    sample; ``|a| = 1`` reaches the whole box from any target.
+    ``state = clip(normalize(target + a * (high - low)))`` (:func:`policy_action_to_state`),
+    ``target`` the goal (RRT, BiRRT's start tree) or the start (BiRRT's goal tree), ``normalize``
+    the problem's (wraps the pendulum's angle). ``a = 0`` samples the target itself, so an
+    untrained policy (``loc = 0``) starts as a Gaussian goal bias and RL learns the spread and
+    where else to sample; ``|a| = 1`` reaches the whole box from any target.
     """
 
     def __init__(self, env: gym.Env) -> None:
@@ -247,22 +264,13 @@ class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         base = self.env.unwrapped
         problem = base.problem
         target = problem.start if int(base.planner.active_tree) == 1 else problem.goal
-        a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
-        x = problem.normalize(target + a * (self._high - self._low))
+        x = problem.normalize(policy_action_to_state(action, "target", self._low, self._high, target))
         return np.clip(x, self._low, self._high).astype(np.float32)
-
-
-def periodic_dims(problem: Any, low: np.ndarray, high: np.ndarray) -> list[bool]:
-    """Which state dimensions ``problem.normalize`` wraps with period ``high - low``."""
-    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
-    probe = low + 1.25 * (high - low)
-    return (~np.isclose(np.asarray(problem.normalize(probe), np.float64), probe)).tolist()
 
 
 def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """A policy action in ``[-1, 1]^d`` -> a state in ``[low, high]`` (``RescaleAction``'s map)."""
-    a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
-    return (low + (high - low) * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)).astype(np.float32)
+    return policy_action_to_state(action, "absolute", low, high).astype(np.float32)
 
 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
@@ -288,14 +296,7 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     """
     from gnn_mp_envs.registration import task_spec
 
-    spec = task_spec(task)
-    env_id = spec.env_id
-    if planner is not None:
-        ids = [i for i, v in spec.envs.items() if v.get("planner") == planner]
-        if not ids:
-            raise ValueError(f"task {task!r} has no {planner!r} planner environment; "
-                             f"known: {', '.join(sorted(v.get('planner', '?') for v in spec.envs.values()))}")
-        env_id = ids[0]
+    env_id = task_spec(task).env_id_for(planner)
     env_kwargs.setdefault("copy_observations", view_nodes is None)
     if action_frame not in ACTION_FRAMES:
         raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
@@ -318,5 +319,5 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
 
 
 __all__ = ["ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward", "ScaleReward",
-           "TargetRelativeAction", "TreeViewWrapper", "UniformMixAction", "make_rl_env", "periodic_dims",
+           "TargetRelativeAction", "TreeViewWrapper", "UniformMixAction", "make_rl_env", "policy_action_to_state",
            "scale_action", "tree_view", "view_rows", "view_space"]

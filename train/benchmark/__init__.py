@@ -25,7 +25,6 @@ from train.benchmark.args import (
                                   is_ompl,
                                   ompl_available,
                                   ompl_rows_for,
-                                  problem_seed,
                                   validate_args,
 )
 from train.benchmark.ompl_rows import _ompl_record, run_ompl_rows, write_ompl_logs
@@ -38,6 +37,6 @@ from train.benchmark.tables import format_table
 
 __all__ = ["METRICS", "OMPL_PREFIX", "SUITES", "BenchmarkArgs", "BenchmarkError", "BenchmarkIncomplete", "SuiteEntry", "_ompl_record",
            "benchmark", "build_report", "check_ompl", "format_table", "is_ompl", "ompl_available",
-           "ompl_rows_for", "plot_report", "problem_seed", "render_growth", "run_benchmark", "run_episode",
+           "ompl_rows_for", "plot_report", "render_growth", "run_benchmark", "run_episode",
            "run_ompl_rows", "run_suite", "sampler_summary", "summarize", "validate_args", "write_ompl_logs",
            "write_outputs"]

@@ -8,14 +8,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from gnn_mp_envs.evaluation import MAX_SEED
 from train.args import arg, name_list, non_negative_int, positive_float, positive_int
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
-#: Seeds are 32-bit (OMPL's RNG takes one; numpy's SeedSequence would take more).
-MAX_SEED = 2**32 - 1
 OMPL_INSTALL_HINT = "OMPL is not installed; install the optional extra with `pip install -e .[ompl]`"
 
 
@@ -78,23 +75,13 @@ def task_spec_for(task: str):
 
 
 def env_kwargs_for(args: BenchmarkArgs) -> dict[str, Any]:
-    """Keyword arguments of ``gym.make`` for the benchmark env (held-out split).
-
-    Observations are live views (``copy_observations=False``): a run reads each one before
-    the next step, and a per-step copy of a 20,000-row padded observation would otherwise
-    dominate the measured wall time.
-    """
-    kwargs: dict[str, Any] = {"split": args.split, "copy_observations": False}
+    """Keyword arguments of :func:`gnn_mp_envs.evaluation.evaluation_env` for the benchmark env."""
+    kwargs: dict[str, Any] = {"split": args.split}
     if args.max_nodes is not None:
         kwargs["max_nodes"] = int(args.max_nodes)
     if args.scene is not None:
-        kwargs["task_kwargs"] = {"scene": args.scene}
+        kwargs["scene"] = args.scene
     return kwargs
-
-
-def problem_seed(seed: int, index: int) -> int:
-    """Sampler seed of problem ``index``: the same for every sampler, distinct across problems."""
-    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
 
 
 def is_ompl(name: str) -> bool:

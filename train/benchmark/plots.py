@@ -71,13 +71,13 @@ def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.
 def render_growth(args: BenchmarkArgs, directory: Path, index: int = 0) -> list[Path]:
     """Tree-growth strips of problem ``index`` for every (non-OMPL) sampler; returns the files written."""
     spec = task_spec_for(args.task)
-    env_id, env_kwargs = spec.env_id, env_kwargs_for(args)
+    env_kwargs = env_kwargs_for(args)
     max_nodes = args.max_nodes or spec.max_nodes
     written = []
     for name in args.samplers:
         if is_ompl(name):
             continue
-        record = run_episode(args.task, env_id, env_kwargs, name, index, args.seed,
+        record = run_episode(args.task, env_kwargs, name, index, args.seed,
                              checkpoint_of(args, name), snapshot_schedule(max_nodes))
         outcome = "solved" if record["success"] else "not solved"
         path = directory / f"{args.task}_{name}_problem{index}.png"

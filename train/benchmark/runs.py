@@ -20,62 +20,52 @@ from train.benchmark.args import (
     env_kwargs_for,
     import_modules,
     is_ompl,
-    problem_seed,
-    task_spec_for,
     validate_args,
 )
 
+#: Per-process caches of the worker state: one env per (id, kwargs), one sampler per (name, task,
+#: checkpoint); building the arm's simulator or a learned sampler is not free.
 _ENVS: dict[str, Any] = {}
 _SAMPLERS: dict[tuple, Any] = {}
 
 
-def cached_env(env_id: str, env_kwargs: dict[str, Any], render: bool = False):
-    """One env per (id, kwargs) and process: building the arm's simulator is not free."""
-    import gymnasium as gym
-
-    import gnn_mp_envs  # noqa: F401  (registers the ids)
-    key = json.dumps([env_id, env_kwargs, render], sort_keys=True)
+def cached_env(task: str, env_kwargs: dict[str, Any], render: bool = False):
+    """The benchmark env of ``task`` (:func:`gnn_mp_envs.evaluation.evaluation_env`), one per process and kwargs."""
+    from gnn_mp_envs.evaluation import evaluation_env
+    key = json.dumps([task, env_kwargs, render], sort_keys=True)
     if key not in _ENVS:
-        # Live observation views are shared between steps on purpose: Gymnasium's passive
-        # checker would warn about exactly that, once per env.
-        _ENVS[key] = gym.make(env_id, render_mode="rgb_array" if render else None,
-                              disable_env_checker=not env_kwargs.get("copy_observations", True), **env_kwargs)
+        _ENVS[key] = evaluation_env(task, render=render, **env_kwargs)
     return _ENVS[key]
 
 
-def cached_sampler(name: str, task: str, low: np.ndarray, high: np.ndarray, checkpoint: str | None = None):
-    """One sampler per (name, task, bounds, checkpoint) and process; reseeded every episode."""
-    from agents.samplers import load_sampler
-    key = (name, task, tuple(low.tolist()), tuple(high.tolist()), checkpoint)
+def cached_sampler(name: str, task: str, checkpoint: str | None = None):
+    """One sampler per (name, task, checkpoint) and process; reseeded every episode."""
+    from agents.registry import load_sampler
+    key = (name, task, checkpoint)
     if key not in _SAMPLERS:
-        extra = {"checkpoint": checkpoint} if checkpoint is not None else {}
-        _SAMPLERS[key] = load_sampler(name, low, high, task=task, seed=0, **extra)
+        _SAMPLERS[key] = load_sampler(name, task=task, seed=0, checkpoint=checkpoint)
     return _SAMPLERS[key]
 
 
-def run_episode(task: str, env_id: str, env_kwargs: dict[str, Any], sampler_name: str, index: int,
-                seed: int, checkpoint: str | None = None,
-                snapshot_iterations: Iterable[int] = ()) -> dict[str, Any]:
+def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index: int, seed: int,
+                checkpoint: str | None = None, snapshot_iterations: Iterable[int] = ()) -> dict[str, Any]:
     """Plan problem ``index`` with one sampler; the record of counters (and optional snapshots)."""
-    from gnn_mp_envs.rollout import rollout
+    from gnn_mp_envs.evaluation import plan_problem, problem_seed
     snapshots_at = set(snapshot_iterations)
-    env = cached_env(env_id, env_kwargs, render=bool(snapshots_at))
-    sampler = cached_sampler(sampler_name, task, env.action_space.low, env.action_space.high, checkpoint)
-    sample_seed = problem_seed(seed, index)
+    env = cached_env(task, env_kwargs, render=bool(snapshots_at))
+    sampler = cached_sampler(sampler_name, task, checkpoint)
     snapshots: list[tuple[int, int, np.ndarray]] = []
 
     def snapshot(_obs: Any, info: dict[str, Any], done: bool) -> None:
         if info["iterations"] in snapshots_at and not done:
             snapshots.append((info["iterations"], info["nodes_expanded"], env.render()))
 
-    sampler.reset(sample_seed)
     try:
-        run = rollout(env, sampler.act, seed=sample_seed, options={"index": index},
-                      on_step=snapshot if snapshots_at else None)
+        run = plan_problem(env, sampler, index, seed, on_step=snapshot if snapshots_at else None)
     except (ValueError, TypeError, RuntimeError, IndexError) as exc:   # e.g. a NaN action
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {message}") from None
-    record = {"sampler": sampler_name, "problem": int(index), "seed": sample_seed, **run.counters()}
+    record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters()}
     record.pop("env_time_s")   # the JSON schema (docs/results.md) reports planning wall time only
     if snapshots_at:
         snapshots.append((run.iterations, run.nodes_expanded, env.render()))
@@ -102,7 +92,7 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
-def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
+def _warm_up_worker(task: str, env_kwargs: dict[str, Any],
                     samplers: list[tuple[str, str | None]], modules: list[str], die_with_parent: bool = True) -> None:
     """Worker initializer: die with the parent, import plugin modules, build the env and
     samplers and run one inference each, so that lazy imports and first-call costs stay out
@@ -110,10 +100,10 @@ def _warm_up_worker(task: str, env_id: str, env_kwargs: dict[str, Any],
     if die_with_parent:
         _die_with_parent()
     import_modules(modules)
-    env = cached_env(env_id, env_kwargs)
+    env = cached_env(task, env_kwargs)
     obs, _ = env.reset(seed=0, options={"index": 0})
     for name, checkpoint in samplers:
-        cached_sampler(name, task, env.action_space.low, env.action_space.high, checkpoint).act(obs)
+        cached_sampler(name, task, checkpoint).act(obs)
 
 
 def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
@@ -121,20 +111,19 @@ def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
     return None if path is None else str(path)
 
 
-def check_env_and_samplers(task: str, env_id: str, env_kwargs: dict[str, Any],
-                           samplers: list[tuple[str, str | None]]) -> None:
+def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list[tuple[str, str | None]]) -> None:
     """Build the env and every sampler once up front so bad input fails before the progress bar;
     one inference each warms up lazy imports (as the workers' initializer does)."""
     try:
-        env = cached_env(env_id, env_kwargs)
+        env = cached_env(task, env_kwargs)
     except ImportError as exc:
         raise BenchmarkError(f"task {task!r} is not available: {exc}") from None
     except (ValueError, TypeError) as exc:
-        raise BenchmarkError(f"cannot build {env_id} with {env_kwargs}: {exc}") from None
+        raise BenchmarkError(f"cannot build the {task} environment with {env_kwargs}: {exc}") from None
     obs, _ = env.reset(seed=0, options={"index": 0})
     for name, checkpoint in samplers:
         try:
-            cached_sampler(name, task, env.action_space.low, env.action_space.high, checkpoint).act(obs)
+            cached_sampler(name, task, checkpoint).act(obs)
         except FileNotFoundError as exc:
             raise BenchmarkError(f"sampler {name!r}: missing checkpoint ({exc})") from None
         except (ValueError, OSError, RuntimeError, KeyError) as exc:
@@ -149,10 +138,10 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     from train.benchmark.stats import build_report
 
     validate_args(args)
-    env_id, env_kwargs = task_spec_for(args.task).env_id, env_kwargs_for(args)
+    env_kwargs = env_kwargs_for(args)
     indices = list(range(args.problems))
     learned = [(n, checkpoint_of(args, n)) for n in args.samplers if not is_ompl(n)]
-    check_env_and_samplers(args.task, env_id, env_kwargs, learned)
+    check_env_and_samplers(args.task, env_kwargs, learned)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in args.samplers}
 
     for name in args.samplers:   # first: an unsupported OMPL combination fails before the long part
@@ -161,7 +150,7 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
                 print(f"{name}: {len(indices)} problems through the OMPL runner ...", file=sys.stderr)
             runs[name] = run_ompl_rows(args, name, indices)
 
-    jobs = [(args.task, env_id, env_kwargs, name, i, args.seed, checkpoint)
+    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint)
             for name, checkpoint in learned for i in indices]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
 
@@ -172,12 +161,12 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     reason = None
     try:
         if args.ray is not None:
-            _run_on_ray(args, env_id, env_kwargs, learned, jobs, finished)
+            _run_on_ray(args, env_kwargs, learned, jobs, finished)
         elif args.workers == 1:
             for job in jobs:
                 finished(_run_episode_job(job))
         else:
-            _run_in_workers(args, env_id, env_kwargs, learned, jobs, finished)
+            _run_in_workers(args, env_kwargs, learned, jobs, finished)
     except KeyboardInterrupt:
         reason = "interrupted"
     except BrokenProcessPool:
@@ -210,14 +199,14 @@ class BenchmarkIncomplete(BenchmarkError):
 class _EpisodeActor:
     """A Ray actor: one worker process with its env and samplers, warmed up as the local workers."""
 
-    def __init__(self, task, env_id, env_kwargs, samplers, modules) -> None:
-        _warm_up_worker(task, env_id, env_kwargs, samplers, modules, die_with_parent=False)
+    def __init__(self, task, env_kwargs, samplers, modules) -> None:
+        _warm_up_worker(task, env_kwargs, samplers, modules, die_with_parent=False)
 
     def run(self, job: tuple) -> dict[str, Any]:
         return _run_episode_job(job)
 
 
-def _run_on_ray(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
+def _run_on_ray(args: BenchmarkArgs, env_kwargs: dict[str, Any],
                 learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
     """Run ``jobs`` on ``args.workers`` Ray actors, locally (``--ray``) or on a cluster
     (``--ray auto`` / ``ray://HOST:10001``). Results equal a local run for the same seed."""
@@ -236,7 +225,7 @@ def _run_on_ray(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
             raise BenchmarkError(f"cannot reach Ray at {args.ray}: {str(exc).splitlines()[0]}") from None
     try:
         actor = ray.remote(num_cpus=1)(_EpisodeActor)
-        pool = ActorPool([actor.remote(args.task, env_id, env_kwargs, learned, args.modules)
+        pool = ActorPool([actor.remote(args.task, env_kwargs, learned, args.modules)
                           for _ in range(args.workers)])
         for record in pool.map_unordered(lambda a, job: a.run.remote(job), jobs):
             finished(record)
@@ -250,13 +239,13 @@ def _run_on_ray(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
             ray.shutdown()
 
 
-def _run_in_workers(args: BenchmarkArgs, env_id: str, env_kwargs: dict[str, Any],
+def _run_in_workers(args: BenchmarkArgs, env_kwargs: dict[str, Any],
                     learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
     """Run ``jobs`` in ``args.workers`` spawned processes; on any error or Ctrl-C the workers
     are killed at once instead of finishing the queue."""
     context = multiprocessing.get_context("spawn")   # torch + fork can deadlock
     pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=context, initializer=_warm_up_worker,
-                               initargs=(args.task, env_id, env_kwargs, learned, args.modules))
+                               initargs=(args.task, env_kwargs, learned, args.modules))
     try:
         futures = [pool.submit(_run_episode_job, job) for job in jobs]
         for future in as_completed(futures):

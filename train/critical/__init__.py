@@ -23,7 +23,7 @@ One file per job:
 Checkpoints are read and written by :mod:`agents.checkpoints` (``weights_only=True``).
 """
 
-from agents.models.critical import MODELS
+from agents.critical.models import MODELS
 from train.critical.cli import main
 from train.critical.config import (CHECKPOINT_DIR, DEFAULT_DATA_DIR, DEFAULTS, EVAL_SAMPLES, RUNS_DIR,
                                    VAL_PROBLEMS, EvaluateArgs, GenerateArgs, ModelDefaults, Optim, TrainArgs)

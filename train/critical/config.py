@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from agents.checkpoints import SHIPPED_DIR
-from agents.models.critical import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
+from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
+from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
 from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
 
@@ -37,8 +37,8 @@ MIN_SEP_R = 1.0
 
 
 def checkpoint_name(model: str) -> str:
-    """File name of a model's checkpoint: ``critical_<model>.pt``."""
-    return f"critical_{model}.pt"
+    """File name of a model's checkpoint: ``critical_<model>.pt`` (in run directories and shipped)."""
+    return shipped_checkpoint(f"critical_{model}").name
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from agents.critical_data import graph_batch, image_batch, label_positions, occupancy_images
-from agents.models.critical import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
+from agents.critical.data import graph_batch, image_batch, label_positions, occupancy_images
+from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import CriticalProblems
 from gnn_mp_envs.critical.halton import HaltonGraph
 

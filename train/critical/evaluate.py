@@ -34,8 +34,8 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.checkpoints import load_checkpoint
-from agents.critical_data import label_positions
-from agents.models.critical import MODELS, kind_of, name_of
+from agents.critical.data import label_positions
+from agents.critical.models import MODELS, kind_of, name_of
 from gnn_mp_envs.critical.dataset import CriticalProblems, DatasetConfig, eval_config, load_or_generate
 from gnn_mp_envs.critical.halton import SPARSE_NODES, HaltonGraph, default_radius, halton_graph, halton_points
 from gnn_mp_envs.critical.planning import SPARSE_RADIUS_FACTOR, compare_planners, path_is_valid, plan_rdisc, summarize

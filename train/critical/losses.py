@@ -9,7 +9,7 @@
 * CVAEs: reconstruction of one randomly drawn label per problem + ``kl_weight`` x KL
   (GNN-CVAE with attention: minus ``node_loss_weight`` x the drawn label node's log attention).
 
-:func:`loss` dispatches on :data:`agents.models.critical.MODELS` (``LOSSES`` table).
+:func:`loss` dispatches on :data:`agents.critical.models.MODELS` (``LOSSES`` table).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Callable
 import torch
 from torch import Tensor, nn
 
-from agents.models.critical import MODELS
+from agents.critical.models import MODELS
 from train.critical.config import Optim
 
 Batch = dict  # an Inputs(...) batch, see train.critical.data

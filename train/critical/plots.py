@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.critical_data import label_positions
+from agents.critical.data import label_positions
 from gnn_mp_envs.critical.dataset import CriticalProblems
 from gnn_mp_envs.critical.halton import HaltonGraph
 from gnn_mp_envs.utils.io import atomic_path

@@ -36,14 +36,15 @@ from tqdm.auto import tqdm
 
 from agents.checkpoints import (CheckpointError, count_parameters, load_checkpoint, load_training_state, plain,
                                 save_checkpoint, save_training_state)
-from agents.models.critical import MODELS, build_model, kind_of
+from agents.critical.models import MODELS, build_model, kind_of
 from gnn_mp_envs.critical.dataset import DatasetConfig, load_or_generate
 from gnn_mp_envs.critical.halton import halton_graph
-from gnn_mp_envs.utils.io import atomic_write_bytes, atomic_write_text
+from gnn_mp_envs.utils.io import atomic_write_text
 from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
 from train.critical.data import inputs_for
 from train.critical.evaluate import validation_scores
 from train.critical.losses import loss as loss_fn
+from train.run import inside
 
 
 #: Validation metric that picks the best epoch: the mean hit rate of the k = 1, 3, 10 samples
@@ -70,19 +71,11 @@ def paths_for(checkpoint: Path) -> RunPaths:
                     checkpoint.with_name(checkpoint.stem + ".resume.pt"))
 
 
-def _inside(path: Path, directory: Path) -> bool:
-    try:
-        path.resolve().relative_to(directory.resolve())
-        return True
-    except ValueError:
-        return False
-
-
 def run_paths(args: TrainArgs, runs_dir: Path = RUNS_DIR, now: float | None = None) -> RunPaths:
     """Where ``args`` trains to (see the module docstring)."""
     name = checkpoint_name(args.model)
     if args.out is not None:
-        if _inside(Path(args.out), CHECKPOINT_DIR):
+        if inside(Path(args.out), CHECKPOINT_DIR):
             raise TrainError(f"--out {args.out} is inside the shipped checkpoint directory {CHECKPOINT_DIR}; "
                              "train elsewhere and pass --ship to copy the result there")
         return paths_for(Path(args.out))
@@ -237,12 +230,11 @@ def _load_resume(path: Path, kind: str, ctor: dict, seed: int, cfg: DatasetConfi
 
 
 def ship(paths: RunPaths, model: str) -> Path:
-    """Copy a run's checkpoint and ``.json`` into the shipped directory as ``critical_<model>.pt``."""
-    if not paths.checkpoint.exists():
-        raise TrainError(f"--ship: no checkpoint was written at {paths.checkpoint}")
-    load_checkpoint(paths.checkpoint, expected_kind=kind_of(model))   # refuse to ship a bad file
-    target = CHECKPOINT_DIR / checkpoint_name(model)
-    atomic_write_bytes(target, paths.checkpoint.read_bytes())
-    atomic_write_bytes(target.with_suffix(".json"), paths.meta.read_bytes())
-    print(f"shipped {paths.checkpoint} -> {target}", flush=True)
-    return target
+    """Copy a run's checkpoint and ``.json`` into the shipped directory as ``critical_<model>.pt``
+    (:meth:`train.run.TrainingRun.ship`)."""
+    from train.run import RunError, TrainingRun
+    try:
+        return TrainingRun(paths.checkpoint.parent).ship(paths.checkpoint, f"critical_{model}",
+                                                          expected_kind=kind_of(model))
+    except RunError as exc:
+        raise TrainError(str(exc)) from None

@@ -1,7 +1,8 @@
 """Datasets of the paper's Algorithm 1 (offline part): uniform-sampler solutions, cut into examples.
 
-Seeded training problems (split ``train``; for the arm the two training scene families) are
-solved with the uniform sampler through :func:`gnn_mp_envs.rollout.rollout`. For each solved
+Seeded training problems (split ``train``; for tasks with scenes the training families) are
+solved with the uniform sampler through :func:`gnn_mp_envs.evaluation.plan_problem` (the
+benchmark's seeding rule). For each solved
 problem the file keeps the whole final tree (states, node features as the environment
 computed them, parents, tree ids), the solution path's node indices, every iteration's tree
 size and active tree, start, goal and the observation's obstacle rows. Examples
@@ -47,7 +48,7 @@ class TreeDataConfig:
     split: str = "train"
     scene: str | None = None          # tasks with scenes: default "train" (both training families)
     problems: int = 300               # problem indices first_problem..first_problem+problems-1 of the split
-    seed: int = 0                     # sampler seed of problem i: problem_seed(seed, i)
+    seed: int = 0                     # sampler seed of problem i: gnn_mp_envs.evaluation.problem_seed(seed, i)
     max_nodes: int | None = None      # node budget (default: the task's)
     first_problem: int = 0
     sampler: str = "uniform"          # who plans: uniform (Algorithm 1) or a learned sampler (DAgger)
@@ -145,33 +146,18 @@ def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
 
 def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None) -> TreeDataset:
     """Solve the config's problems with its sampler (uniform, or a learned one from
-    ``checkpoint`` for DAgger); keep the solved ones."""
-    import gymnasium as gym
+    ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones."""
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
 
-    import gnn_mp_envs  # noqa: F401  (registers the environments)
-    from agents.samplers import load_sampler
-    from gnn_mp_envs.registration import task_spec
-    from gnn_mp_envs.rollout import rollout
-    from train.benchmark.args import problem_seed
-
-    spec = task_spec(config.task)
-    kwargs = {"split": config.split, "copy_observations": False}
-    if config.max_nodes is not None:
-        kwargs["max_nodes"] = config.max_nodes
-    if config.scene is not None:
-        kwargs["scene"] = config.scene
-    env = gym.make(spec.env_id, disable_env_checker=True, **kwargs)
+    env = evaluation_env(config.task, config.split, scene=config.scene, max_nodes=config.max_nodes)
     base = env.unwrapped
-    extra = {} if checkpoint is None else {"checkpoint": checkpoint}
-    sampler = load_sampler(config.sampler, env.action_space.low, env.action_space.high, task=config.task, seed=0,
-                           **extra)
+    sampler = load_sampler(config.sampler, task=config.task, seed=0, checkpoint=checkpoint)
     trees, paths, starts, goals, obstacles, indices, iters = [], [], [], [], [], [], []
     try:
         first = config.first_problem
         for i in tqdm(range(first, first + config.problems), desc=f"{config.task} {config.sampler} solutions",
                       unit="problem", disable=not progress):
-            seed = problem_seed(config.seed, i)
-            sampler.reset(seed)
             last: dict = {}
             roots = 2 if base.planner_name == "birrt" else 1
             iterations = [(roots, 0)]   # (tree size, active tree) before each iteration
@@ -189,7 +175,7 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
                 store.append(sampler.act(obs))
                 return store[-1]
 
-            record = rollout(env, act, seed=seed, options={"index": i}, on_step=keep_last)
+            record = plan_problem(env, sampler, i, config.seed, on_step=keep_last, policy=act)
             if not record.success:
                 continue
             tree = base.planner.tree

@@ -10,15 +10,16 @@
    problems and seeds) and report both; save the checkpoint (sampling settings and config in
    its meta, the config beside it as JSON), TensorBoard events and a learning-curve figure.
 
-Everything goes to a run directory (``runs/tree/<task>-<model>-seed<S>-<time>/``); ``--ship``
-copies the checkpoint into the package (``agents/checkpoints/tree_<model>_<task>.pt``).
+Everything goes to a run directory (:class:`train.run.TrainingRun`:
+``runs/tree/<task>-<model>-seed<S>-<time>/`` with ``config.json``, ``model.pt`` + ``model.json``,
+``tb/``, ``learning_curve.png``, ``resume.pt``); ``--ship`` copies the checkpoint into the
+package (``agents/checkpoints/<model>_<task>.pt`` + ``.json``). Tasks registered outside the
+package train too: ``--import MODULE`` imports the module that calls ``register_task``.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -29,21 +30,18 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from agents.checkpoints import (SHIPPED_DIR, load_checkpoint, load_training_state, save_checkpoint,
-                                save_training_state)
-from gnn_mp_envs.utils.io import atomic_path, atomic_write_text
+from agents.checkpoints import load_training_state, save_checkpoint, save_training_state
 from train.args import arg, non_negative_int, positive_float, positive_int
-from train.tree_samplers.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
-from train.tree_samplers.models import TASKS, adapter_for
-
-MODELS = ("gnn", "cvae", "gnn-cvae")
+from train.run import RunError, TrainingRun, plot_learning_curve
+from train.tree.adapters import MODELS, adapter_for, task_scales
+from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
 
 
 @dataclass
 class TrainArgs:
     """Flags of ``gnn-mp train sampler``."""
 
-    task: str = arg("pendulum", "task", choices=tuple(TASKS))
+    task: str = arg("pendulum", "task (any registered task; --import adds your own)")
     model: str = arg("gnn", "model", choices=MODELS)
     problems: int = arg(400, "training problems solved by the uniform sampler (split train)", parse=positive_int)
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
@@ -55,43 +53,24 @@ class TrainArgs:
     dagger_minutes: float = arg(6.0, "fine-tuning time per DAgger round (minutes)", parse=positive_float)
     batch_size: int = arg(8, "runs (solved problems) per optimisation step", parse=positive_int)
     lr: float = arg(2e-3, "Adam learning rate (cosine-annealed)", parse=positive_float)
+    max_snapshots: int = arg(96, "snapshots per run in an epoch (the scorer: negative samples per run)",
+                             parse=positive_int)
     eval_problems: int = arg(60, "validation problems planned at the end (sampler and uniform)",
                              parse=non_negative_int)
     seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=non_negative_int)
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
     out: Path | None = arg(None, "run directory (default: runs/tree/<task>-<model>-seed<S>-<time>)")
+    overwrite: bool = arg(False, "reuse an --out that already holds a run")
     ship: bool = arg(False, "also copy the checkpoint into the package (agents/checkpoints/)")
     resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
     threads: int = arg(1, "torch threads", parse=positive_int)
+    modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
+                             metavar="MODULE", append=True)
     progress: bool = arg(True, "hide progress bars")
 
 
 class TrainError(Exception):
     """A user-facing error (one line)."""
-
-
-def run_dir(args: TrainArgs) -> Path:
-    if args.out is not None:
-        return args.out
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path("runs") / "tree" / f"{args.task}-{args.model}-seed{args.seed}-{stamp}"
-
-
-def scene_of(task: str) -> str | None:
-    from gnn_mp_envs.registration import task_spec
-    return "train" if task_spec(task).scenes else None
-
-
-def observation_space_of(task: str):
-    import gymnasium as gym
-
-    import gnn_mp_envs  # noqa: F401
-    from gnn_mp_envs.registration import task_spec
-    env = gym.make(task_spec(task).env_id, max_nodes=2, disable_env_checker=True)
-    try:
-        return env.observation_space, env.action_space
-    finally:
-        env.close()
 
 
 # ---------------------------------------------------------------------------- one phase
@@ -174,49 +153,55 @@ def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDatas
 # ---------------------------------------------------------------------------- the whole job
 def train(args: TrainArgs) -> dict[str, Any]:
     """Data, training, DAgger, evaluation, checkpoint; returns the run's summary."""
+    from gnn_mp_envs.registration import task_spec
+    from train.benchmark.args import BenchmarkError, import_modules
+    try:
+        import_modules(args.modules)
+        spec = task_spec(args.task)
+        run = TrainingRun.create("tree", f"{args.task}-{args.model}", args.seed, out=args.out, resume=args.resume,
+                                 overwrite=args.overwrite)
+    except (BenchmarkError, ValueError, RunError) as exc:
+        raise TrainError(str(exc)) from None
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    out = run_dir(args)
-    if args.resume and args.out is None:
-        raise TrainError("--resume needs --out RUN_DIR (the run to continue)")
-    out.mkdir(parents=True, exist_ok=True)
     adapter = adapter_for(args.model, args.task)
-    observation_space, action_space = observation_space_of(args.task)
-    model, ctor_args = adapter.build(args.task, observation_space)
-    scene = scene_of(args.task)
+    scales = task_scales(args.task)
+    try:
+        model, ctor_args = adapter.build(scales)
+    except ValueError as exc:
+        raise TrainError(f"--model {args.model} on task {args.task}: {exc}") from None
     started = time.perf_counter()
 
     # 1. data: uniform solutions of training problems
-    data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
+    data_config = TreeDataConfig(task=args.task, split="train", scene=spec.training_scene(), problems=args.problems,
+                                 seed=args.seed)
     data = load_or_generate(data_config, args.data_dir, progress=args.progress)
     rng = np.random.default_rng(args.seed)
-    snapshots = TASKS[args.task].max_snapshots
+    snapshots = args.max_snapshots
     if len(data) < 2:
         raise TrainError(f"only {len(data)} solved problem(s) in {data_config.file_name()}; raise --problems")
     train_data, val_data = split_problems(data, args.seed)
     train_items = adapter.items(model, train_data, args.view, rng, snapshots)
     val_items = adapter.items(model, val_data, args.view, rng, snapshots)
 
-    from torch.utils.tensorboard import SummaryWriter
-    writer = SummaryWriter(str(out / "tb"))
-    resume_path = out / "resume.pt"
+    resume_path = run.path("resume.pt")
     if args.resume and not resume_path.exists():
         raise TrainError(f"--resume: {resume_path} does not exist")
     resume = load_training_state(resume_path) if args.resume else None
-    summary: dict[str, Any] = {"config": _plain(asdict(args)), "dataset": data_config.file_name(),
+    summary: dict[str, Any] = {"config": asdict(args), "dataset": data_config.file_name(),
                                "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
     # 2. the first phase
-    phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed, writer,
-                  "phase0", args.progress, resume=resume, resume_path=resume_path)]
+    phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed,
+                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path)]
     # 3. DAgger
-    settings = dict(TASKS[args.task].sampler.get(args.model, {}))
+    settings = spec.sampler_defaults(args.model)
     for r in range(args.dagger_rounds):
         own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r),
                                             args.seed + r + 1)
         train_items += adapter.items(model, own_train, "grown", rng, snapshots)
         val_items += adapter.items(model, own_val, "grown", rng, snapshots)
         phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
-                          args.batch_size, args.seed + r + 1, writer, f"dagger{r + 1}", args.progress))
+                          args.batch_size, args.seed + r + 1, run.writer, f"dagger{r + 1}", args.progress))
     summary["phases"] = phases
     # a resumed run counts the first phase's time spent before the interruption too
     summary["train_seconds"] = time.perf_counter() - started + (float(resume["elapsed"]) if resume else 0.0)
@@ -227,84 +212,86 @@ def train(args: TrainArgs) -> dict[str, Any]:
         for view in VIEWS}
 
     # 4. save, evaluate, ship
-    meta = {"task": args.task, "sampler": settings, "config": summary["config"], "dataset": summary["dataset"]}
-    ckpt = save_checkpoint(out / "model.pt", model, adapter.kind, ctor_args, meta=meta)
+    meta = {"task": args.task, "sampler": settings, "command": command_of(args), "config": summary["config"],
+            "dataset": summary["dataset"], "train_seconds": summary["train_seconds"]}
+    ckpt = run.save_checkpoint("model.pt", model, adapter.kind, ctor_args, meta=meta)
     if args.eval_problems:
         summary["validation"] = evaluate_online(args.task, ckpt, args.model, args.eval_problems, args.seed,
                                                 args.progress)
         for name, stats in summary["validation"].items():
-            writer.add_scalar(f"validation/{name}_median_nodes", stats["median_nodes"], 0)
-    writer.close()
-    plot_learning_curve(phases, out / "learning_curve.png", f"{args.task} {args.model}",
-                        getattr(adapter, "loss_name", "NLL per snapshot"))
-    atomic_write_text(out / "config.json", json.dumps(summary, indent=2, default=float) + "\n")
+            run.writer.add_scalar(f"validation/{name}_median_nodes", stats["median_nodes"], 0)
+        ckpt = run.save_checkpoint("model.pt", model, adapter.kind, ctor_args,
+                                   meta={**meta, "validation": summary["validation"]})
+    run.close()
+    plot_phases(phases, run.path("learning_curve.png"), f"{args.task} {args.model}",
+                getattr(adapter, "loss_name", "NLL per snapshot"))
+    run.write_config(summary)
     if args.ship:
-        target = SHIPPED_DIR / f"tree_{args.model}_{args.task}.pt"
-        with atomic_path(target) as tmp:
-            shutil.copyfile(ckpt, tmp)
-        load_checkpoint(target, expected_kind=adapter.kind)
-        summary["shipped"] = str(target)
-    summary["run_dir"] = str(out)
+        summary["shipped"] = str(run.ship(ckpt, args.model, args.task, expected_kind=adapter.kind))
+    summary["run_dir"] = str(run.dir)
+    summary["checkpoint"] = str(ckpt)
     return summary
+
+
+def command_of(args: TrainArgs) -> str:
+    """The command line that reproduces the run (what a shipped sidecar records)."""
+    imports = "".join(f" --import {m}" for m in args.modules)
+    return (f"gnn-mp train sampler{imports} --task {args.task} --model {args.model} --problems {args.problems} "
+            f"--view {args.view} --minutes {args.minutes} --dagger-rounds {args.dagger_rounds} --dagger-problems "
+            f"{args.dagger_problems} --dagger-minutes {args.dagger_minutes} --eval-problems {args.eval_problems} "
+            f"--seed {args.seed}")
 
 
 def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_index: int) -> TreeDataset:
     """DAgger data: fresh training problems planned by the current sampler, labelled by the
     paths it found itself."""
     import tempfile
+
+    from gnn_mp_envs.registration import task_spec
+    from train.tree.data import generate
     with tempfile.TemporaryDirectory() as tmp:
         ckpt = save_checkpoint(Path(tmp) / "current.pt", model, adapter.kind, ctor_args,
                                meta={"task": args.task, "sampler": settings})
-        config = TreeDataConfig(task=args.task, split="train", scene=scene_of(args.task), problems=args.dagger_problems,
-                                seed=args.seed + 1000 * (round_index + 1), first_problem=args.problems +
-                                round_index * args.dagger_problems, sampler=args.model)
-        from train.tree_samplers.data import generate
+        config = TreeDataConfig(task=args.task, split="train", scene=task_spec(args.task).training_scene(),
+                                problems=args.dagger_problems, seed=args.seed + 1000 * (round_index + 1),
+                                first_problem=args.problems + round_index * args.dagger_problems, sampler=args.model)
         return generate(config, progress=args.progress, checkpoint=str(ckpt))
 
 
 def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed: int,
                     progress: bool) -> dict[str, dict[str, float]]:
     """Plan validation problems 0..N-1 with the trained sampler and with uniform (same seeds)."""
-    from train.benchmark import BenchmarkArgs, run_benchmark
-    report = run_benchmark(BenchmarkArgs(task=task, samplers=["uniform", model], problems=problems, seed=seed,
-                                         split="val", checkpoints={model: checkpoint}, progress=progress))
-    out = {}
-    for name, s in report["results"].items():
-        out[name] = {"success_rate": s["success_rate"], "median_nodes": s["nodes_expanded"]["median"],
-                     "median_collision_checks": s["collision_checks"]["median"],
-                     "median_wall_ms": 1e3 * s["wall_time_s"]["median"]}
-    return out
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
+    env = evaluation_env(task, "val")
+    try:
+        out = {}
+        for name, extra in (("uniform", {}), (model, {"checkpoint": checkpoint})):
+            sampler = load_sampler(name, task=task, seed=0, **extra)
+            out[name] = summarize(plan_problems(sampler, env, range(problems), seed, progress=progress,
+                                                desc=f"val {name}"))
+        return out
+    finally:
+        env.close()
 
 
-def plot_learning_curve(phases: list[dict], path: Path, title: str, loss_name: str = "NLL per snapshot") -> None:
-    import matplotlib
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(5, 3.2))
-    offset = 0.0
+def plot_phases(phases: list[dict], path: Path, title: str, loss_name: str = "NLL per snapshot") -> Path | None:
+    """Train and validation loss against training time, the DAgger rounds dotted."""
+    train_x, train_y, val_y, bounds, offset = [], [], [], [], 0.0
     for k, phase in enumerate(phases):
         h = phase["history"]
         if not h:
             continue
-        t = [offset + r["seconds"] / 60 for r in h]
-        ax.plot(t, [r["train"] for r in h], color="tab:blue", label="train" if k == 0 else None)
-        ax.plot(t, [r["val"] for r in h], color="tab:orange", label="validation" if k == 0 else None)
         if k:
-            ax.axvline(offset, color="0.6", linestyle=":", linewidth=1)
+            bounds.append(offset)
+        t = [offset + r["seconds"] / 60 for r in h]
+        train_x += t
+        train_y += [r["train"] for r in h]
+        val_y += [r["val"] for r in h]
         offset = t[-1]
-    ax.set_xlabel("training time [min] (dotted: DAgger rounds)")
-    ax.set_ylabel(f"loss ({loss_name})")
-    ax.set_title(title, fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    return plot_learning_curve(path, {"train": (train_x, train_y), "validation": (train_x, val_y)},
+                               xlabel="training time [min] (dotted: DAgger rounds)", ylabel=f"loss ({loss_name})",
+                               title=title, vlines=bounds)
 
 
-def _plain(d: dict) -> dict:
-    return {k: (str(v) if isinstance(v, Path) else v) for k, v in d.items()}
-
-
-__all__ = ["MODELS", "TrainArgs", "TrainError", "evaluate_online", "fit", "plot_learning_curve", "train"]
+__all__ = ["TrainArgs", "TrainError", "evaluate_online", "fit", "plot_phases", "train"]

@@ -4,10 +4,10 @@
     gnn-mp train rl --algo sac --lib sb3 --task pendulum --total-steps 20000
     gnn-mp train rl --algo ppo --lib torchrl --task arm --total-steps 2000
 
-The flags are the fields of :class:`train.rl_common.RLArgs`; the library's script
-(:mod:`train.rl_sb3`, :mod:`train.rl_torchrl`) does the rest. The trained policy is the
+The flags are the fields of :class:`train.rl.args.RLArgs`; the library's script
+(:mod:`train.rl.sb3`, :mod:`train.rl.torchrl`) does the rest. The trained policy is the
 sampler ``rl-ppo`` / ``rl-sac`` / ``rl-ppo-torchrl`` (``gnn-mp benchmark --samplers rl-ppo
---checkpoint rl-ppo=runs/.../best.pt``, or ``--ship`` it as the task's default weights).
+--checkpoint rl-ppo=runs/rl/.../best.pt``, or ``--ship`` it as the task's default weights).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 
 from train.args import OneLineParser, add_dataclass_arguments, from_namespace
-from train.rl_common import RLArgs, check_args
+from train.rl.args import RLArgs, check_args
 
 
 def parse(argv: list[str]) -> RLArgs:
@@ -30,12 +30,17 @@ def parse(argv: list[str]) -> RLArgs:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.run import RunError
     args = parse(list(sys.argv[1:] if argv is None else argv))
     if args.lib == "sb3":
-        from train.rl_sb3 import train
+        from train.rl.sb3 import train
     else:
-        from train.rl_torchrl import train
-    train(args)
+        from train.rl.torchrl import train
+    try:
+        train(args)
+    except RunError as exc:
+        print(f"gnn-mp train rl: error: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

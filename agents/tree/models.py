@@ -6,7 +6,7 @@ same tree (PyG :class:`RelativeConv` layers, messages built from the sender's em
 the relative position ``(x_j - x_n) / step_scale``). A node's embedding is therefore fixed the
 moment it is inserted: training scores every snapshot of a run with one forward pass over
 its final tree, and online inference embeds each new node once and caches it
-(:class:`agents.samplers.tree.TreeGNNSampler`). The sampling distribution at a snapshot is a
+(:class:`agents.tree.samplers.TreeGNNSampler`). The sampling distribution at a snapshot is a
 mixture over the tree's nodes::
 
     q          = MLP(start, goal, one_hot(active_tree), mean embedding of each tree, log sizes)

@@ -6,7 +6,7 @@ A trained SB3 or TorchRL agent holds its policy inside library objects (an SB3
 ``nn.Module`` s with the same parameter layout, so a policy is exported by copying tensors
 (:func:`policy_from_sb3`, :func:`policy_from_torchrl`), saved in the one checkpoint format
 (:mod:`agents.checkpoints`, one kind per policy type) and turned into a sampler by
-:mod:`agents.samplers.rl`. Every policy acts in ``[-1, 1]^d`` (the action box of
+:mod:`agents.rl.sampler`. Every policy acts in ``[-1, 1]^d`` (the action box of
 :func:`gnn_mp_envs.envs.wrappers.make_rl_env`) and returns the parameters of its Normal:
 
 =====================  ====================  ===============================================
@@ -34,7 +34,8 @@ import torch
 from torch import nn
 
 from agents.checkpoints import CheckpointError, read_checkpoint, register_model_kind
-from agents.encoders import ACTIVATIONS, ENCODERS, TreeEncoder, TreeGNNEncoder
+from agents.encoders import ACTIVATIONS, TreeEncoder
+from agents.rl.backbones import ENCODERS, TreeGNNEncoder
 
 #: SB3 SAC's clamp of the log standard deviation (``stable_baselines3.sac.policies``).
 SAC_LOG_STD_MIN, SAC_LOG_STD_MAX = -20.0, 2.0
@@ -128,13 +129,13 @@ class SB3SACPolicy(RLPolicy):
 
 
 class TorchRLPPOPolicy(RLPolicy):
-    """The actor of :func:`agents.torchrl.make_actor`: the same Gaussian head (MLP +
+    """The actor of :func:`agents.rl.torchrl.make_actor`: the same Gaussian head (MLP +
     ``NormalParamExtractor``), ``TanhNormal`` on the box."""
 
     def __init__(self, encoder: Mapping[str, Any], action_dim: int, head_hidden: int = 64,
                  init_scale: float = 1.0) -> None:
         super().__init__(encoder, action_dim)
-        from agents.torchrl import make_gaussian_head
+        from agents.rl.torchrl import make_gaussian_head
         self.head = make_gaussian_head(self.encoder.out_channels, self.action_dim, int(head_hidden),
                                        init_scale=init_scale).module
 
@@ -193,7 +194,7 @@ def policy_from_sb3(model: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
 
 
 def policy_from_torchrl(actor: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
-    """``(policy, kind, ctor_args)`` holding a copy of an :func:`agents.torchrl.make_actor` actor."""
+    """``(policy, kind, ctor_args)`` holding a copy of an :func:`agents.rl.torchrl.make_actor` actor."""
     sequential = actor.module[0] if hasattr(actor, "module") else actor
     encoder_module, head = sequential.module[0], sequential.module[1]
     encoder = encoder_module.encoder

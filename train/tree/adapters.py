@@ -2,13 +2,16 @@
 dataset into its training items, and score a batch of items (one *adapter* per model).
 
 An adapter is the only model-specific piece of ``gnn-mp train sampler``: the loop in
-:mod:`train.tree_samplers.training` and the DAgger rounds are written once. Task defaults
-(architecture, scales, the sampling settings shipped with the weights) live here too.
+:mod:`train.tree.training` and the DAgger rounds are written once. The task facts the models
+need (step scale, periodic coordinates, number of trees, the planner's metric, which GNN head,
+the sampling settings shipped with the weights) come from the task's
+:class:`~gnn_mp_envs.registration.TaskSpec`, so a task registered from outside the package
+trains as it benchmarks.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol, Sequence
 
 import numpy as np
@@ -16,54 +19,53 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
-from agents.models.tree_samplers import TreeCVAE, TreeGNN, TreeGNNCVAE
-from agents.models.tree_scorer import TreeGNNScorer
-from gnn_mp_envs.tasks.pendulum import VELOCITY_WEIGHT
-from train.tree_samplers.data import TreeDataset
-from train.tree_samplers.runs import Run, ScorerRun, make_run, make_scorer_run
+from agents.tree.models import TreeCVAE, TreeGNN, TreeGNNCVAE
+from agents.tree.scorer import TreeGNNScorer
+from gnn_mp_envs.registration import TaskSpec, task_spec
+from train.tree.data import TreeDataset
+from train.tree.items import Run, ScorerRun, make_run, make_scorer_run
 
 
 @dataclass(frozen=True)
-class TaskDefaults:
-    """Per-task facts the models need that the observation space does not say."""
+class TaskScales:
+    """A task's facts as the models take them (from its ``TaskSpec`` and one probe environment)."""
 
-    step_scale: float                      # ~ one extension in state units (relative positions, offsets)
-    periodic: tuple[int, ...] = ()         # angle coordinates
-    num_trees: int = 1                     # 2 for BiRRT
-    max_snapshots: int = 96                # snapshots per run in an epoch (scorer: negative samples per run)
-    metric_weights: tuple[float, ...] | None = None   # the planner's nearest-neighbour metric (None: Euclidean)
-    sampler: dict[str, dict[str, Any]] = field(default_factory=dict)   # model -> sampling settings
+    spec: TaskSpec
+    observation_space: spaces.Dict
+    step_scale: float        # the spec's, else the problems' step size
 
+    @property
+    def state_dim(self) -> int:
+        return int(self.observation_space["start"].shape[0])
 
-#: Chosen on the validation split (see docs/learned_samplers.md); shipped with the weights.
-TASKS: dict[str, TaskDefaults] = {
-    "maze2d": TaskDefaults(step_scale=0.05, num_trees=1,
-                           sampler={"gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
-                                    "cvae": {"uniform_mix": 0.5}, "gnn-cvae": {"uniform_mix": 0.5}}),
-    # The pendulum's "gnn" is the sample scorer (TASK_HEADS): M=16 candidates, 20% uniform, 5% goal.
-    "pendulum": TaskDefaults(step_scale=0.4, periodic=(0,), num_trees=1, metric_weights=(1.0, VELOCITY_WEIGHT),
-                             sampler={"gnn": {"uniform_mix": 0.2, "goal_bias": 0.05, "candidates": 16,
-                                              "temperature": 1.0},
-                                      "cvae": {"uniform_mix": 0.5}, "gnn-cvae": {"uniform_mix": 0.5}}),
-    "arm": TaskDefaults(step_scale=0.4, num_trees=2,
-                        sampler={"gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
-                                 "cvae": {"uniform_mix": 0.5}, "gnn-cvae": {"uniform_mix": 0.5}}),
-}
+    def space_scales(self) -> dict[str, list[float]]:
+        """State centre / half-span and node-feature scales from the observation space."""
+        start = self.observation_space["start"]
+        low, high = np.asarray(start.low, np.float64), np.asarray(start.high, np.float64)
+        half = (high - low) / 2
+        return {"state_center": ((high + low) / 2).tolist(), "state_scale": half.tolist(),
+                "feature_scale": np.concatenate([2 * half, 2 * half, [1.0]]).tolist()}
 
 
-def space_scales(observation_space: spaces.Dict) -> dict[str, list[float]]:
-    """State centre / half-span and node-feature scales from an env's observation space."""
-    start = observation_space["start"]
-    low, high = np.asarray(start.low, np.float64), np.asarray(start.high, np.float64)
-    half = (high - low) / 2
-    return {"state_center": ((high + low) / 2).tolist(), "state_scale": half.tolist(),
-            "feature_scale": np.concatenate([2 * half, 2 * half, [1.0]]).tolist()}
+def task_scales(task: str) -> TaskScales:
+    """The :class:`TaskScales` of a registered task (builds its benchmark environment once)."""
+    import gymnasium as gym
+
+    import gnn_mp_envs  # noqa: F401  (registers the built-in ids)
+    spec = task_spec(task)
+    env = gym.make(spec.env_id, max_nodes=2, disable_env_checker=True)
+    try:
+        env.reset(seed=0, options={"index": 0})
+        step = spec.step_scale if spec.step_scale is not None else float(env.unwrapped.problem.step_size)
+        return TaskScales(spec, env.observation_space, float(step))
+    finally:
+        env.close()
 
 
 class Adapter(Protocol):
     kind: str
 
-    def build(self, task: str, observation_space: spaces.Dict, **overrides) -> tuple[torch.nn.Module, dict]: ...
+    def build(self, scales: TaskScales, **overrides) -> tuple[torch.nn.Module, dict]: ...
     def items(self, model: torch.nn.Module, data: TreeDataset, view: str, rng: np.random.Generator,
               max_snapshots: int) -> list[Any]: ...
     def loss(self, model: torch.nn.Module, items: Sequence[Any],
@@ -78,17 +80,16 @@ class GNNAdapter:
     #: The shipped architecture (also what RL's ``--encoder tree-gnn`` builds, to warm-start from it).
     hidden_channels, num_layers, knn = 64, 2, 6
 
-    def ctor_args(self, task: str, observation_space: spaces.Dict, **overrides) -> dict:
-        t = TASKS[task]
-        d = int(observation_space["start"].shape[0])
+    def ctor_args(self, scales: TaskScales, **overrides) -> dict:
+        d, spec = scales.state_dim, scales.spec
         args = {"state_dim": d, "hidden_channels": self.hidden_channels, "num_layers": self.num_layers,
-                "knn": self.knn, **space_scales(observation_space),
-                "step_scale": [t.step_scale] * d, "periodic": list(t.periodic), "num_trees": t.num_trees}
+                "knn": self.knn, **scales.space_scales(), "step_scale": [scales.step_scale] * d,
+                "periodic": list(spec.periodic), "num_trees": spec.num_trees()}
         args.update(overrides)
         return args
 
-    def build(self, task: str, observation_space: spaces.Dict, **overrides) -> tuple[torch.nn.Module, dict]:
-        args = self.ctor_args(task, observation_space, **overrides)
+    def build(self, scales: TaskScales, **overrides) -> tuple[torch.nn.Module, dict]:
+        args = self.ctor_args(scales, **overrides)
         return self.model_class(**args), args
 
     def _gnn(self, model: torch.nn.Module) -> TreeGNN:
@@ -112,8 +113,8 @@ class GNNCVAEAdapter(GNNAdapter):
     model_class = TreeGNNCVAE
     kl_weight = 0.05
 
-    def ctor_args(self, task, observation_space, **overrides):
-        args = super().ctor_args(task, observation_space)
+    def ctor_args(self, scales, **overrides):
+        args = super().ctor_args(scales)
         args.update({"latent_channels": 4, **overrides})
         return args
 
@@ -142,14 +143,13 @@ class CVAEAdapter:
     kind = "tree/cvae"
     kl_weight = 0.05
 
-    def build(self, task, observation_space, **overrides):
-        t = TASKS[task]
-        d = int(observation_space["start"].shape[0])
-        obstacles = int(np.prod(observation_space["obstacles"].shape))
-        scales = space_scales(observation_space)
+    def build(self, scales, **overrides):
+        d = scales.state_dim
+        obstacles = int(np.prod(scales.observation_space["obstacles"].shape))
+        space = scales.space_scales()
         args = {"state_dim": d, "condition_dim": 2 * d + obstacles, "hidden_channels": 128, "latent_channels": 4,
-                "state_center": scales["state_center"], "state_scale": scales["state_scale"],
-                "periodic": list(t.periodic), **overrides}
+                "state_center": space["state_center"], "state_scale": space["state_scale"],
+                "periodic": list(scales.spec.periodic), **overrides}
         return TreeCVAE(**args), args
 
     def items(self, model, data, view, rng, max_snapshots) -> list[PathStates]:
@@ -181,19 +181,19 @@ class ScorerAdapter:
     kind = "tree/gnn-scorer"
     loss_name = "BCE per sample"
 
-    def ctor_args(self, task: str, observation_space: spaces.Dict, **overrides) -> dict:
-        t = TASKS[task]
-        if t.num_trees != 1:
-            raise ValueError(f"the sample scorer supports RRT (one tree); task {task!r} plans {t.num_trees} trees")
-        d = int(observation_space["start"].shape[0])
-        args = {"state_dim": d, "hidden_channels": 64, "num_layers": 2, "knn": 6, **space_scales(observation_space),
-                "step_scale": [t.step_scale] * d, "periodic": list(t.periodic),
-                "metric_weights": list(t.metric_weights or [1.0] * d)}
+    def ctor_args(self, scales: TaskScales, **overrides) -> dict:
+        spec, d = scales.spec, scales.state_dim
+        if spec.num_trees() != 1:
+            raise ValueError(f"the sample scorer supports RRT (one tree); task {spec.name!r} plans "
+                             f"{spec.num_trees()} trees")
+        args = {"state_dim": d, "hidden_channels": 64, "num_layers": 2, "knn": 6, **scales.space_scales(),
+                "step_scale": [scales.step_scale] * d, "periodic": list(spec.periodic),
+                "metric_weights": list(spec.metric_weights or [1.0] * d)}
         args.update(overrides)
         return args
 
-    def build(self, task, observation_space, **overrides):
-        args = self.ctor_args(task, observation_space, **overrides)
+    def build(self, scales, **overrides):
+        args = self.ctor_args(scales, **overrides)
         return TreeGNNScorer(**args), args
 
     def items(self, model, data, view, rng, max_snapshots) -> list[ScorerRun]:
@@ -218,16 +218,16 @@ class ScorerAdapter:
 
 
 ADAPTERS: dict[str, Adapter] = {"gnn": GNNAdapter(), "cvae": CVAEAdapter(), "gnn-cvae": GNNCVAEAdapter()}
+MODELS = tuple(ADAPTERS)
 
 
 def adapter_for(model: str, task: str) -> Adapter:
-    """The adapter of ``model`` for ``task`` (a task may ship another GNN head: see TASK_HEADS)."""
-    return TASK_HEADS.get((model, task), ADAPTERS[model])
+    """The adapter of ``model`` for ``task``: the ``gnn`` head is the one its ``TaskSpec`` names
+    (``"scorer"``: :class:`ScorerAdapter`, else the node mixture)."""
+    if model == "gnn" and task_spec(task).gnn_head == "scorer":
+        return ScorerAdapter()
+    return ADAPTERS[model]
 
 
-#: (model, task) -> adapter, where a task's best GNN head is not the node mixture.
-TASK_HEADS: dict[tuple[str, str], Adapter] = {("gnn", "pendulum"): ScorerAdapter()}
-
-
-__all__ = ["ADAPTERS", "Adapter", "CVAEAdapter", "GNNAdapter", "GNNCVAEAdapter", "ScorerAdapter", "TASKS", "TASK_HEADS",
-           "TaskDefaults", "adapter_for", "space_scales"]
+__all__ = ["ADAPTERS", "MODELS", "Adapter", "CVAEAdapter", "GNNAdapter", "GNNCVAEAdapter", "ScorerAdapter",
+           "TaskScales", "adapter_for", "task_scales"]

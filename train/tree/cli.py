@@ -1,4 +1,4 @@
-"""``gnn-mp train sampler``: flags from :class:`~train.tree_samplers.training.TrainArgs`."""
+"""``gnn-mp train sampler``: flags from :class:`~train.tree.training.TrainArgs`."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 def main(argv: Sequence[str] | None = None) -> int:
     from agents.checkpoints import CheckpointError
     from gnn_mp_envs.utils.npz import DatasetCacheError
-    from train.tree_samplers.training import TrainArgs, TrainError, train
+    from train.tree.training import TrainArgs, TrainError, train
     parser = OneLineParser(prog="gnn-mp train sampler",
                            description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
                            "evaluate it against uniform on validation problems.")
@@ -23,7 +23,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (TrainError, CheckpointError, DatasetCacheError) as exc:
         print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps({k: summary[k] for k in ("run_dir", "items", "train_seconds", "validation", "shipped")
+    print(json.dumps({k: summary[k] for k in ("run_dir", "checkpoint", "items", "train_seconds", "validation",
+                                              "shipped")
                       if k in summary}, indent=2, default=float))
     return 0
 

@@ -1,7 +1,7 @@
 """Stable-Baselines3 features extractor: the same :class:`agents.encoders.TreeEncoder`.
 
     from stable_baselines3 import PPO
-    from agents.sb3 import TreeFeaturesExtractor
+    from agents.rl.sb3 import TreeFeaturesExtractor
     model = PPO("MultiInputPolicy", env, policy_kwargs={
         "features_extractor_class": TreeFeaturesExtractor,
         "features_extractor_kwargs": {"hidden_channels": 64, "num_layers": 3, "out_channels": 128}})
@@ -16,14 +16,14 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from agents.encoders import encoder_from_space
+from agents.rl.backbones import encoder_from_space
 
 
 class TreeFeaturesExtractor(BaseFeaturesExtractor):
     """Observation dict -> the :class:`TreeEncoder` graph embedding ``(batch, out_channels)``.
 
     ``features_extractor_kwargs`` go to ``TreeEncoder.from_space`` (``backbone="tree-gnn"``: the
-    GNN sampler's backbone, :class:`agents.encoders.TreeGNNEncoder`) (``hidden_channels``,
+    GNN sampler's backbone, :class:`agents.rl.backbones.TreeGNNEncoder`) (``hidden_channels``,
     ``num_layers``, ``out_channels``, ``conv``, ``knn``, ...).
     """
 

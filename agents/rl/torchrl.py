@@ -8,7 +8,7 @@
     rollout = env.rollout(256, actor)          # "embed", "loc", "scale", "action", log-prob
     value(rollout)                             # "state_value" (T, 1)
 
-This module is ``agents.torchrl``; it imports the TorchRL package absolutely (``import
+This module is ``agents.rl.torchrl``; it imports the TorchRL package absolutely (``import
 torchrl`` anywhere resolves to the installed package, never to this file).
 """
 
@@ -21,7 +21,7 @@ from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequ
 from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
-from agents.encoders import EncoderModule
+from agents.rl.backbones import EncoderModule
 
 
 def _encoder(observation_space: spaces.Dict, encoder: EncoderModule | None, encoder_kw: dict) -> EncoderModule:

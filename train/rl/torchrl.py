@@ -2,10 +2,10 @@
 
     gnn-mp train rl --lib torchrl --algo ppo --task maze2d --total-steps 50000
 
-Read top to bottom: flags (``train.rl_common.RLArgs``) -> a batched env (``SerialEnv``, or
+Read top to bottom: flags (``train.rl.args.RLArgs``) -> a batched env (``SerialEnv``, or
 ``ParallelEnv`` with ``--parallel``) of ``GymWrapper(make_rl_env(...))`` (tree view of
 ``--view-nodes`` rows, actions in [-1, 1]) -> ``ProbabilisticActor`` and value head over the
-shared ``TreeEncoder`` (:mod:`agents.torchrl`) -> ``Collector`` -> GAE + ``ClipPPOLoss``,
+shared ``TreeEncoder`` (:mod:`agents.rl.torchrl`) -> ``Collector`` -> GAE + ``ClipPPOLoss``,
 ``--n-epochs`` passes of minibatches per batch -> TensorBoard logger, periodic evaluation on
 split ``val`` with checkpoints (the policy exported to the sampler ``rl-ppo-torchrl``).
 """
@@ -23,10 +23,14 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 from torchrl.record.loggers import TensorboardLogger
 
-from agents.models.rl import policy_from_torchrl, warm_start_encoder
-from agents.torchrl import make_actor, make_value
+from tqdm import tqdm
+
+from agents.rl.policies import policy_from_torchrl, warm_start_encoder
+from agents.rl.torchrl import make_actor, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl_common import Evaluator, RLArgs, RunResult, check_args, fmt_seconds, human_bytes, write_config
+from train.rl.args import RLArgs, RunResult, check_args, run_config
+from train.rl.evaluation import Evaluator
+from train.run import TrainingRun
 
 
 def make_env(args: RLArgs, seed: int) -> GymWrapper:
@@ -48,9 +52,9 @@ def train(args: RLArgs) -> RunResult:
         raise ValueError("the TorchRL script trains PPO only (use --lib sb3 for SAC)")
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    run_dir = args.run_dir()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    write_config(args, run_dir)
+    run = TrainingRun.create("rl", f"torchrl-{args.algo}-{args.task}", args.seed, out=args.out,
+                             overwrite=args.overwrite)
+    run.write_config(run_config(args))
 
     # 1. environments
     probe = make_rl_env(args.task, split="train", **args.env_kwargs())
@@ -76,14 +80,13 @@ def train(args: RLArgs) -> RunResult:
     loss_module = ClipPPOLoss(actor, value, clip_epsilon=args.clip_range, entropy_coeff=args.ent_coef,
                               normalize_advantage=False)
     optimiser = torch.optim.Adam(loss_module.parameters(), lr=args.lr)
-    logger = TensorboardLogger(exp_name=f"ppo_{args.task}", log_dir=str(run_dir / "tb"))
-    evaluator = Evaluator(args, run_dir, lambda: policy_from_torchrl(actor),
+    logger = TensorboardLogger(exp_name=f"ppo_{args.task}", log_dir=str(run.path("tb")))
+    evaluator = Evaluator(args, run, lambda: policy_from_torchrl(actor),
                           log=lambda name, v, step: logger.log_scalar(name, v, step=step))
     print(f"TorchRL PPO on {args.task}: {sum(p.numel() for p in loss_module.parameters()):,} parameters, "
-          f"{frames_per_batch} frames per batch, run directory {run_dir}")
+          f"{frames_per_batch} frames per batch, run directory {run.dir}")
 
     # 4. the loop: collect a batch, GAE, epochs of minibatch updates, log, evaluate
-    from tqdm import tqdm
     bar = tqdm(total=args.total_steps, unit="step", disable=not args.progress, dynamic_ncols=True)
     started, steps, batch_bytes = time.perf_counter(), 0, 0
     evaluator(0)
@@ -110,7 +113,7 @@ def train(args: RLArgs) -> RunResult:
         bar.update(batch.numel())
         if evaluator.due(steps):
             row = evaluator(steps)
-            bar.write(f"  step {steps:>7}: val success {row['success']:.2f}, median nodes {row['median_nodes']:.0f} "
+            bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
                       f"({row['eval_wall_s']:.0f} s)")
     bar.close()
     collector.shutdown()
@@ -120,11 +123,6 @@ def train(args: RLArgs) -> RunResult:
     best = evaluator.finish(steps)
     if not env.is_closed:
         env.close()
-    print(f"trained {steps:,} steps in {fmt_seconds(train_time)} (batches of {human_bytes(batch_bytes)}); "
-          f"policy {best}")
-    return RunResult(best, steps, train_time, batch_bytes, evaluator.rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    from train.rl import main as rl_main
-    return rl_main(["--lib", "torchrl", *(argv or [])])
+    print(f"trained {steps:,} steps in {tqdm.format_interval(train_time)} (batches of "
+          f"{tqdm.format_sizeof(batch_bytes, 'B', 1024)}); policy {best}")
+    return RunResult(run.dir, best, steps, train_time, batch_bytes, evaluator.rows)

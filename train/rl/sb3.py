@@ -3,13 +3,13 @@
     gnn-mp train rl --lib sb3 --algo ppo --task maze2d --total-steps 50000
     gnn-mp train rl --lib sb3 --algo sac --task pendulum --total-steps 20000
 
-Read top to bottom: flags (``train.rl_common.RLArgs``, one dataclass) -> vectorised
+Read top to bottom: flags (``train.rl.args.RLArgs``, one dataclass) -> vectorised
 ``make_rl_env`` envs (tree view of ``--view-nodes`` rows, actions in [-1, 1]) -> PPO or SAC with
 ``TreeFeaturesExtractor`` (the shared ``TreeEncoder``) -> optional warm start of the encoder
 (``--init-from``) -> ``learn`` with a progress bar and an evaluation callback (split ``val``,
 every ``--eval-every`` steps: checkpoint ``policy.pt``/``best.pt`` in the one checkpoint format,
 ``evaluations.json``, TensorBoard scalars) -> learning curve, optional ``--tune-mix`` and
-``--ship``. Outputs go to ``runs/`` (see :mod:`train.rl_common`).
+``--ship``. Outputs go to a run directory (see :mod:`train.rl.args`).
 """
 
 from __future__ import annotations
@@ -22,11 +22,15 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-from agents.models.rl import policy_from_sb3, warm_start_encoder
-from agents.sb3 import TreeFeaturesExtractor
+from tqdm import tqdm
+
+from agents.rl.policies import policy_from_sb3, warm_start_encoder
+from agents.rl.sb3 import TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl_common import (Evaluator, RLArgs, RunResult, check_args, fmt_seconds, human_bytes, sb3_buffer_nbytes,
-                             write_config)
+from train.rl.args import RLArgs, RunResult, check_args, run_config
+from train.rl.evaluation import Evaluator
+from train.rl.memory import sb3_buffer_nbytes
+from train.run import TrainingRun
 
 
 class EvalCallback(BaseCallback):
@@ -44,7 +48,7 @@ class EvalCallback(BaseCallback):
             row = self.evaluator(self.num_timesteps)
             self.logger.dump(self.num_timesteps)
             lead = "\n" if self.evaluator.args.progress else ""   # below the progress bar
-            print(f"{lead}  step {row['steps']:>7}: val success {row['success']:.2f}, "
+            print(f"{lead}  step {row['steps']:>7}: val success {row['success_rate']:.2f}, "
                   f"median nodes {row['median_nodes']:.0f} ({row['eval_wall_s']:.0f} s)", flush=True)
         return True
 
@@ -57,7 +61,6 @@ class ProgressCallback(BaseCallback):
         self.total, self.bar = total, None
 
     def _on_training_start(self) -> None:
-        from tqdm import tqdm
         self.bar = tqdm(total=self.total, unit="step", dynamic_ncols=True)
 
     def _on_step(self) -> bool:
@@ -68,12 +71,12 @@ class ProgressCallback(BaseCallback):
         self.bar.close()
 
 
-def build_model(args: RLArgs, env) -> PPO | SAC:
+def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
     """PPO or SAC over the env with the tree encoder as features extractor."""
     policy_kwargs = {"features_extractor_class": TreeFeaturesExtractor,
                      "features_extractor_kwargs": args.encoder_kwargs(), "net_arch": list(args.net_arch)}
     common = {"learning_rate": args.lr, "gamma": args.gamma, "batch_size": args.batch_size, "seed": args.seed,
-              "device": "cpu", "tensorboard_log": str(args.run_dir() / "tb"), "verbose": 0}
+              "device": "cpu", "tensorboard_log": str(run_dir / "tb"), "verbose": 0}
     if args.algo == "ppo":
         policy_kwargs["log_std_init"] = args.log_std_init
         return PPO("MultiInputPolicy", env, n_steps=args.n_steps, n_epochs=args.n_epochs,
@@ -91,9 +94,8 @@ def encoders_of(model: PPO | SAC) -> list:
 def train(args: RLArgs) -> RunResult:
     check_args(args)
     torch.set_num_threads(args.threads)
-    run_dir = args.run_dir()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    write_config(args, run_dir)
+    run = TrainingRun.create("rl", f"sb3-{args.algo}-{args.task}", args.seed, out=args.out, overwrite=args.overwrite)
+    run.write_config(run_config(args))
 
     # 1. environments: n_envs copies of make_rl_env (tree view + actions in [-1, 1]), seeded
     env_kwargs = {"task": args.task, "split": "train", **args.env_kwargs()}
@@ -101,21 +103,21 @@ def train(args: RLArgs) -> RunResult:
                            vec_env_cls=SubprocVecEnv if args.parallel else DummyVecEnv)
 
     # 2. the agent, the optional warm start of its encoder(s)
-    model = build_model(args, vec_env)
+    model = build_model(args, vec_env, run.dir)
     if args.init_from is not None:
         source = warm_start_encoder(args.init_from, *encoders_of(model))
         print(f"encoder initialised from {args.init_from} ({source})")
     buffer = model.rollout_buffer if args.algo == "ppo" else model.replay_buffer
     buffer_bytes = sb3_buffer_nbytes(buffer)
     print(f"{args.algo.upper()} on {args.task}: {sum(p.numel() for p in model.policy.parameters()):,} parameters, "
-          f"{'rollout' if args.algo == 'ppo' else 'replay'} buffer {human_bytes(buffer_bytes)}, "
-          f"run directory {run_dir}")
+          f"{'rollout' if args.algo == 'ppo' else 'replay'} buffer {tqdm.format_sizeof(buffer_bytes, 'B', 1024)}, "
+          f"run directory {run.dir}")
 
     # 3. evaluation on split val (the policy exported to the sampler the benchmark runs)
     def log(name: str, value: float, step: int) -> None:
         model.logger.record(name, value)
 
-    evaluator = Evaluator(args, run_dir, lambda: policy_from_sb3(model), log=log)
+    evaluator = Evaluator(args, run, lambda: policy_from_sb3(model), log=log)
 
     # 4. learn
     callbacks = [EvalCallback(evaluator)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
@@ -126,10 +128,5 @@ def train(args: RLArgs) -> RunResult:
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(model.num_timesteps)
     vec_env.close()
-    print(f"trained {model.num_timesteps:,} steps in {fmt_seconds(train_time)}; policy {best}")
-    return RunResult(best, int(model.num_timesteps), train_time, buffer_bytes, evaluator.rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    from train.rl import main as rl_main
-    return rl_main(["--lib", "sb3", *(argv or [])])
+    print(f"trained {model.num_timesteps:,} steps in {tqdm.format_interval(train_time)}; policy {best}")
+    return RunResult(run.dir, best, int(model.num_timesteps), train_time, buffer_bytes, evaluator.rows)

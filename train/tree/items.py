@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from agents.models.tree_samplers import causal_knn, wrap_periodic
-from train.tree_samplers.data import TreeDataset, reindex
+from agents.tree.models import causal_knn, wrap_periodic
+from train.tree.data import TreeDataset, reindex
 
 
 @dataclass

@@ -179,7 +179,7 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
         for name in samplers:
             kwargs = {"checkpoint": checkpoints[name]} if name in checkpoints else {}
             try:
-                sampler = load_sampler(name, space.low, space.high, task=task, seed=args.seed, **kwargs)
+                sampler = load_sampler(name, task=task, seed=args.seed, **kwargs)
             except (ValueError, FileNotFoundError):   # not for this task, or no weights shipped for it
                 out[name, task] = None
                 continue

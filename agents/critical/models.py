@@ -47,7 +47,7 @@ NODE_FEATURES_WITH_POSITION = 7
 READOUTS = ("max", "attention")
 #: Which edges the graph filters run on: the problem's collision-free edges only, or every
 #: edge of the fixed r-disc graph (then the obstacle indicator reaches free nodes). The
-#: models only record the choice; :mod:`agents.critical_data` builds the edges.
+#: models only record the choice; :mod:`agents.critical.data` builds the edges.
 EDGE_MODES = ("valid", "all")
 #: Attention readout: what each node's score sees besides its own embedding: nothing, or the
 #: graph's max-pooled embedding (global context, like the paper's max-pool head).

@@ -1,11 +1,11 @@
 """A learned tree sampler that *scores candidate samples* (the pendulum's GNN head).
 
-The node-mixture head of :class:`agents.models.tree_samplers.TreeGNN` places samples around
+The node-mixture head of :class:`agents.tree.models.TreeGNN` places samples around
 tree nodes; on kinodynamic problems (the pendulum) where a sample lands matters less than
 *which node the planner will extend* and toward where, and the mixture did not beat uniform
 sampling there. :class:`TreeGNNScorer` keeps the causal tree GNN and replaces the head by a
 classifier over candidate samples: draw ``M`` uniform candidates, score each, pick one with
-``softmax(logit / temperature)`` (:class:`agents.samplers.tree_scorer.TreeScorerSampler`).
+``softmax(logit / temperature)`` (:class:`agents.tree.samplers.TreeScorerSampler`).
 
 **Static (causal) layers.** As the tree GNN: node ``n`` receives messages from its parent and
 from its ``knn`` nearest *earlier* nodes of its tree (nearest under the planner's metric,
@@ -23,7 +23,7 @@ the count of each edge type). It tells the head how much the tree has already gr
     logit(s) = MLP([h_o, frontier_sum_o / (1 + count_o), log1p(count_o), candidate features(s, x_o, goal)])
 
 Trained as a classifier (binary cross-entropy): did this sample create the next node of the
-eventual solution path? (:class:`train.tree_samplers.models.ScorerAdapter`.)
+eventual solution path? (:class:`train.tree.adapters.ScorerAdapter`.)
 
 Node inputs are the environment's features (``[x_init - x_n, x_goal - x_n, tree_id]``), the
 node's state, the goal, ``sin``/``cos`` of every periodic coordinate among them and the
@@ -40,7 +40,7 @@ from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
 
 from agents.checkpoints import register_model_kind
-from agents.models.tree_samplers import (
+from agents.tree.models import (
     RelativeConv,
     causal_knn,
     fixed_vector,

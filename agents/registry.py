@@ -1,0 +1,150 @@
+"""The sampler registry: every sampler is built by name through :func:`load_sampler`.
+
+    sampler = load_sampler("goal-bias", task="maze2d", seed=0)            # bounds from the TaskSpec
+    sampler = load_sampler("gnn", task="arm")                              # the shipped weights
+    sampler = load_sampler("gnn", task="arm", checkpoint="runs/.../model.pt")
+    sampler = load_sampler("uniform", bounds=(low, high))                  # a box of your own
+
+A factory receives ``(low, high, task, seed, checkpoint, **settings)``; the registry refuses,
+in one line each, an unknown name, an unknown task, bounds that are not the task's, a setting
+the sampler does not take (a typo such as ``goal_bais``) and a checkpoint of another task.
+Learned samplers load on first use (listing the registry, ``gnn-mp samplers``, imports no
+torch_geometric).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from agents.samplers.base import Sampler
+
+
+@dataclass(frozen=True)
+class SamplerEntry:
+    """A registered sampler: how to build it and what it accepts."""
+
+    factory: Callable[..., "Sampler"]
+    description: str = ""
+    #: Keyword settings the factory accepts besides checkpoint (None: decided by the checkpoint).
+    settings: tuple[str, ...] | None = ()
+    #: Whether it needs weights (then ``task=`` or ``checkpoint=``).
+    learned: bool = False
+
+
+SAMPLERS: dict[str, SamplerEntry] = {}
+
+
+def register_sampler(name: str, factory: Callable[..., "Sampler"], description: str = "", *,
+                     settings: tuple[str, ...] | None = (), learned: bool = False) -> None:
+    """Add a sampler to the registry (names are unique)."""
+    if name in SAMPLERS:
+        raise ValueError(f"sampler {name!r} is already registered")
+    SAMPLERS[name] = SamplerEntry(factory, description, settings, learned)
+
+
+def available_samplers() -> list[str]:
+    return sorted(SAMPLERS)
+
+
+def descriptions() -> dict[str, str]:
+    return {name: entry.description for name, entry in SAMPLERS.items()}
+
+
+def _bounds_for(name: str, task: str | None, bounds: tuple[Any, Any] | None) -> tuple[np.ndarray, np.ndarray]:
+    from gnn_mp_envs.registration import task_spec
+    if task is None:
+        if bounds is None:
+            raise ValueError(f"sampler {name!r} needs task=NAME (bounds from its TaskSpec) or bounds=(low, high)")
+        low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
+        return low, high
+    spec_low, spec_high = task_spec(task).state_bounds()
+    if bounds is not None:
+        low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
+        if low.shape != spec_low.shape or not (np.allclose(low, spec_low, atol=1e-5)
+                                               and np.allclose(high, spec_high, atol=1e-5)):
+            raise ValueError(f"bounds {low.tolist()}..{high.tolist()} are not task {task!r}'s "
+                             f"({spec_low.tolist()}..{spec_high.tolist()})")
+    return spec_low, spec_high
+
+
+def load_sampler(name: str, task: str | None = None, *, seed: int | None = None,
+                 checkpoint: str | Path | None = None, bounds: tuple[Any, Any] | None = None,
+                 **settings: Any) -> "Sampler":
+    """Build the sampler ``name`` for ``task`` (its sampling bounds from the task's
+    :class:`~gnn_mp_envs.registration.TaskSpec`), or for ``bounds=(low, high)`` without a task."""
+    try:
+        entry = SAMPLERS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown sampler {name!r}; known: {', '.join(available_samplers())}") from None
+    if task is not None and not isinstance(task, str):
+        raise ValueError(f"task must be a task name, got {type(task).__name__} (bounds go in bounds=(low, high))")
+    if entry.settings is not None:
+        unknown = sorted(set(settings) - set(entry.settings))
+        if unknown:
+            takes = ", ".join(entry.settings) or "no settings"
+            raise ValueError(f"sampler {name!r} takes {takes}; unknown: {', '.join(unknown)}")
+    if checkpoint is not None and not entry.learned:
+        raise ValueError(f"sampler {name!r} has no weights (checkpoint= is for learned samplers)")
+    if entry.learned and task is None and checkpoint is None:
+        raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=PATH")
+    if entry.learned and task is None:
+        task = _checkpoint_task(checkpoint)
+    low, high = _bounds_for(name, task, bounds)
+    extra = {"checkpoint": checkpoint} if entry.learned else {}
+    return entry.factory(low=low, high=high, task=task, seed=seed, **extra, **settings)
+
+
+def _checkpoint_task(checkpoint: str | Path) -> str:
+    """The task a checkpoint's weights were trained for (``meta["task"]``)."""
+    from agents.checkpoints import read_checkpoint
+    task = (read_checkpoint(checkpoint).get("meta") or {}).get("task")
+    if not isinstance(task, str):
+        raise ValueError(f"{checkpoint}: names no task (meta['task']); pass task=")
+    return task
+
+
+# ---------------------------------------------------------------------------- built-in samplers
+def _uniform(low, high, task=None, seed=None):
+    from agents.samplers.baselines import UniformSampler
+    return UniformSampler(low, high, seed)
+
+
+def _goal_bias(low, high, task=None, seed=None, goal_bias=0.05):
+    from agents.samplers.baselines import GoalBiasSampler
+    return GoalBiasSampler(low, high, seed, goal_bias)
+
+
+def _lazy(module: str, function: str, name: str) -> Callable[..., "Sampler"]:
+    """A factory that imports ``module`` (torch_geometric and friends) only when a sampler is built."""
+    def factory(**kwargs):
+        return getattr(importlib.import_module(module), function)(name, **kwargs)
+    return factory
+
+
+register_sampler("uniform", _uniform, "uniform over the state bounds")
+register_sampler("goal-bias", _goal_bias, "uniform with 5% samples at the active tree's target",
+                 settings=("goal_bias",))
+register_sampler("gnn", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn"),
+                 "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree (pendulum: a scorer of "
+                 "16 uniform candidates); shipped weights per task with their uniform/goal mix",
+                 settings=None, learned=True)
+register_sampler("cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "cvae"),
+                 "learned baseline (Ichter et al. 2018): CVAE on start, goal and obstacles; ignores the tree",
+                 settings=None, learned=True)
+register_sampler("gnn-cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn-cvae"),
+                 "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True)
+for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d and pendulum"),
+                             ("rl-sac", "SB3 SAC", "no shipped weights"),
+                             ("rl-ppo-torchrl", "TorchRL PPO", "no shipped weights")):
+    register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),
+                     f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
+                     settings=("uniform_mix", "deterministic"), learned=True)
+
+
+__all__ = ["SAMPLERS", "SamplerEntry", "available_samplers", "descriptions", "load_sampler", "register_sampler"]

@@ -1,0 +1,207 @@
+"""Samplers over the growing tree: the GNN (node mixture), the GNN sample scorer (the pendulum's
+GNN head), the CVAE and the GNN-CVAE of :mod:`agents.tree.models` / :mod:`agents.tree.scorer`.
+
+Each is a :class:`~agents.samplers.base.ModelSampler` (the one uniform / goal / model mixture,
+one numpy stream); :meth:`model_sample` is the model's part:
+
+* ``gnn`` (:class:`TreeGNNSampler`): a node of the tree ~ softmax(key . q / temperature), then a
+  Gaussian around its learned offset (scale times ``sigma_scale``);
+* ``gnn`` on tasks whose ``TaskSpec.gnn_head`` is ``"scorer"`` (:class:`TreeScorerSampler`):
+  ``candidates`` uniform states, one drawn with softmax(score / temperature);
+* ``cvae`` (:class:`TreeCVAESampler`): decodes ``proposals`` states per forward pass for the
+  problem (start, goal, obstacles) and spends them over the next steps; it ignores the tree;
+* ``gnn-cvae`` (:class:`TreeGNNCVAESampler`): the causal GNN's tree context and a latent draw,
+  decoded into the next sample.
+
+**Inference cost.** The GNN models read the tree through the incremental engines of
+:mod:`agents.tree.engine` (each new node embedded once); ``tools/bench_sampler.py`` reports the
+cost at 1,000 nodes. The batched TensorDict path (:meth:`propose`) runs ``act`` per
+observation with cleared caches (the same distribution).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import torch
+
+from agents.samplers.base import ModelSampler
+from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
+from agents.tree.models import TreeCVAE, TreeGNN, TreeGNNCVAE
+from agents.tree.scorer import TreeGNNScorer
+
+
+class _EngineSampler(ModelSampler):
+    """A sampler that reads the tree through an incremental engine (per-episode caches)."""
+
+    engine: IncrementalTreeGNN | IncrementalTreeScorer
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if hasattr(self, "engine"):
+            self.engine.clear()
+
+    def act_stateless(self, obs: Mapping) -> np.ndarray:
+        self.engine.clear()
+        return self.act(obs)
+
+    @staticmethod
+    def active(obs: Mapping) -> int:
+        return int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+
+    def tree_context(self, obs: Mapping) -> tuple[np.ndarray, int]:
+        """Ingest the observation's new nodes; the tree context ``q`` and the active tree."""
+        self.engine.ingest(obs)
+        active = self.active(obs)
+        q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
+        return q, active
+
+
+class TreeGNNSampler(_EngineSampler):
+    """The GNN sampler (Algorithm 1): a node ~ softmax(key . q / temperature), then a Gaussian
+    around its learned offset (scale times ``sigma_scale``)."""
+
+    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale")
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNN,
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0, temperature: float = 1.0,
+                 sigma_scale: float = 1.0) -> None:
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
+                         periodic=model.periodic.numpy())
+        self.model = model.eval()
+        self.engine = IncrementalTreeGNN(model)
+        self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        q, active = self.tree_context(obs)
+        e = self.engine
+        p, shift = e.mixture(q, active, self.temperature)
+        m = min(int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right")), e.n - 1)
+        sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
+        return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
+
+
+class TreeScorerSampler(_EngineSampler):
+    """``candidates`` uniform states, one drawn with ``softmax(score / temperature)`` of the
+    :class:`TreeGNNScorer` (each candidate scored with its nearest node of the active tree under
+    the planner's metric: the node the planner would extend)."""
+
+    settings = ("uniform_mix", "goal_bias", "candidates", "temperature")
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNScorer,
+                 uniform_mix: float = 0.2, goal_bias: float = 0.05, candidates: int = 16,
+                 temperature: float = 1.0) -> None:
+        if int(candidates) < 1 or not temperature > 0:
+            raise ValueError(f"candidates must be >= 1 and temperature > 0, got {candidates}, {temperature}")
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
+                         periodic=model.periodic.numpy())
+        self.model = model.eval()
+        self.engine = IncrementalTreeScorer(model)
+        self.candidates, self.temperature = int(candidates), float(temperature)
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        e = self.engine
+        e.ingest(obs)
+        cands = self.rng.uniform(self.low, self.high, size=(self.candidates, e.d))
+        logits = e.logits(cands, e.nearest(cands, self.active(obs))) / self.temperature
+        p = np.exp(logits - logits.max())
+        c = np.cumsum(p)
+        i = min(int(np.searchsorted(c, self.rng.random() * c[-1], side="right")), self.candidates - 1)
+        return cands[i]
+
+
+class TreeCVAESampler(ModelSampler):
+    """Ichter et al.'s CVAE: decodes ``proposals`` states per forward pass for the problem
+    (start, goal, obstacles) and spends them over the next steps; it does not read the tree."""
+
+    settings = ("uniform_mix", "goal_bias", "proposals")
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeCVAE,
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 32) -> None:
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
+                         periodic=model.periodic.numpy())
+        self.model = model.eval()
+        self.proposals = int(proposals)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self._queue: list[np.ndarray] = []
+        self._key = None
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        key = b"".join(np.asarray(obs[k]).tobytes() for k in ("start", "goal", "obstacles"))
+        if key != self._key:
+            self._queue, self._key = [], key
+        if not self._queue:
+            condition = cvae_condition(self.model, obs)
+            z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
+                                dtype=torch.float32)
+            with torch.no_grad():
+                self._queue = list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
+        return self._queue.pop()
+
+
+class TreeGNNCVAESampler(_EngineSampler):
+    """The GNN-CVAE: the causal GNN summarises the tree (incrementally, as the GNN sampler),
+    the decoder turns a latent draw and that context into the next sample."""
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNCVAE,
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0) -> None:
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
+                         periodic=model.gnn.periodic.numpy())
+        self.model = model.eval()
+        self.engine = IncrementalTreeGNN(model.gnn)
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        q, _ = self.tree_context(obs)
+        z = torch.as_tensor(self.rng.standard_normal(self.model.latent_channels), dtype=torch.float32)
+        with torch.no_grad():
+            return self.model.decode(z[None], torch.as_tensor(q, dtype=torch.float32)[None])[0].double().numpy()
+
+
+def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
+    """``[start, goal, obstacle rows]`` of one observation, states scaled as the model's."""
+    center, scale = model.state_center.numpy(), model.state_scale.numpy()
+    start = (np.asarray(obs["start"], np.float32) - center) / scale
+    goal = (np.asarray(obs["goal"], np.float32) - center) / scale
+    obstacles = np.asarray(obs["obstacles"], np.float32).reshape(-1)
+    return torch.as_tensor(np.concatenate([start, goal, obstacles]), dtype=torch.float32)
+
+
+# ---------------------------------------------------------------------------- loading
+#: Checkpoint kind -> sampler class.
+KIND_SAMPLERS: dict[str, type[ModelSampler]] = {
+    "tree/gnn": TreeGNNSampler, "tree/gnn-scorer": TreeScorerSampler,
+    "tree/cvae": TreeCVAESampler, "tree/gnn-cvae": TreeGNNCVAESampler,
+}
+#: Sampler name -> the checkpoint kinds it accepts (a task ships the GNN head its TaskSpec names:
+#: the node mixture ``tree/gnn``, or the sample scorer ``tree/gnn-scorer``).
+NAME_KINDS: dict[str, tuple[str, ...]] = {"gnn": ("tree/gnn", "tree/gnn-scorer"), "cvae": ("tree/cvae",),
+                                          "gnn-cvae": ("tree/gnn-cvae",)}
+
+
+def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | None = None,
+                      seed: int | None = None, checkpoint: str | Path | None = None, **settings) -> ModelSampler:
+    """A tree sampler with its weights (``checkpoint`` or the shipped file for ``task``) and the
+    sampling settings stored with them (``meta["sampler"]``), which ``settings`` override."""
+    from agents.checkpoints import load_checkpoint, resolve_checkpoint
+    path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train sampler --task {task} --model {name}")
+    model, record = load_checkpoint(path, expected_kind=NAME_KINDS[name])
+    cls = KIND_SAMPLERS[record["kind"]]
+    meta = record.get("meta") or {}
+    unknown = sorted(set(settings) - set(cls.settings))
+    if unknown:
+        raise ValueError(f"sampler {name!r} ({record['kind']}) takes {', '.join(cls.settings)}; "
+                         f"unknown: {', '.join(unknown)}")
+    trained_for = meta.get("task")
+    if task is not None and trained_for is not None and trained_for != task:
+        raise ValueError(f"{path}: weights trained for task {trained_for!r}, not {task!r}")
+    chosen = {k: v for k, v in dict(meta.get("sampler") or {}).items() if k in cls.settings}
+    chosen.update(settings)
+    return cls(low, high, seed, model=model, **chosen)
+
+
+__all__ = ["KIND_SAMPLERS", "NAME_KINDS", "TreeCVAESampler", "TreeGNNCVAESampler", "TreeGNNSampler",
+           "TreeScorerSampler", "cvae_condition", "load_tree_sampler"]

@@ -1,0 +1,145 @@
+"""The incremental numpy engines against their torch models, on what makes an action.
+
+For every shipped tree model (the GNN node mixture on RRT and BiRRT, the GNN-CVAE's tree
+context and decoder, the pendulum's sample scorer), a tree is grown to a few hundred nodes
+with uniform samples and fed to the engine one step at a time; at several sizes the engine's
+offsets, log-sigmas, keys, mixture weights, component shift, tree context, decoded state and
+candidate scores must equal the torch model's forward pass over the whole prefix (float64) to 1e-5.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+import gnn_mp_envs  # noqa: F401
+from agents.checkpoints import load_checkpoint, shipped_checkpoint
+from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
+from agents.tree.models import causal_knn
+from tests.helpers import uniform_policy
+
+TOL = 1e-5
+
+
+def grown(task: str, min_nodes: int, max_steps: int = 1500):
+    """Copies of every observation of a uniform run on validation problem 0 (goal reached or not)."""
+    spec = gnn_mp_envs.task_spec(task)
+    env = gym.make(spec.env_id, split="val", copy_observations=False, disable_env_checker=True)
+    policy = uniform_policy(env, 0)
+    for index in range(10):
+        obs, _ = env.reset(seed=0, options={"index": index})
+        snapshots = [{k: np.array(v) for k, v in obs.items()}]
+        for _ in range(max_steps):
+            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            snapshots.append({k: np.array(v) for k, v in obs.items()})
+            if terminated or truncated:
+                break
+        if int(snapshots[-1]["num_nodes"][0]) >= min_nodes:
+            env.close()
+            return snapshots
+    raise AssertionError(f"no {task} validation problem grew {min_nodes} nodes")
+
+
+def prefix(obs, model):
+    """The torch inputs of one observation: nodes, features, parents, tree ids, causal k-NN (float64)."""
+    n = int(obs["num_nodes"][0])
+    d = model.state_dim
+    nodes = torch.as_tensor(obs["nodes"][:n], dtype=torch.float64)
+    feats = torch.as_tensor(obs["node_features"][:n], dtype=torch.float64)
+    tid = feats[:, 2 * d].long()
+    parent = torch.as_tensor(obs["parent"][:n]).long()
+    return n, nodes, feats, parent, tid
+
+
+def torch_mixture(model, obs, temperature):
+    """The torch model's node heads, context, mixture weights and shift at one observation."""
+    n, nodes, feats, parent, tid = prefix(obs, model)
+    knn = causal_knn(nodes, tid, model.knn, model.step_scale, model.periodic)
+    with torch.no_grad():
+        h = model.embed(nodes, feats, parent, knn)
+        key, offset, log_sigma = model.node_heads(h)
+        onehot = F.one_hot(tid, model.num_trees).double()
+        counts = onehot.sum(0)
+        means = (onehot.T @ h) / counts.clamp(min=1)[:, None]
+        active = torch.as_tensor(obs["active_tree"]).long()
+        start = torch.as_tensor(obs["start"], dtype=torch.float64)[None]
+        goal = torch.as_tensor(obs["goal"], dtype=torch.float64)[None]
+        q = model.context(start, goal, active, means[None], counts[None])
+        weights = torch.softmax(model.logits(q, key, temperature)[0], -1)
+        shift = model.shift(q, active)[0]
+    return {"key": key.numpy(), "offset": offset.numpy(), "log_sigma": log_sigma.numpy(), "q": q[0].numpy(),
+            "weights": weights.numpy(), "shift": shift.numpy()}
+
+
+def check_mixture_engine(gnn, snapshots, temperature=0.5, decoder=None):
+    engine = IncrementalTreeGNN(gnn, capacity=16)           # grows its caches on the way
+    checked = 0
+    for i, obs in enumerate(snapshots):
+        engine.ingest(obs)
+        n = int(obs["num_nodes"][0])
+        if i not in (len(snapshots) // 3, 2 * len(snapshots) // 3, len(snapshots) - 1):
+            continue
+        ref = torch_mixture(gnn, obs, temperature)
+        active = int(obs["active_tree"][0])
+        q = engine.context(obs["start"].astype(np.float64), obs["goal"].astype(np.float64), active)
+        p, shift = engine.mixture(q, active, temperature)
+        assert engine.n == n
+        np.testing.assert_allclose(engine.keys[:n], ref["key"], atol=TOL)
+        np.testing.assert_allclose(engine.offsets[:n], ref["offset"], atol=TOL)
+        np.testing.assert_allclose(engine.log_sigma[:n], ref["log_sigma"], atol=TOL)
+        np.testing.assert_allclose(q, ref["q"], atol=TOL)
+        np.testing.assert_allclose(p, ref["weights"], atol=TOL)
+        np.testing.assert_allclose(shift, ref["shift"], atol=TOL)
+        if decoder is not None:       # the GNN-CVAE decodes a latent draw with that context
+            z = torch.randn(1, decoder.latent_channels, generator=torch.Generator().manual_seed(i), dtype=torch.float64)
+            with torch.no_grad():
+                mine = decoder.decode(z, torch.as_tensor(q)[None])
+                theirs = decoder.decode(z, torch.as_tensor(ref["q"])[None])
+            np.testing.assert_allclose(mine.numpy(), theirs.numpy(), atol=TOL)
+        checked += 1
+    assert checked == 3
+
+
+@pytest.mark.parametrize("task,min_nodes", [("maze2d", 200), ("arm", 60)])
+def test_gnn_mixture_engine_equals_the_torch_model(task, min_nodes):
+    model, record = load_checkpoint(shipped_checkpoint("gnn", task), expected_kind="tree/gnn")
+    snapshots = grown(task, min_nodes)
+    assert model.num_trees == (2 if task == "arm" else 1)
+    check_mixture_engine(model.double(), snapshots, temperature=record["meta"]["sampler"]["temperature"])
+
+
+@pytest.mark.parametrize("task,min_nodes", [("maze2d", 200), ("pendulum", 200), ("arm", 60)])
+def test_gnn_cvae_engine_equals_the_torch_model(task, min_nodes):
+    model, _ = load_checkpoint(shipped_checkpoint("gnn-cvae", task), expected_kind="tree/gnn-cvae")
+    model = model.double()
+    check_mixture_engine(model.gnn, grown(task, min_nodes), decoder=model)
+
+
+def test_scorer_engine_equals_the_torch_model():
+    model, _ = load_checkpoint(shipped_checkpoint("gnn", "pendulum"), expected_kind="tree/gnn-scorer")
+    model = model.double()
+    snapshots = grown("pendulum", 300)
+    engine = IncrementalTreeScorer(model, capacity=16)
+    rng = np.random.default_rng(0)
+    low, high = np.array([-np.pi, -8.0]), np.array([np.pi, 8.0])
+    checked = 0
+    for i, obs in enumerate(snapshots):
+        engine.ingest(obs)
+        if i not in (len(snapshots) // 3, 2 * len(snapshots) // 3, len(snapshots) - 1):
+            continue
+        n, nodes, feats, parent, tid = prefix(obs, model)
+        samples = rng.uniform(low, high, size=(16, 2))
+        near = engine.nearest(samples, 0)
+        s = torch.as_tensor(samples)
+        with torch.no_grad():
+            knn = model.causal_knn(nodes, tid)
+            near_torch = model.nearest(s, nodes)
+            goal = torch.as_tensor(obs["goal"], dtype=torch.float64)
+            ref = model(nodes, feats, parent, knn, goal, near_torch, torch.full_like(near_torch, n), s)
+        np.testing.assert_array_equal(near, near_torch.numpy())
+        np.testing.assert_allclose(engine.logits(samples, near), ref.numpy(), atol=TOL)
+        checked += 1
+    assert checked == 3 and engine.n >= 300

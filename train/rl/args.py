@@ -1,0 +1,172 @@
+"""The flags of ``gnn-mp train rl`` (one dataclass, CleanRL style) and their checks.
+
+The library scripts (:mod:`train.rl.sb3`, :mod:`train.rl.torchrl`) read top to bottom and share
+the evaluation on validation problems (:mod:`train.rl.evaluation`) and the run shell of
+:mod:`train.run`. A run directory holds::
+
+    runs/rl/<lib>-<algo>-<task>-seed<S>-<time>/
+        config.json          every flag of the run (+ library versions, start time)
+        policy.pt (+ .json)  the latest evaluated policy (agents.checkpoints format, weights_only)
+        best.pt (+ .json)    the best one on split ``val`` (success rate, then median nodes)
+        evaluations.json     one row per evaluation (steps, wall time, success rate, nodes, ...)
+        learning_curve.png   val success rate and median nodes against training steps
+        tb/                  TensorBoard logs (`tensorboard --logdir runs/`)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
+
+LIBS = ("sb3", "torchrl")
+ALGOS = ("ppo", "sac")
+#: (lib, algo) -> registry name of the sampler a run's policy becomes
+SAMPLER_NAMES = {("sb3", "ppo"): "rl-ppo", ("sb3", "sac"): "rl-sac", ("torchrl", "ppo"): "rl-ppo-torchrl"}
+
+
+def _mixes(text: str) -> list[float]:
+    import argparse
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers in [0, 1], got {text!r}") from None
+    if not values or not all(0.0 <= v <= 1.0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers in [0, 1], got {text!r}")
+    return values
+
+
+@dataclass
+class RLArgs:
+    """Flags of ``gnn-mp train rl`` (CleanRL style: one line of doc per field)."""
+
+    # --- what to train
+    algo: str = arg("ppo", "algorithm", choices=ALGOS)
+    lib: str = arg("sb3", "library (torchrl: PPO only)", choices=LIBS)
+    task: str = arg("maze2d", "task family: maze2d, pendulum, arm (arm: BiRRT, the action extends active_tree)")
+    planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
+    total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
+    seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=non_negative_int)
+    # --- environment (make_rl_env)
+    n_envs: int = arg(4, "environments stepped together (vectorised)", parse=positive_int)
+    parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
+    view_nodes: int = arg(64, "rows of the tree view the policy sees (roots + most recent nodes)", parse=positive_int)
+    max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)", parse=positive_int)
+    action_frame: str = arg("target", "policy actions in [-1, 1]: offsets from the active tree's target "
+                            "(target) or the rescaled state box (absolute)", choices=("target", "absolute"))
+    step_penalty: float = arg(1.0, "reward: -step_penalty per planner iteration", parse=non_negative_float)
+    collision_check_cost: float = arg(0.0, "reward: -cost per validity check of the step", parse=non_negative_float)
+    success_reward: float = arg(10.0, "reward: +success_reward on the step that finds a path", parse=non_negative_float)
+    progress_reward: float = arg(10.0, "reward shaping: coef of the potential-based progress term "
+                                 "(ProgressReward; 0: the env's reward only)", parse=non_negative_float)
+    reward_scale: float = arg(0.01, "multiply every reward by this (returns of order 1)", parse=positive_float)
+    # --- networks (the shared TreeEncoder + the library's head)
+    hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=positive_int)
+    num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
+    out_channels: int = arg(64, "TreeEncoder graph embedding width", parse=positive_int)
+    conv: str = arg("sage", "TreeEncoder convolution", choices=("sage", "graph", "gcn", "gatv2"))
+    knn: int = arg(0, "TreeEncoder k-NN edges per node (0: tree edges only)", parse=non_negative_int)
+    net_arch: list[int] = arg([64, 64], "hidden widths of the policy and value heads")
+    encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
+                       "sampler's causal TreeGNN, its architecture; what --init-from a tree_gnn checkpoint needs)",
+                       choices=("tree", "tree-gnn"))
+    init_from: Path | None = arg(None, "warm start: copy the backbone weights of this checkpoint (any kind holding "
+                                 "one of the same size, e.g. agents/checkpoints/tree_gnn_maze2d.pt with --encoder tree-gnn)")
+    # --- optimisation
+    lr: float = arg(3e-4, "Adam learning rate", parse=positive_float)
+    gamma: float = arg(0.99, "discount", parse=positive_float)
+    batch_size: int = arg(128, "minibatch size", parse=positive_int)
+    n_steps: int = arg(256, "PPO: steps per env per rollout", parse=positive_int)
+    n_epochs: int = arg(4, "PPO: passes over each rollout", parse=positive_int)
+    gae_lambda: float = arg(0.95, "PPO: GAE lambda", parse=positive_float)
+    clip_range: float = arg(0.2, "PPO: clip range", parse=positive_float)
+    ent_coef: float = arg(0.0, "PPO: entropy bonus", parse=non_negative_float)
+    log_std_init: float = arg(-2.0, "PPO: initial log std of the Gaussian (actions in [-1, 1]; -2: std 0.135, a "
+                              "narrow bias toward the target in the target frame)")
+    buffer_size: int = arg(100_000, "SAC: replay buffer transitions", parse=positive_int)
+    learning_starts: int = arg(1000, "SAC: steps before the first update", parse=non_negative_int)
+    # --- evaluation, outputs
+    eval_every: int = arg(10_000, "evaluate (and checkpoint) every N steps", parse=positive_int)
+    eval_problems: int = arg(10, "problems 0..N-1 of split val per evaluation", parse=positive_int)
+    eval_max_steps: int = arg(4000, "planner iterations per evaluation problem (then a failure)", parse=positive_int)
+    uniform_mix: float = arg(0.5, "probability of a uniform sample instead of the policy's, in training "
+                             "(UniformMixAction) and in the sampler", parse=non_negative_float)
+    tune_mix: list[float] | None = arg(None, "after training, pick the final policy's uniform_mix among these "
+                                       "on split val (e.g. 0.25,0.5,0.75)", parse=_mixes)
+    out: Path | None = arg(None, "run directory (default: runs/rl/<lib>-<algo>-<task>-seed<S>-<time>)")
+    overwrite: bool = arg(False, "reuse an --out that already holds a run")
+    ship: bool = arg(False, "copy the final policy to agents/checkpoints/<sampler>_<task>.pt (+ .json)")
+    progress: bool = arg(True, "hide the progress bar")
+    threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
+        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner, "action_frame": self.action_frame,
+                              "step_penalty": self.step_penalty, "collision_check_cost": self.collision_check_cost,
+                              "success_reward": self.success_reward, "uniform_mix": self.uniform_mix,
+                              "progress_reward": self.progress_reward, "gamma": self.gamma,
+                              "reward_scale": self.reward_scale}
+        if self.max_nodes is not None:
+            kw["max_nodes"] = self.max_nodes
+        return kw
+
+    def encoder_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``agents.encoders.encoder_from_space``."""
+        if self.encoder == "tree-gnn":   # the supervised GNN sampler's architecture, so its weights fit
+            from train.tree.adapters import GNNAdapter, task_scales
+            scales = task_scales(self.task)
+            spec = scales.spec
+            return {"backbone": "tree-gnn", "hidden_channels": GNNAdapter.hidden_channels,
+                    "num_layers": GNNAdapter.num_layers, "knn": GNNAdapter.knn, "step_scale": scales.step_scale,
+                    "periodic": list(spec.periodic), "num_trees": spec.num_trees(spec.env_id_for(self.planner))}
+        return {"hidden_channels": self.hidden_channels, "num_layers": self.num_layers,
+                "out_channels": self.out_channels, "conv": self.conv, "knn": self.knn}
+
+    @property
+    def sampler_name(self) -> str:
+        return SAMPLER_NAMES[(self.lib, self.algo)]
+
+
+@dataclass
+class RunResult:
+    """What a training script returns."""
+
+    run_dir: Path                       # the run directory
+    best: Path                          # the best policy on split val (best.pt)
+    steps: int                          # environment steps trained
+    train_seconds: float                # wall time of the training loop (evaluations included)
+    buffer_bytes: int                   # SB3: the rollout/replay buffer's arrays; TorchRL: one batch
+    evaluations: list[dict[str, Any]]   # the rows of evaluations.json
+
+
+def check_args(args: RLArgs) -> None:
+    """One-line ``ValueError`` for combinations that cannot run."""
+    from gnn_mp_envs.registration import task_spec
+    if (args.lib, args.algo) not in SAMPLER_NAMES:
+        raise ValueError(f"--lib {args.lib} --algo {args.algo} is not available "
+                         f"(available: {', '.join(f'{l}/{a}' for l, a in SAMPLER_NAMES)})")
+    task_spec(args.task)
+    if args.view_nodes < 2:
+        raise ValueError("--view-nodes must be >= 2")
+    if args.init_from is not None and not Path(args.init_from).exists():
+        raise ValueError(f"--init-from {args.init_from}: no such file")
+    if args.uniform_mix > 1:
+        raise ValueError("--uniform-mix must be in [0, 1]")
+
+
+def run_config(args: RLArgs) -> dict[str, Any]:
+    """What ``config.json`` records: every flag, the library versions and the start time."""
+    import time
+    from dataclasses import asdict
+
+    import stable_baselines3
+    import torch
+    import torchrl
+    return {**asdict(args), "versions": {"torch": torch.__version__, "torchrl": torchrl.__version__,
+                                         "stable_baselines3": stable_baselines3.__version__},
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
+
+
+__all__ = ["ALGOS", "LIBS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args", "run_config"]

@@ -1,0 +1,142 @@
+"""Evaluation of an RL policy during training: the policy as the sampler the benchmark runs,
+planned on validation problems through :func:`gnn_mp_envs.evaluation.plan_problems`.
+
+:class:`Evaluator` is called every ``--eval-every`` steps: it exports the library's policy
+(``export() -> (policy, kind, ctor_args)``, :mod:`agents.rl.policies`), plans problems
+``0..N-1`` of split ``val`` with the benchmark's seeding rule, writes ``policy.pt`` (and
+``best.pt`` when it is the best so far: success rate, then fewer median nodes) with their
+``.json`` sidecars, ``evaluations.json`` and TensorBoard scalars. ``finish`` adds the last
+evaluation, the optional ``--tune-mix`` search, the learning curve and ``--ship``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from gnn_mp_envs.utils.io import atomic_write_text
+from train.rl.args import RLArgs
+from train.run import TrainingRun, plot_learning_curve
+
+
+def score(row: dict[str, Any]) -> tuple[float, float]:
+    """Higher is better: success rate, then fewer median nodes."""
+    return (row["success_rate"], -row["median_nodes"])
+
+
+class Evaluator:
+    """Periodic evaluation on split ``val``: checkpoints, ``evaluations.json``, TensorBoard scalars.
+
+    ``log`` receives ``(name, value, step)`` for TensorBoard.
+    """
+
+    def __init__(self, args: RLArgs, run: TrainingRun, export: Callable[[], tuple],
+                 log: Callable[[str, float, int], None] | None = None) -> None:
+        from gnn_mp_envs.evaluation import evaluation_env
+        from gnn_mp_envs.registration import task_spec
+        self.args, self.run, self.export, self.log = args, run, export, log
+        spec = task_spec(args.task)
+        self.low, self.high = spec.state_bounds()
+        self.periodic = spec.periodic_mask(len(self.low)).tolist()
+        self.env = evaluation_env(args.task, "val", planner=args.planner, max_nodes=args.max_nodes)
+        self.rows: list[dict[str, Any]] = []
+        self.best: tuple[float, float] | None = None
+        self.started = time.perf_counter()
+        self.next_at = 0
+
+    def due(self, steps: int) -> bool:
+        return steps >= self.next_at
+
+    def sampler(self, policy: Any, uniform_mix: float | None = None):
+        from agents.rl.sampler import RLSampler
+        mix = self.args.uniform_mix if uniform_mix is None else uniform_mix
+        return RLSampler(self.low, self.high, 0, policy=policy, view_nodes=self.args.view_nodes,
+                         uniform_mix=mix, action_frame=self.args.action_frame, periodic=self.periodic)
+
+    def evaluate(self, sampler: Any) -> dict[str, Any]:
+        """Problems ``0..N-1`` of split ``val`` planned with ``sampler``: the figures of ``summarize``."""
+        from gnn_mp_envs.evaluation import plan_problems, summarize
+        a = self.args
+        return summarize(plan_problems(sampler, self.env, range(a.eval_problems), a.seed, max_steps=a.eval_max_steps,
+                                       progress=a.progress, desc="val"))
+
+    def save(self, name: str, policy: Any, kind: str, ctor_args: dict, uniform_mix: float, **meta: Any) -> Path:
+        from agents.rl.sampler import policy_record
+        obs_spec, full_meta = policy_record(task=self.args.task, view_nodes=self.args.view_nodes, low=self.low,
+                                            high=self.high, uniform_mix=uniform_mix,
+                                            action_frame=self.args.action_frame, periodic=self.periodic,
+                                            meta={"sampler_name": self.args.sampler_name, "planner": self.args.planner,
+                                                  "train_config": json.loads(self.run.path("config.json").read_text()),
+                                                  **meta})
+        return self.run.save_checkpoint(name, policy, kind, ctor_args, obs_spec=obs_spec, meta=full_meta)
+
+    def __call__(self, steps: int) -> dict[str, Any]:
+        """Evaluate the current policy; write ``policy.pt`` (and ``best.pt`` when it is the best)."""
+        import torch
+        a = self.args
+        policy, kind, ctor_args = self.export()
+        train_wall = time.perf_counter() - self.started
+        t0 = time.perf_counter()
+        with torch.no_grad():
+            row = self.evaluate(self.sampler(policy))
+        row = {"steps": int(steps), "train_wall_s": round(train_wall, 1), "eval_wall_s": round(time.perf_counter() - t0, 1),
+               **row}
+        self.rows.append(row)
+        self.save("policy.pt", policy, kind, ctor_args, a.uniform_mix, evaluation=row)
+        if self.best is None or score(row) > self.best:
+            self.best = score(row)
+            self.save("best.pt", policy, kind, ctor_args, a.uniform_mix, evaluation=row)
+        atomic_write_text(self.run.path("evaluations.json"), json.dumps(self.rows, indent=2) + "\n")
+        if self.log is not None:
+            for name in ("success_rate", "median_nodes", "mean_nodes", "median_collision_checks"):
+                self.log(f"eval/{name}", row[name], steps)
+        self.next_at = steps + a.eval_every
+        return row
+
+    def finish(self, steps: int) -> Path:
+        """Last evaluation, uniform-mix tuning (``--tune-mix``), learning curve, shipping."""
+        if not self.rows or self.rows[-1]["steps"] != steps:
+            self(steps)
+        if self.args.tune_mix:   # of the final policy, the one --ship copies
+            self.tune_uniform_mix(self.run.path("policy.pt"))
+        x = [r["steps"] for r in self.rows]
+        plot_learning_curve(self.run.path("learning_curve.png"),
+                            {"median nodes (val)": (x, [r["median_nodes"] for r in self.rows])},
+                            right={"success rate (val)": (x, [r["success_rate"] for r in self.rows])},
+                            right_label="success rate", right_limits=(-0.05, 1.05), xlabel="training steps",
+                            ylabel="median nodes expanded",
+                            title=f"{self.args.lib} {self.args.algo.upper()} on {self.args.task}")
+        if self.args.ship:   # the final policy: what the command trained (best.pt is the val pick)
+            from agents.rl.sampler import RL_SAMPLERS
+            self.run.ship(self.run.path("policy.pt"), self.args.sampler_name, self.args.task,
+                          expected_kind=RL_SAMPLERS[self.args.sampler_name])
+        self.env.close()
+        return self.run.path("best.pt")
+
+    def tune_uniform_mix(self, path: Path) -> float:
+        """Pick ``uniform_mix`` among ``--tune-mix`` on split ``val`` and store it in the checkpoint."""
+        import torch
+
+        from agents.checkpoints import load_checkpoint
+        from agents.rl.sampler import sampler_from_checkpoint
+        rows = []
+        for mix in self.args.tune_mix or []:
+            sampler = sampler_from_checkpoint(path, self.low, self.high, seed=0, uniform_mix=mix)
+            with torch.no_grad():
+                row = self.evaluate(sampler)
+            rows.append({"uniform_mix": mix, **row})
+            print(f"  uniform_mix {mix:.2f}: val success {row['success_rate']:.2f}, "
+                  f"median nodes {row['median_nodes']:.0f}")
+        best = max(rows, key=score)
+        model, record = load_checkpoint(path)
+        meta = {**record["meta"], "sampler": {"uniform_mix": best["uniform_mix"]}, "mix_tuning": rows}
+        self.run.save_checkpoint(path.name, model, record["kind"], record["ctor_args"], obs_spec=record["obs_spec"],
+                                 meta=meta)
+        return best["uniform_mix"]
+
+
+__all__ = ["Evaluator", "score"]
