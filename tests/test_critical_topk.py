@@ -177,8 +177,6 @@ def test_evaluate_rows_carry_model_and_k(tmp_path):
     checkpoint directories give mean ± std; --eval-seed reaches the data."""
     from train.critical import evaluate, format_table
     from train.critical.config import CHECKPOINT_DIR
-    if not all((CHECKPOINT_DIR / f"critical_{m}.pt").exists() for m in ("gnn", "cvae")):
-        pytest.skip("no shipped checkpoints")
     rep = evaluate(models=["gnn", "cvae"], checkpoint_dir=[CHECKPOINT_DIR, CHECKPOINT_DIR], data_dir=tmp_path,
                    num_problems=2, num_samples=4, dataset=TINY, progress=False, eval_seed=7, ks=(1, 3))
     assert rep["settings"]["eval_seed"] == 7 and (tmp_path / "eval_blob_seed7.npz").exists()

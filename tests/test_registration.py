@@ -77,3 +77,58 @@ def test_run_steps_stops_where_asked_and_times_the_env():
     assert 0 < result.env_time_s <= result.wall_time_s
     stopped = run_steps(env, sampler.act, result.observation, on_step=lambda o, info, done: info["iterations"] >= 10)
     assert stopped.steps == 3
+
+
+# ---------------------------------------------------------------------------- every per-task fact on the TaskSpec
+@pytest.mark.parametrize("task", ["maze2d", "pendulum", "arm", "tiny"])
+def test_spec_facts_agree_with_the_task_itself(task):
+    """The facts a TaskSpec states for learned samplers are the task's own: bounds = the env's action
+    box, the periodic coordinates are the ones ``normalize`` wraps, the metric weights are those of
+    ``distance``, the step scale (where it names the extension) the problems' step size."""
+    spec = task_spec(task)
+    env = gym.make(spec.env_id, split="val", disable_env_checker=True)
+    env.reset(seed=0, options={"index": 0})
+    problem = env.unwrapped.problem
+    low, high = spec.state_bounds()
+    np.testing.assert_array_equal(low, env.action_space.low)
+    np.testing.assert_array_equal(high, env.action_space.high)
+    d = len(low)
+    probe = problem.low + 1.25 * (problem.high - problem.low)          # a quarter period beyond the box
+    wraps = ~np.isclose(problem.normalize(probe), probe)
+    np.testing.assert_array_equal(wraps, spec.periodic_mask(d))
+    weights = np.asarray(spec.metric_weights or [1.0] * d)
+    for axis in range(d):
+        step = np.zeros(d)
+        step[axis] = 0.1
+        a = (problem.low + problem.high) / 2
+        assert problem.distance((a + step)[None], a)[0] == pytest.approx(0.1 * weights[axis])
+    if spec.step_scale is not None and problem.geometric:
+        assert spec.step_scale == pytest.approx(problem.step_size)
+    assert spec.num_trees() == (2 if spec.planner() == "birrt" else 1)
+    env.close()
+
+
+def test_an_outside_task_trains_and_its_sampler_benchmarks(tmp_path):
+    """A task registered from outside the package (tests/tiny_task.py, no edit of package source) is
+    trained by ``gnn-mp train sampler`` into a run directory and benchmarked with the result."""
+    run = tmp_path / "run"
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    train = subprocess.run([sys.executable, "-c", code, "train", "sampler", "--import", "tests.tiny_task", "--task",
+                            "tiny", "--model", "gnn", "--problems", "6", "--minutes", "0.05", "--dagger-rounds", "0",
+                            "--eval-problems", "2", "--data-dir", str(tmp_path / "data"), "--out", str(run),
+                            "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert train.returncode == 0, train.stderr[-2000:]
+    for name in ("model.pt", "model.json", "config.json", "learning_curve.png"):
+        assert (run / name).is_file(), name
+    summary = json.loads(train.stdout)
+    assert summary["run_dir"] == str(run) and summary["validation"]["gnn"]["problems"] == 2
+    out = tmp_path / "tiny.json"
+    bench = subprocess.run([sys.executable, "-c", code, "benchmark", "--import", "tests.tiny_task", "--task", "tiny",
+                            "--samplers", "uniform,gnn", "--checkpoint", f"gnn={run / 'model.pt'}", "--problems", "3",
+                            "--no-progress", "--json", str(out)], capture_output=True, text=True, timeout=600)
+    assert bench.returncode == 0, bench.stderr[-2000:]
+    runs = json.loads(out.read_text())["runs"]
+    assert [r["problem"] for r in runs["gnn"]] == [0, 1, 2] and all(r["success"] for r in runs["gnn"])
+    again = subprocess.run([sys.executable, "-c", code, "train", "sampler", "--import", "tests.tiny_task", "--task",
+                            "tiny", "--out", str(run)], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 2 and "already holds a run" in again.stderr    # a finished run is not overwritten

@@ -375,23 +375,6 @@ def test_docs_python_block_runs():
     assert out.returncode == 0, out.stderr[-2000:]
 
 
-@pytest.mark.parametrize("path", sorted(__import__("agents.checkpoints", fromlist=["SHIPPED_DIR"]).SHIPPED_DIR
-                                        .glob("rl-*.pt")), ids=lambda p: p.name)
-def test_shipped_rl_checkpoints(path):
-    """Shipped RL policies: current format, a policy kind, a sidecar, loadable by name for their task."""
-    from agents.checkpoints import FORMAT_VERSION, read_checkpoint
-    from agents.samplers import load_sampler
-    from agents.rl.sampler import RL_SAMPLERS
-    name, task = path.stem.split("_")
-    record = read_checkpoint(path, expected_kind=RL_SAMPLERS[name])
-    assert record["format_version"] == FORMAT_VERSION and record["meta"]["task"] == task
-    assert json.loads(path.with_suffix(".json").read_text())["task"] == task
-    env = gym.make(f"GNNMP/{'Maze2D' if task == 'maze2d' else 'Pendulum'}RRT-v0", copy_observations=False)
-    sampler = load_sampler(name, task=task, seed=0)
-    obs, _ = env.reset(seed=0)
-    assert env.action_space.contains(sampler.act(obs))
-
-
 @pytest.mark.parametrize("lib", ["sb3", "torchrl"])
 def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     """--encoder tree-gnn builds the GNN sampler's own backbone (one module), and --init-from

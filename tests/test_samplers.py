@@ -64,6 +64,10 @@ def test_tensordict_module_batched():
 def test_unknown_sampler_lists_known_names():
     with pytest.raises(ValueError, match="uniform"):
         load_sampler("nope", bounds=(np.zeros(2), np.ones(2)))
+    with pytest.raises(ValueError, match="bounds"):
+        load_sampler("uniform", np.zeros(2))                  # bounds where the task goes: refused, not misread
+    with pytest.raises(TypeError):
+        load_sampler("uniform", np.zeros(2), np.ones(2))      # the old positional bounds
     assert {"uniform", "goal-bias"} <= set(available_samplers())
 
 
@@ -207,3 +211,67 @@ def test_docs_python_blocks_run(tmp_path):
                             timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "torch.Size([4, 2])" in result.stdout and "sample_log_prob" in result.stdout
+
+
+# ---------------------------------------------------------------------------- the registry refuses mistakes
+def test_load_sampler_takes_bounds_from_the_task_spec():
+    env = gym.make("GNNMP/ArmBiRRT-v0", disable_env_checker=True)
+    sampler = load_sampler("uniform", task="arm", seed=0)
+    np.testing.assert_array_equal(sampler.low32, env.action_space.low)
+    np.testing.assert_array_equal(sampler.high32, env.action_space.high)
+    env.close()
+
+
+def one_line_error(call) -> str:
+    with pytest.raises(ValueError) as exc:
+        call()
+    message = str(exc.value)
+    assert "\n" not in message
+    return message
+
+
+def test_load_sampler_refuses_an_unknown_keyword():
+    message = one_line_error(lambda: load_sampler("goal-bias", task="maze2d", goal_bais=0.5))
+    assert "goal_bais" in message and "goal_bias" in message
+    assert "unknown: temperature" in one_line_error(lambda: load_sampler("uniform", task="maze2d", temperature=2))
+    assert "sigma_scale" in one_line_error(lambda: load_sampler("gnn", task="pendulum", sigma_scale=0.5))
+
+
+def test_load_sampler_refuses_an_unknown_task_and_bounds_of_another_task():
+    message = one_line_error(lambda: load_sampler("uniform", task="maze3d"))
+    assert "maze3d" in message and "maze2d" in message
+    message = one_line_error(lambda: load_sampler("gnn", task="arm", bounds=(np.zeros(2), np.ones(2))))
+    assert "not task 'arm'" in message
+    assert "task=" in one_line_error(lambda: load_sampler("gnn"))
+
+
+def test_load_sampler_refuses_a_checkpoint_of_another_task():
+    from agents.checkpoints import shipped_checkpoint
+    for name in ("gnn", "cvae", "rl-ppo"):
+        message = one_line_error(lambda: load_sampler(name, task="arm", checkpoint=shipped_checkpoint(name, "maze2d")))
+        assert "trained for task 'maze2d', not 'arm'" in message
+
+
+def test_a_sampler_refuses_observations_of_another_state_dimension():
+    maze = load_sampler("goal-bias", task="maze2d", seed=0)
+    gnn = load_sampler("gnn", task="maze2d", seed=0)
+    env = gym.make("GNNMP/PendulumRRT-v0", disable_env_checker=True)
+    obs, _ = env.reset(seed=0)
+    arm = {**obs, "start": np.zeros(6, np.float32), "goal": np.zeros(6, np.float32)}
+    for sampler in (maze, gnn):
+        assert "6-D states" in one_line_error(lambda: sampler.act(arm))
+
+
+def test_torch_compatible_stream_makes_torchs_draws():
+    """The classical samplers and the shipped RL policies draw torch's values without torch: rand and
+    randn after manual_seed, in any interleaving (randn's cached second value included)."""
+    from agents.samplers.streams import TorchCompatibleStream
+    for seed in (0, 7, 2**32 - 1):
+        g = torch.Generator().manual_seed(seed)
+        stream = TorchCompatibleStream(seed)
+        for kind, n in [("rand", 2), ("randn", 2), ("randn", 3), ("rand", 1), ("randn", 1), ("randn", 6), ("rand", 5)]:
+            ours = stream.unit(n) if kind == "rand" else stream.normal(n)
+            theirs = (torch.rand if kind == "rand" else torch.randn)(n, generator=g).numpy()
+            np.testing.assert_array_equal(ours, theirs)
+    with pytest.raises(ValueError, match="16"):
+        TorchCompatibleStream(0).normal(16)

@@ -90,6 +90,10 @@ class RLPolicy(nn.Module):
         """``(loc, scale)`` from the graph embedding."""
         raise NotImplementedError
 
+    def squash_action(self, z: torch.Tensor) -> torch.Tensor:
+        """A Normal draw ``z`` -> the action in ``[-1, 1]^d`` (clipped, or tanh-squashed)."""
+        return torch.clamp(z, -1.0, 1.0) if self.squash == "clip" else torch.tanh(z)
+
     def forward(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor]:
         return self.params(self.encoder(obs)[1])
 

@@ -6,10 +6,16 @@ training applied: the bounded view of the tree (:func:`gnn_mp_envs.envs.wrappers
 ``view_nodes`` rows, read from the checkpoint) and the action map of
 :func:`~gnn_mp_envs.envs.wrappers.make_rl_env`
 (:func:`~gnn_mp_envs.envs.wrappers.policy_action_to_state`: offsets from the active tree's
-target in box spans, ``action_frame="target"``, or the box rescaled, ``"absolute"``). The
-policy's Normal draw is ``loc + scale * rng.standard_normal(d)`` from the sampler's stream
-(never ``model.predict``), so the benchmark's ``reset(seed)`` reproduces every action; with
-probability ``uniform_mix`` the step takes a uniform sample and the policy does not run.
+target in box spans, ``action_frame="target"``, or the box rescaled, ``"absolute"``), in
+float32. Randomness comes from the sampler's one stream (never ``model.predict``), so the
+benchmark's ``reset(seed)`` reproduces every action.
+
+**Draw order.** The shipped policies' benchmark runs were recorded with torch's generator in
+this order per step: the policy's Normal (``d`` normals), then, with ``uniform_mix > 0``, a
+uniform state (``d`` uniforms) and the choice (one uniform). The sampler keeps exactly those
+draws (a :class:`~agents.samplers.streams.TorchCompatibleStream`), so its counters are the
+recorded ones; the tree samplers' mixture draws the choice first instead
+(:class:`~agents.samplers.base.ModelSampler`). A retrained policy could move to that order.
 
     sampler = load_sampler("rl-ppo", task="maze2d", seed=0)                         # shipped weights
     sampler = load_sampler("rl-ppo", task="maze2d", checkpoint="runs/.../policy.pt")
@@ -31,6 +37,7 @@ import torch
 from agents.checkpoints import load_checkpoint, resolve_checkpoint, save_checkpoint
 from agents.rl.policies import POLICY_KINDS, RLPolicy
 from agents.samplers.base import ModelSampler, active_target
+from agents.samplers.streams import TorchCompatibleStream
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
 
 #: sampler name -> checkpoint kind
@@ -67,23 +74,34 @@ class RLSampler(ModelSampler):
         self.deterministic = bool(deterministic)
         self.action_frame = action_frame
 
-    def act(self, obs: Mapping) -> np.ndarray:
-        if self.deterministic:
-            return self.finish(self.model_sample(obs))
-        return super().act(obs)
+    def make_stream(self, seed: int | None) -> TorchCompatibleStream:
+        return TorchCompatibleStream(seed)
 
-    def params(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    def params(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor]:
         """The policy's ``(loc, scale)`` ``(d,)`` for one full observation (through its view)."""
         view = {k: torch.as_tensor(v) for k, v in tree_view(obs, self.view_nodes).items()}
         with torch.no_grad():
-            loc, scale = self.policy(view)
-        return loc.double().numpy(), scale.double().numpy()
+            return self.policy(view)
+
+    def act(self, obs: Mapping) -> np.ndarray:
+        """The policy's draw, mapped to a state, then (``uniform_mix > 0``) a uniform state taken
+        instead with probability ``uniform_mix`` (see the module docstring for the draw order)."""
+        if np.shape(obs["start"])[-1] != self.state_dim:
+            self.check_observation(obs)
+        x = self.model_sample(obs)
+        if self.uniform_mix == 0.0 or self.deterministic:
+            return x
+        uniform = self.low32 + self.rng.unit(self.state_dim) * self.span32
+        return uniform if self.rng.unit(1)[0] < np.float32(self.uniform_mix) else x
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
+        """The policy's state for one observation (float32, in the bounds)."""
         loc, scale = self.params(obs)
-        z = loc if self.deterministic else loc + scale * self.rng.standard_normal(self.state_dim)
-        u = np.clip(z, ACTION_LOW, ACTION_HIGH) if self.policy.squash == "clip" else np.tanh(z)
-        return policy_action_to_state(u, self.action_frame, self.low, self.high, active_target(obs))
+        z = loc if self.deterministic else loc + scale * torch.from_numpy(self.rng.normal(self.state_dim))
+        u = self.policy.squash_action(z).numpy()
+        x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
+                                   np.asarray(active_target(obs), np.float32), self.periodic)
+        return np.clip(x, self.low32, self.high32)
 
 
 # ----------------------------------------------------------------------------- files

@@ -1,10 +1,9 @@
 """Classical samplers: uniform and goal-biased.
 
 Their random streams are part of the benchmark's contract (same seed, same samples, same
-counters since the first benchmark): the stream is the Mersenne Twister that
-``torch.manual_seed(seed)`` starts, read as ``torch.rand`` reads it (a 32-bit draw's low 24
-bits times ``2**-24``, float32), but drawn in numpy: uniform takes ``d`` draws per call
-(``low + u * (high - low)`` in float32), goal-bias takes those, then one for the choice.
+counters since the first benchmark): ``torch.rand``'s values from ``torch.manual_seed(seed)``,
+drawn in numpy (:class:`~agents.samplers.streams.TorchCompatibleStream`): uniform takes ``d``
+per call (``low + u * (high - low)`` in float32), goal-bias takes those, then one for the choice.
 ``tests/test_samplers.py`` pins both against ``torch.rand`` itself.
 """
 
@@ -16,35 +15,18 @@ import numpy as np
 import torch
 
 from agents.samplers.base import Sampler, active_target
-
-_MASK24 = np.uint64(0xFFFFFF)
-_UNIT24 = np.float32(2.0 ** -24)
-
-
-def torch_compatible_stream(seed: int | None) -> np.random.Generator:
-    """A numpy Generator on the MT19937 state ``torch.manual_seed(seed)`` gives torch's CPU
-    generator (the classic ``init_genrand`` of the seed's low 32 bits)."""
-    legacy = np.random.RandomState(None if seed is None else int(seed) & 0xFFFFFFFF)
-    _, key, pos, *_ = legacy.get_state(legacy=True)
-    bits = np.random.MT19937()
-    bits.state = {"bit_generator": "MT19937", "state": {"key": key, "pos": pos}}
-    return np.random.Generator(bits)
-
+from agents.samplers.streams import TorchCompatibleStream
 
 class _TorchCompatible(Sampler):
     """Draws float32 uniforms exactly as ``torch.rand`` does from the same seed."""
 
-    def make_stream(self, seed: int | None) -> np.random.Generator:
-        return torch_compatible_stream(seed)
-
-    def unit(self, n: int) -> np.ndarray:
-        """``n`` float32 uniforms in ``[0, 1)``: ``torch.rand(n)``'s values."""
-        return (self.rng.bit_generator.random_raw(n) & _MASK24).astype(np.float32) * _UNIT24
+    def make_stream(self, seed: int | None) -> TorchCompatibleStream:
+        return TorchCompatibleStream(seed)
 
     def uniform(self, batch_shape: tuple = ()) -> np.ndarray:
         """``(*batch_shape, d)`` float32 uniform states in the bounds."""
         n = int(np.prod(batch_shape, dtype=np.int64)) * self.state_dim
-        return self.low32 + self.unit(n).reshape(*batch_shape, self.state_dim) * self.span32
+        return self.low32 + self.rng.unit(n).reshape(*batch_shape, self.state_dim) * self.span32
 
     def batch_shape(self, obs: Mapping) -> tuple:
         shape = np.shape(obs["start"])
@@ -89,7 +71,7 @@ class GoalBiasSampler(_TorchCompatible):
         if shape:
             return self.propose(obs).numpy()
         sample = self.uniform(())
-        if self.unit(1)[0] < self._goal_bias32:
+        if self.rng.unit(1)[0] < self._goal_bias32:
             return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
         return sample
 
@@ -102,5 +84,5 @@ class GoalBiasSampler(_TorchCompatible):
         active = np.asarray(obs["active_tree"].cpu() if isinstance(obs["active_tree"], torch.Tensor)
                             else obs["active_tree"]).reshape(*shape, 1)
         target = np.where(active == 1, start, goal)
-        pick = self.unit(int(np.prod(shape, dtype=np.int64))).reshape(*shape, 1) < self._goal_bias32
+        pick = self.rng.unit(int(np.prod(shape, dtype=np.int64))).reshape(*shape, 1) < self._goal_bias32
         return torch.as_tensor(np.where(pick, target, sample).astype(np.float32))

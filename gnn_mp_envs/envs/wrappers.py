@@ -226,20 +226,27 @@ class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 
 
 def policy_action_to_state(action: np.ndarray, frame: str, low: np.ndarray, high: np.ndarray,
-                           target: np.ndarray | None = None) -> np.ndarray:
-    """A policy action in ``[-1, 1]^d`` -> a state (float64, before wrapping and clipping): the
-    one action map of training (:func:`make_rl_env`) and of the RL sampler.
+                           target: np.ndarray | None = None, periodic: np.ndarray | None = None) -> np.ndarray:
+    """A policy action in ``[-1, 1]^d`` -> a state, before clipping: the one action map of
+    training (:func:`make_rl_env`) and of the RL sampler. Computed in the dtype of ``low``.
 
     ``frame="absolute"``: the box rescaled (``RescaleAction``'s map); ``frame="target"``: an
     offset from ``target`` (the active tree's) in units of the box span, ``target + a * (high - low)``.
+    ``periodic`` (a bool mask): those coordinates wrapped into ``[low, high)``.
     """
-    a = np.clip(np.asarray(action, dtype=np.float64), ACTION_LOW, ACTION_HIGH)
-    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    low = np.asarray(low)
+    high = np.asarray(high, dtype=low.dtype)
+    span = high - low
+    a = np.clip(np.asarray(action, dtype=low.dtype), ACTION_LOW, ACTION_HIGH)
     if frame == "absolute":
-        return low + (high - low) * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
-    if frame == "target":
-        return np.asarray(target, np.float64) + a * (high - low)
-    raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {frame!r}")
+        x = low + span * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
+    elif frame == "target":
+        x = np.asarray(target, dtype=low.dtype) + a * span
+    else:
+        raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {frame!r}")
+    if periodic is not None and np.any(periodic):
+        x = np.where(periodic, low + np.remainder(x - low, span), x)
+    return x
 
 
 class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
@@ -270,7 +277,7 @@ class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 
 def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """A policy action in ``[-1, 1]^d`` -> a state in ``[low, high]`` (``RescaleAction``'s map)."""
-    return policy_action_to_state(action, "absolute", low, high).astype(np.float32)
+    return policy_action_to_state(action, "absolute", np.asarray(low, np.float64), high).astype(np.float32)
 
 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,

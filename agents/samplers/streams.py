@@ -1,0 +1,63 @@
+"""Random streams that reproduce torch's CPU generator in numpy.
+
+The classical samplers (since the first benchmark) and the shipped RL policies (since they were
+recorded) drew from ``torch.manual_seed(seed)``'s Mersenne Twister through ``torch.rand`` and
+``torch.randn``; every counter in ``docs/results.md`` depends on those exact values. A
+:class:`TorchCompatibleStream` makes the same draws without torch:
+
+* :meth:`~TorchCompatibleStream.unit` is ``torch.rand(n)`` (float32): a 32-bit draw's low 24
+  bits times ``2**-24``;
+* :meth:`~TorchCompatibleStream.normal` is ``torch.randn(n)`` (float32) for the small sizes
+  samplers draw (torch's serial path below 16 values): Box-Muller on two 53-bit uniforms, each
+  from two 32-bit draws, the sine half kept for the next value as torch keeps it.
+
+``tests/test_samplers.py`` checks both against torch itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_MASK24 = np.uint64(0xFFFFFF)
+_UNIT24 = np.float32(2.0 ** -24)
+_MASK53 = (1 << 53) - 1
+
+
+class TorchCompatibleStream:
+    """The draws ``torch.Generator().manual_seed(seed)`` gives, made in numpy (``seed=None``: fresh entropy)."""
+
+    def __init__(self, seed: int | None) -> None:
+        legacy = np.random.RandomState(None if seed is None else int(seed) & 0xFFFFFFFF)
+        _, key, pos, *_ = legacy.get_state(legacy=True)
+        self.bits = np.random.MT19937()
+        self.bits.state = {"bit_generator": "MT19937", "state": {"key": key, "pos": pos}}
+        self._normal: float | None = None     # torch's cached second Box-Muller value
+
+    def unit(self, n: int) -> np.ndarray:
+        """``n`` float32 uniforms in ``[0, 1)``: ``torch.rand(n)``."""
+        return (self.bits.random_raw(n) & _MASK24).astype(np.float32) * _UNIT24
+
+    def _double(self) -> float:
+        hi, lo = self.bits.random_raw(2)
+        return ((int(hi) << 32 | int(lo)) & _MASK53) * 2.0 ** -53
+
+    def normal(self, n: int) -> np.ndarray:
+        """``n`` float32 standard normals: ``torch.randn(n)`` for ``n < 16``."""
+        if n >= 16:
+            raise ValueError("torch draws 16 or more normals with another algorithm; draw fewer per call")
+        out = np.empty(n, dtype=np.float64)
+        for i in range(n):
+            if self._normal is not None:
+                out[i], self._normal = self._normal, None
+                continue
+            u1, u2 = self._double(), self._double()
+            r = math.sqrt(-2.0 * math.log1p(-u2))
+            theta = 2.0 * math.pi * u1
+            self._normal = r * math.sin(theta)
+            out[i] = r * math.cos(theta)
+        return out.astype(np.float32)
+
+
+__all__ = ["TorchCompatibleStream"]

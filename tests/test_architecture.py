@@ -1,0 +1,80 @@
+"""The floors of the house, read from the sources (every import, at module level or inside a function):
+no import circle among the package's modules; ``gnn_mp_envs`` imports neither ``agents`` nor
+``train`` nor torch; ``agents`` imports no ``train``; nothing in the packages imports ``tools``."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import networkx as nx
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("gnn_mp_envs", "agents", "train")
+TORCH_FAMILY = ("torch", "tensordict", "torchrl", "torch_geometric", "stable_baselines3")
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            out[name.removesuffix(".__init__")] = path
+    return out
+
+
+def imported_names(name: str, path: Path) -> set[str]:
+    """Every module name ``path`` imports (``from a import b`` gives ``a`` and ``a.b``)."""
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            names.add(base)
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def import_graph() -> tuple[nx.DiGraph, dict[str, set[str]]]:
+    mods = modules()
+    graph = nx.DiGraph()
+    graph.add_nodes_from(mods)
+    external: dict[str, set[str]] = {}
+    for name, path in mods.items():
+        for target in imported_names(name, path):
+            external.setdefault(name, set()).add(target.split(".")[0])
+            while target and target not in mods:
+                target = target.rsplit(".", 1)[0] if "." in target else ""
+            if target and target != name:
+                graph.add_edge(name, target)
+    return graph, external
+
+
+def test_no_import_circle():
+    graph, _ = import_graph()
+    circles = [sorted(c) for c in nx.strongly_connected_components(graph) if len(c) > 1]
+    assert circles == []
+
+
+def test_floors():
+    graph, external = import_graph()
+    breaks = [(a, b) for a, b in graph.edges
+              if (a.startswith("gnn_mp_envs") and b.split(".")[0] in ("agents", "train"))
+              or (a.startswith("agents") and b.startswith("train"))]
+    assert breaks == []
+    torch_in_envs = sorted(m for m, names in external.items() if m.startswith("gnn_mp_envs")
+                           and names & set(TORCH_FAMILY))
+    assert torch_in_envs == []
+    assert sorted(m for m, names in external.items() if "tools" in names) == []
+
+
+def test_the_graph_sees_imports_inside_functions():
+    """An oracle for the reader itself: a lazy import inside a function is an edge too."""
+    graph, _ = import_graph()
+    assert graph.has_edge("agents.registry", "agents.samplers.baselines")      # imported inside a factory
+    assert graph.has_edge("train.benchmark.runs", "gnn_mp_envs.evaluation")
