@@ -301,7 +301,7 @@ def test_render_draws_arm_scene_and_path():
 # ---------------------------------------------------------------------- statistics
 def test_uniform_birrt_solves_heldout_arm_problems():
     """Issue 3: uniform BiRRT solves >= 90% of held-out test-scene problems within 20,000
-    nodes (10 problems here; train/bench_arm.py measures 50)."""
+    nodes (10 problems here; python -m tools.bench_arm measures 50)."""
     t = ArmTask("test")
     try:
         solved = 0

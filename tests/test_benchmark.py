@@ -70,11 +70,12 @@ def test_ompl_rows_fail_early_with_an_install_hint(monkeypatch):
 
 
 def test_ompl_record_maps_runner_counters():
-    record = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": True, "collision_checks": 120, "time": 0.02,
+    from train.benchmark.ompl_rows import _ompl_record
+    record = _ompl_record("ompl-rrtconnect", 4, 11, {"solved": True, "collision_checks": 120, "time": 0.02,
                                                          "path_length": 1.5, "nodes": 40})
     assert record["success"] and record["collision_checks"] == 120 and record["wall_time_s"] == 0.02
     assert record["nodes_expanded"] == 40 and record["edges"] is None
-    failed = bm._ompl_record("ompl-rrtconnect", 4, 11, {"solved": False, "path_length": float("inf")})
+    failed = _ompl_record("ompl-rrtconnect", 4, 11, {"solved": False, "path_length": float("inf")})
     assert failed["path_length"] is None
 
 
@@ -125,3 +126,20 @@ def test_an_ompl_runner_timeout_is_one_error_naming_the_row(monkeypatch):
     monkeypatch.setattr(ompl_runner, "run_ompl", hung)
     with pytest.raises(bm.BenchmarkError, match=r"ompl-rrt on maze2d: the OMPL runner did not finish within 42 s"):
         run_ompl_rows(tiny_args(samplers=["ompl-rrt"]), "ompl-rrt", [0, 1])
+
+
+def test_a_suite_draws_its_tree_growth_images(tmp_path, capsys):
+    """--suite writes tree-growth images to OUT/renders, or to --render DIR when given (the two flags
+    used to share one argparse destination, and no image was written)."""
+    assert cli.main(["benchmark", "--suite", "smoke", "--out", str(tmp_path / "a"), "--no-progress"]) == 0
+    for name in ("uniform", "goal-bias"):
+        assert (tmp_path / "a" / "renders" / f"maze2d_{name}_problem0.png").stat().st_size > 1000
+    assert (tmp_path / "a" / "summary.md").exists()
+    assert cli.main(["benchmark", "--suite", "smoke", "--out", str(tmp_path / "b"), "--render",
+                     str(tmp_path / "elsewhere"), "--no-progress"]) == 0
+    assert (tmp_path / "elsewhere" / "maze2d_uniform_problem0.png").exists()
+    assert not (tmp_path / "b" / "renders").exists()
+    assert cli.main(["benchmark", "--suite", "smoke", "--out", str(tmp_path / "c"), "--no-render",
+                     "--no-progress"]) == 0
+    assert not (tmp_path / "c" / "renders").exists()
+    capsys.readouterr()

@@ -1,15 +1,16 @@
 """Arm benchmark: checker speed, env overhead, and uniform BiRRT vs OMPL RRTConnect.
 
-Run: ``python -m train.bench_arm`` (``--help`` for options). It reports
+Run: ``.venv/bin/python -m tools.bench_arm`` from the repository root (``--help`` for options). It reports
 
 1. raw collision checks per second of the checker alone (``ArmWorld.collides`` on
    uniformly drawn configurations in held-out scenes);
 2. ``env.step`` calls per second of ``GNNMP/ArmBiRRT-v0`` driven by uniform samples, and
    the fraction of step time that is environment overhead, i.e. not spent inside the
    collision checks the step makes (measured by timing every ``collides`` call);
-3. uniform-sampler BiRRT on the first ``--problems`` held-out problems of the ``test``
-   scene family (split ``test``) within ``--max-nodes`` nodes: solve rate, median
-   collision checks, median planning time (sum of step times), median nodes;
+3. the uniform sampler's BiRRT on the first ``--problems`` held-out problems of the ``test``
+   scene family (split ``test``) within ``--max-nodes`` nodes, planned by
+   :func:`gnn_mp_envs.evaluation.plan_problem` (the benchmark's seeding rule): solve rate,
+   median collision checks, median planning time (sum of step times), median nodes;
 4. the same for OMPL's RRTConnect on the same problems with the same checker, via
    :func:`gnn_mp_envs.baselines.ompl_runner.run_ompl` (skipped when OMPL is missing).
 
@@ -22,16 +23,19 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-import gnn_mp_envs  # noqa: F401  (registers the environments)
+from agents.registry import load_sampler
+from gnn_mp_envs.evaluation import evaluation_env, plan_problem
 from gnn_mp_envs.registration import task_spec
-from gnn_mp_envs.rollout import rollout, run_steps
+from gnn_mp_envs.rollout import run_steps
 from gnn_mp_envs.tasks.arm import ArmTask
+from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
 
 ENV_ID = task_spec("arm").env_id
@@ -82,21 +86,18 @@ class _CheckTimer:
         self.world.collides = self.inner
 
 
-def uniform_birrt(scene: str, split: str, problems: int, max_nodes: int, seed: int,
-                  copy_observations: bool = True) -> dict[str, Any]:
-    """Uniform-sample BiRRT through the env on problems ``0..problems-1`` of ``split``."""
-    env = gym.make(ENV_ID, max_nodes=max_nodes, split=split, task_kwargs={"scene": scene},
-                   copy_observations=copy_observations)
+def uniform_birrt(scene: str, split: str, problems: int, max_nodes: int, seed: int) -> dict[str, Any]:
+    """The uniform sampler's BiRRT on problems ``0..problems-1`` of ``split`` (the benchmark's env and
+    seeding rule), with the time inside the collision checks measured."""
+    env = evaluation_env("arm", split, scene=scene, max_nodes=max_nodes)
     base = env.unwrapped
+    sampler = load_sampler("uniform", task="arm", seed=0)
     timer = _CheckTimer(base.task.world)
     records = []
     try:
-        low, high = env.action_space.low, env.action_space.high
         for i in tqdm(range(problems), desc=f"uniform BiRRT ({scene})", leave=False):
-            rng = np.random.default_rng([seed, i])
-            actions = iter(rng.uniform(low, high, (base.max_steps, len(low))).astype(np.float32))
             check_s0, calls0 = timer.seconds, timer.calls
-            run = rollout(env, lambda _obs: next(actions), options={"index": i})
+            run = plan_problem(env, sampler, i, seed)
             records.append({"index": i, "solved": run.success, "time": run.env_time_s, "steps": run.iterations,
                             "collision_checks": run.collision_checks, "nodes": run.nodes_expanded,
                             "path_length": run.path_length,
@@ -157,7 +158,7 @@ def step_throughput(scene: str, window: int, seed: int, copy_observations: bool)
 
 @dataclass
 class Args:
-    """Flags of ``gnn-mp bench-arm``."""
+    """Flags of ``python -m tools.bench_arm``."""
 
     scene: str = arg("test", "scene family (held out: test)", choices=("train-a", "train-b", "train", "test"))
     split: str = arg("test", "problem split", choices=("train", "val", "test"))
@@ -173,14 +174,14 @@ class Args:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry (``gnn-mp bench-arm``): prints the figures; exit status 0."""
+    """Command-line entry: prints the figures; exit status 0."""
     run(argv)
     return 0
 
 
 def run(argv: list[str] | None = None) -> dict[str, Any]:
     """Measure and print everything; returns the report (also written with ``--json``)."""
-    ap = OneLineParser(prog="gnn-mp bench-arm", description=__doc__.split("\n\n")[0])
+    ap = OneLineParser(prog="python -m tools.bench_arm", description=__doc__.split("\n\n")[0])
     add_dataclass_arguments(ap, Args)
     args = from_namespace(Args, ap.parse_args(argv))
 
@@ -218,8 +219,7 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
               f"median checks {om['median_collision_checks']:,.0f}, median time {om['median_time']:.3f} s, "
               f"median nodes {om['median_nodes']:.0f}")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(report, f, indent=1, default=float)
+        atomic_write_text(Path(args.json), json.dumps(report, indent=1, default=float) + "\n")
     if args.ompl_log:
         from gnn_mp_envs.baselines.ompl_log import write_ompl_log
         runs = {"birrt_uniform": [dict(r, status="Exact solution" if r["solved"] else "Timeout")

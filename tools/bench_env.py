@@ -1,6 +1,6 @@
 """Environment throughput: env steps per second with the uniform sampler at given tree sizes.
 
-Run: ``gnn-mp bench-env`` (or ``python -m train.bench_env``). For each task, a held-out
+Run: ``.venv/bin/python -m tools.bench_env`` from the repository root. For each task, a held-out
 problem is planned with its goal test switched off so the tree can grow to each
 measured size; then ``--window`` further ``env.step`` calls are timed (uniform actions
 drawn beforehand, so only the environment is measured). The observation is updated
@@ -12,10 +12,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numpy as np
 
-import gnn_mp_envs  # noqa: F401  (registers the environments)
+from tools.probes import goal_free_env
 from gnn_mp_envs.registration import task_spec
 from gnn_mp_envs.rollout import run_steps
 from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
@@ -23,7 +22,7 @@ from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespa
 
 @dataclass
 class Args:
-    """Flags of ``gnn-mp bench-env``."""
+    """Flags of ``python -m tools.bench_env``."""
 
     tasks: list[str] = arg(["maze2d", "pendulum"], "tasks to measure")
     sizes: list[int] = arg([100, 1000, 5000], "tree sizes at which steps/s is measured")
@@ -32,22 +31,12 @@ class Args:
     copy_observations: bool = arg(True, "return live observation views instead of the default copies")
 
 
-def _goal_free(problem) -> None:
-    """Switch off the goal test so the tree keeps growing (benchmark only)."""
-    problem.in_goal = lambda x: False
-    problem.goal_connection = lambda x: None
-
-
 def measure(task: str, sizes: list[int], window: int, seed: int,
             copy_observations: bool = True) -> dict[int, float]:
     """Steps per second of ``env.step`` at each tree size in ``sizes``."""
     spec = task_spec(task)
     max_nodes = max(spec.max_nodes, max(sizes) + window + 10)  # pad as users get it, or more if needed
-    env = gym.make(spec.env_id, max_nodes=max_nodes, max_steps=100 * max_nodes,
-                   split="test", copy_observations=copy_observations).unwrapped
-    problem = env.task.problem("test", 0)
-    _goal_free(problem)
-    obs, _ = env.reset(seed=seed, options={"problem": problem})
+    env, obs = goal_free_env(task, "test", 0, max_nodes=max_nodes, copy_observations=copy_observations)
     rng = np.random.default_rng(seed)
     low, high = env.action_space.low, env.action_space.high
     out: dict[int, float] = {}
@@ -63,7 +52,7 @@ def measure(task: str, sizes: list[int], window: int, seed: int,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = OneLineParser(prog="gnn-mp bench-env", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m tools.bench_env", description=__doc__.splitlines()[0])
     add_dataclass_arguments(parser, Args)
     args = from_namespace(Args, parser.parse_args(argv))
     from gnn_mp_envs.registration import TASK_SPECS

@@ -1,6 +1,6 @@
 """Sampler speed: to_pyg conversions/s and act() microseconds per call, single-threaded torch.
 
-Run: ``gnn-mp bench-sampler`` (or ``python -m train.bench_sampler``).
+Run: ``.venv/bin/python -m tools.bench_sampler`` from the repository root.
 
 1. ``to_pyg``: ``--batch`` maze2d observations of ``--nodes`` nodes each (``--trees`` distinct
    trees planned on validation problems with the goal test switched off, tiled to the batch)
@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-import gnn_mp_envs  # noqa: F401  (registers the environments)
+from tools import probes
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 from gnn_mp_envs.registration import TASK_SPECS, task_spec
 from train.args import (
@@ -69,29 +69,7 @@ class Args:
 def grow(task: str, nodes: int, index: int, seed: int, max_nodes: int | None = None) -> dict[str, np.ndarray]:
     """An observation of ``task``'s problem ``index`` (split ``val``) grown to ``nodes`` nodes
     with uniform samples and the goal test off."""
-    kwargs = {"split": SPLIT}
-    if max_nodes is not None:
-        kwargs["max_nodes"] = max_nodes
-    env = gym.make(task_spec(task).env_id, **kwargs).unwrapped
-    capacity = env.observation_space["nodes"].shape[0]
-    if nodes > capacity:
-        raise ValueError(f"{nodes} nodes do not fit the {task} env's max_nodes={capacity}")
-    env.max_steps = max(getattr(env, "max_steps", 0) or 0, 1000 * nodes)
-    problem = env.task.problem(SPLIT, index)
-    problem.in_goal = lambda x: False            # benchmark only: keep growing
-    problem.goal_connection = lambda x: None
-    obs, _ = env.reset(seed=seed, options={"problem": problem})
-    rng = np.random.default_rng([seed, index])
-    low, high = env.action_space.low, env.action_space.high
-    while int(obs["num_nodes"][0]) < nodes:
-        obs, _, terminated, truncated, _ = env.step(rng.uniform(low, high).astype(np.float32))
-        if (terminated or truncated) and int(obs["num_nodes"][0]) < nodes:
-            # BiRRT (the arm) ends when its two trees connect, whatever the goal test says
-            why = "solved" if terminated else "stopped"
-            raise RuntimeError(f"{task} problem {index}: the planner {why} at {int(obs['num_nodes'][0])} "
-                               f"nodes, before {nodes}")
-    env.close()
-    return obs
+    return probes.grow(task, nodes, index, seed, split=SPLIT, max_nodes=max_nodes)
 
 
 def cut(obs: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
@@ -238,7 +216,7 @@ def run(args: Args) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = OneLineParser(prog="gnn-mp bench-sampler", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m tools.bench_sampler", description=__doc__.splitlines()[0])
     add_dataclass_arguments(parser, Args)
     args = from_namespace(Args, parser.parse_args(argv))
     from agents.samplers import available_samplers

@@ -99,6 +99,17 @@ def _float_list(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
 
 
+def import_modules(modules: typing.Iterable[str]) -> None:
+    """Import modules that call ``register_task`` / ``register_sampler`` (``--import MODULE``);
+    a one-line ``ValueError`` naming the module that cannot be imported."""
+    import importlib
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ValueError(f"cannot import module {module!r}: {exc}") from None
+
+
 # ---------------------------------------------------------------------------- dataclass -> flags
 def _unwrap_optional(tp: Any) -> tuple[Any, bool]:
     """``X | None`` -> (X, True); anything else -> (tp, False)."""

@@ -81,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name, (module, help_text) in PASSTHROUGH.items():
         sub.add_parser(name, help=f"{help_text} ({module}.main; arguments are passed through)", add_help=False)
-    train = sub.add_parser("train", help="train a model: `gnn-mp train critical ...`", add_help=False)
+    train = sub.add_parser("train", help="train a model: `gnn-mp train {sampler,rl,critical} ...`", add_help=False)
     train.add_argument("target", nargs="?", choices=sorted(TRAIN_TARGETS))
     return parser
 
@@ -115,8 +115,9 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
     suite = from_namespace(SuiteOptions, ns)
     try:
         if suite.suite is not None:
+            renders = (args.render or suite.out / "renders") if suite.render_images else None
             bm.run_suite(suite.suite, suite.out, seed=args.seed, workers=args.workers, progress=args.progress,
-                         with_ompl=None if suite.ompl else False, render=suite.render)
+                         with_ompl=None if suite.ompl else False, render=renders)
             return 0
         bm.benchmark(args)
     except bm.BenchmarkIncomplete as exc:

@@ -163,8 +163,3 @@ class ModelSampler(Sampler):
     def model_sample(self, obs: Mapping) -> np.ndarray:
         """The model's next state ``(d,)`` for one observation (random draws from ``self.rng``)."""
         raise NotImplementedError
-
-
-def batch_shape_of(start: torch.Tensor | np.ndarray) -> tuple[int, ...]:
-    """Leading batch dimensions of an observation, read off its ``start`` entry."""
-    return tuple(start.shape[:-1])

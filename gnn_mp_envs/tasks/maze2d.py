@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.envs.render import draw_tree, figure, to_rgb
+from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task
 
 #: Extension length of RRT/BiRRT in the unit square.

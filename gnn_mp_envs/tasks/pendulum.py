@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
-from gnn_mp_envs.envs.render import draw_tree, figure, to_rgb
+from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task
 
 GRAVITY = 9.81          # m/s^2

@@ -27,7 +27,7 @@ from train.benchmark.args import (
                                   ompl_rows_for,
                                   validate_args,
 )
-from train.benchmark.ompl_rows import _ompl_record, run_ompl_rows, write_ompl_logs
+from train.benchmark.ompl_rows import run_ompl_rows, write_ompl_logs
 from train.benchmark.outputs import benchmark, write_outputs
 from train.benchmark.plots import plot_report, render_growth
 from train.benchmark.runs import BenchmarkIncomplete, run_benchmark, run_episode
@@ -35,7 +35,7 @@ from train.benchmark.stats import METRICS, build_report, sampler_summary, summar
 from train.benchmark.suites import SUITES, SuiteEntry, run_suite
 from train.benchmark.tables import format_table
 
-__all__ = ["METRICS", "OMPL_PREFIX", "SUITES", "BenchmarkArgs", "BenchmarkError", "BenchmarkIncomplete", "SuiteEntry", "_ompl_record",
+__all__ = ["METRICS", "OMPL_PREFIX", "SUITES", "BenchmarkArgs", "BenchmarkError", "BenchmarkIncomplete", "SuiteEntry",
            "benchmark", "build_report", "check_ompl", "format_table", "is_ompl", "ompl_available",
            "ompl_rows_for", "plot_report", "render_growth", "run_benchmark", "run_episode",
            "run_ompl_rows", "run_suite", "sampler_summary", "summarize", "validate_args", "write_ompl_logs",

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import importlib
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
+from train.args import import_modules as import_plugins
 from train.args import arg, name_list, non_negative_int, positive_float, positive_int
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
@@ -99,13 +99,12 @@ def known_sampler_names(task: str) -> list[str]:
 
 
 def import_modules(modules: list[str]) -> None:
-    """Import modules that call ``register_sampler`` / ``register_task`` (in the main process
-    and in every worker)."""
-    for module in modules:
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            raise BenchmarkError(f"cannot import module {module!r}: {exc}") from None
+    """:func:`train.args.import_modules` (in the main process and in every worker), a
+    :class:`BenchmarkError` when one cannot be imported."""
+    try:
+        import_plugins(modules)
+    except ValueError as exc:
+        raise BenchmarkError(str(exc)) from None
 
 
 def validate_args(args: BenchmarkArgs) -> None:

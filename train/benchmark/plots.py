@@ -13,7 +13,7 @@ from train.benchmark.runs import checkpoint_of, run_episode
 
 
 def plot_report(report: dict[str, Any], path: Path) -> None:
-    """Box plots per sampler in the style of the paper: nodes expanded, path length (+ checks for the arm)."""
+    """Box plots per sampler in the style of the paper: nodes expanded, collision checks, path length."""
     import matplotlib
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
@@ -21,9 +21,8 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
     from gnn_mp_envs.registration import TASK_SPECS
     spec = TASK_SPECS.get(report["task"])
     unit = f" [{spec.path_unit}]" if spec is not None else ""
-    panels = [("nodes_expanded", "nodes expanded", False), ("path_length", f"path length{unit}, solved", True)]
-    if report["task"] == "arm":
-        panels.append(("collision_checks", "collision checks", False))
+    panels = [("nodes_expanded", "nodes expanded", False), ("collision_checks", "collision checks", False),
+              ("path_length", f"path length{unit}, solved", True)]
     names = list(report["results"])
     fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels) + 0.6, 3.6), squeeze=False)
     for ax, (metric, label, success_only) in zip(axes[0], panels):

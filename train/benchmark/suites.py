@@ -27,7 +27,8 @@ class SuiteOptions:
                             "<task>.json/.png/.txt and summary.md to --out")
     out: Path = arg(Path("results"), "output directory of --suite")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
-    render: bool = arg(True, "--suite: skip tree-growth images")
+    render_images: bool = arg(True, "--suite: skip tree-growth images (else written to --render DIR, default "
+                              "OUT/renders)", flag="--no-render")
 
 
 @dataclass
@@ -38,7 +39,7 @@ class SuiteEntry:
     samplers: list[str]
     problems: int
     max_nodes: int | None = None
-    scene: str | None = None
+    scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores. The learned rows
@@ -51,8 +52,7 @@ SUITES: dict[str, list[SuiteEntry]] = {
                    ompl=("rrt", "rrtconnect")),
         SuiteEntry("pendulum", ["uniform", "goal-bias", *LEARNED, "rl-ppo"], problems=60,
                    ompl=("rrt", "kpiece")),
-        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED], problems=40, scene="test",
-                   ompl=("rrtconnect",)),
+        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED], problems=40, ompl=("rrtconnect",)),
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
@@ -61,8 +61,9 @@ SUITES: dict[str, list[SuiteEntry]] = {
 
 
 def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: bool = True,
-              with_ompl: bool | None = None, render: bool = True) -> dict[str, dict[str, Any]]:
-    """Run a named suite; writes ``{task}.json``, ``{task}.png``, ``{task}.txt`` and ``summary.md`` to ``out``."""
+              with_ompl: bool | None = None, render: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Run a named suite; writes ``{task}.json``, ``{task}.png``, ``{task}.txt`` and ``summary.md`` to
+    ``out`` and tree-growth images to ``render`` (None: none)."""
     if name not in SUITES:
         raise BenchmarkError(f"unknown suite {name!r}; known: {', '.join(sorted(SUITES))}")
     if with_ompl is None:
@@ -78,7 +79,7 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers,
                              json=out / f"{entry.task}.json", plot=out / f"{entry.task}.png",
-                             render=out / "renders" if render else None,
+                             render=render,
                              ompl_log=out / "ompl" if with_ompl else None,
                              progress=progress)
         task_start = time.perf_counter()

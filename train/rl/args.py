@@ -100,6 +100,8 @@ class RLArgs:
     ship: bool = arg(False, "copy the final policy to agents/checkpoints/<sampler>_<task>.pt (+ .json)")
     progress: bool = arg(True, "hide the progress bar")
     threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
+    modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
+                             metavar="MODULE", append=True)
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
@@ -144,6 +146,8 @@ class RunResult:
 def check_args(args: RLArgs) -> None:
     """One-line ``ValueError`` for combinations that cannot run."""
     from gnn_mp_envs.registration import task_spec
+    from train.args import import_modules
+    import_modules(args.modules)
     if (args.lib, args.algo) not in SAMPLER_NAMES:
         raise ValueError(f"--lib {args.lib} --algo {args.algo} is not available "
                          f"(available: {', '.join(f'{l}/{a}' for l, a in SAMPLER_NAMES)})")

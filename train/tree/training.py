@@ -154,13 +154,13 @@ def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDatas
 def train(args: TrainArgs) -> dict[str, Any]:
     """Data, training, DAgger, evaluation, checkpoint; returns the run's summary."""
     from gnn_mp_envs.registration import task_spec
-    from train.benchmark.args import BenchmarkError, import_modules
+    from train.args import import_modules
     try:
         import_modules(args.modules)
         spec = task_spec(args.task)
         run = TrainingRun.create("tree", f"{args.task}-{args.model}", args.seed, out=args.out, resume=args.resume,
                                  overwrite=args.overwrite)
-    except (BenchmarkError, ValueError, RunError) as exc:
+    except (ValueError, RunError) as exc:
         raise TrainError(str(exc)) from None
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
