@@ -1,4 +1,4 @@
-"""The tree encoder shared by every learned model: padded observation -> node and graph embeddings.
+"""A PyG encoder of the tree observation: padded observation -> node and graph embeddings.
 
 :class:`TreeEncoder` reads the observation through :func:`agents.graph.to_pyg` (so any
 leading batch shape works), runs ``num_layers`` message-passing layers of a PyG convolution

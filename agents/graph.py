@@ -8,7 +8,7 @@ are its prefix rows ``0..num_nodes-1`` (see :mod:`gnn_mp_envs.envs.observation`)
 node rows are gathered with one boolean mask, graph offsets come from a cumulative sum and
 the tree edges from one ``nonzero`` over the padded ``parent`` block. No Python loop over
 batch elements. :func:`to_pyg_per_graph` is the obvious per-element reference (used by the
-tests and ``gnn-mp bench-sampler``).
+tests and ``python -m tools.bench_sampler``).
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
 def to_pyg_per_graph(obs: Mapping, features: str = "node_features") -> Data | Batch:
     """Reference for :func:`to_pyg`: one ``Data`` per element, then ``Batch.from_data_list``.
 
-    Slow for batches (a Python loop over them); kept for ``gnn-mp bench-sampler``. An
+    Slow for batches (a Python loop over them); kept for ``python -m tools.bench_sampler``. An
     unbatched observation takes the same path in both.
     """
     feats = _as_tensor(obs[features], torch.float32)

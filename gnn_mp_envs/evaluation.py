@@ -42,8 +42,9 @@ def problem_seed(seed: int, index: int) -> int:
 def evaluation_env(task: str, split: str = "test", *, planner: str | None = None, scene: str | None = None,
                    max_nodes: int | None = None, render: bool = False, **env_kwargs: Any):
     """The environment samplers are judged on: the task's benchmark variant (or ``planner``'s),
-    problems of ``split`` (for tasks with scenes: of ``scene``, by default the held-out family,
-    whatever the split, so validation figures compare with test ones), live observation views (``copy_observations=False``: a run reads each
+    problems of ``split`` (for tasks with scenes: of ``scene``, by default the split's own, i.e. the
+    held-out family for ``"test"`` and the training families otherwise, so nothing is tuned on the
+    held-out family), live observation views (``copy_observations=False``: a run reads each
     observation before the next step; a per-step copy of a 20,000-row padded observation would
     dominate the wall time), Gymnasium's passive checker off (it would warn about exactly those
     shared views)."""
@@ -55,7 +56,6 @@ def evaluation_env(task: str, split: str = "test", *, planner: str | None = None
     kwargs: dict[str, Any] = {"split": split, "copy_observations": False, **env_kwargs}
     if max_nodes is not None:
         kwargs["max_nodes"] = int(max_nodes)
-    scene = spec.benchmark_scene if scene is None else scene
     if scene is not None:
         kwargs["scene"] = scene
     return gym.make(spec.env_id_for(planner), render_mode="rgb_array" if render else None,

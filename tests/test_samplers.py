@@ -210,7 +210,8 @@ def test_docs_python_blocks_run(tmp_path):
     result = subprocess.run([sys.executable, str(script)], cwd=root, env=env, capture_output=True, text=True,
                             timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
-    assert "torch.Size([4, 2])" in result.stdout and "sample_log_prob" in result.stdout
+    assert "torch.Size([4, 2])" in result.stdout
+    assert "takes goal_bias; unknown: goal_bais" in result.stdout and "GoalMLPSampler 0.25" in result.stdout
 
 
 # ---------------------------------------------------------------------------- the registry refuses mistakes

@@ -147,7 +147,7 @@ def load_module_main(module: str) -> Callable[[list[str]], int | None]:
 
 
 def run_passthrough(module: str, argv: list[str], prog: str) -> int:
-    """Call ``module.main(argv)``; its argparse usage lines read ``prog`` (e.g. ``gnn-mp bench-env``)."""
+    """Call ``module.main(argv)``; its argparse usage lines read ``prog`` (e.g. ``gnn-mp critical``)."""
     main_fn = load_module_main(module)
     saved_argv0, sys.argv[0] = sys.argv[0], prog
     try:

@@ -8,7 +8,7 @@ numpy pass; once a tree has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes 
 older nodes and only the nodes added since the last rebuild are scanned. The k-d tree
 is rebuilt when that recent buffer outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the
 rebuild cost is amortised and a query stays roughly flat as the tree grows (measured by
-``gnn-mp bench-env``). The k-d tree works in the problem's ``nn_embed`` coordinates,
+``python -m tools.bench_env``). The k-d tree works in the problem's ``nn_embed`` coordinates,
 where Euclidean distance (with ``nn_boxsize`` periodic axes) equals ``problem.distance``.
 """
 

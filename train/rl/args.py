@@ -45,7 +45,8 @@ class RLArgs:
     # --- what to train
     algo: str = arg("ppo", "algorithm", choices=ALGOS)
     lib: str = arg("sb3", "library (torchrl: PPO only)", choices=LIBS)
-    task: str = arg("maze2d", "task family: maze2d, pendulum, arm (arm: BiRRT, the action extends active_tree)")
+    task: str = arg("maze2d", "task (any registered task; --import adds your own; BiRRT tasks: the action extends "
+                    "active_tree)")
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=non_negative_int)
@@ -70,10 +71,10 @@ class RLArgs:
     knn: int = arg(0, "TreeEncoder k-NN edges per node (0: tree edges only)", parse=non_negative_int)
     net_arch: list[int] = arg([64, 64], "hidden widths of the policy and value heads")
     encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
-                       "sampler's causal TreeGNN, its architecture; what --init-from a tree_gnn checkpoint needs)",
+                       "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))
     init_from: Path | None = arg(None, "warm start: copy the backbone weights of this checkpoint (any kind holding "
-                                 "one of the same size, e.g. agents/checkpoints/tree_gnn_maze2d.pt with --encoder tree-gnn)")
+                                 "one of the same size, e.g. agents/checkpoints/gnn_maze2d.pt with --encoder tree-gnn)")
     # --- optimisation
     lr: float = arg(3e-4, "Adam learning rate", parse=positive_float)
     gamma: float = arg(0.99, "discount", parse=positive_float)
