@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from gnn_mp_envs.utils.io import atomic_path, atomic_write_bytes, atomic_write_text
+from train.args import arg, positive_int
 
 #: Where run directories go by default: runs/<family>/<name>-seed<S>-<YYYYmmdd-HHMMSS>/.
 RUNS_ROOT = Path("runs")
@@ -32,6 +34,20 @@ RUN_MARKERS = ("config.json",)
 
 class RunError(Exception):
     """A user-facing error about a run directory (one line)."""
+
+
+@dataclass
+class RunFlags:
+    """The flags of the run shell, shared by ``gnn-mp train sampler`` and ``gnn-mp train rl``."""
+
+    out: Path | None = arg(None, "run directory (default: a fresh runs/<family>/<name>-seed<S>-<time>/)")
+    overwrite: bool = arg(False, "reuse an --out that already holds a run")
+    ship: bool = arg(False, "also copy the result into the package's shipped weights "
+                     "(agents/checkpoints/<name>_<task>.pt + .json)")
+    threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
+    modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
+                             metavar="MODULE", append=True)
+    progress: bool = arg(True, "hide progress bars")
 
 
 def shipped_dir() -> Path:
@@ -190,4 +206,4 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-__all__ = ["RUNS_ROOT", "RunError", "TrainingRun", "plot_learning_curve"]
+__all__ = ["RUNS_ROOT", "RunError", "RunFlags", "TrainingRun", "plot_learning_curve"]

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
+from train.run import RunFlags
 
 LIBS = ("sb3", "torchrl")
 ALGOS = ("ppo", "sac")
@@ -39,8 +40,9 @@ def _mixes(text: str) -> list[float]:
 
 
 @dataclass
-class RLArgs:
-    """Flags of ``gnn-mp train rl`` (CleanRL style: one line of doc per field)."""
+class RLArgs(RunFlags):
+    """Flags of ``gnn-mp train rl`` (CleanRL style: one line of doc per field; the run shell's from
+    :class:`train.run.RunFlags`: ``--ship`` copies the final policy)."""
 
     # --- what to train
     algo: str = arg("ppo", "algorithm", choices=ALGOS)
@@ -96,13 +98,6 @@ class RLArgs:
                              "(UniformMixAction) and in the sampler", parse=non_negative_float)
     tune_mix: list[float] | None = arg(None, "after training, pick the final policy's uniform_mix among these "
                                        "on split val (e.g. 0.25,0.5,0.75)", parse=_mixes)
-    out: Path | None = arg(None, "run directory (default: runs/rl/<lib>-<algo>-<task>-seed<S>-<time>)")
-    overwrite: bool = arg(False, "reuse an --out that already holds a run")
-    ship: bool = arg(False, "copy the final policy to agents/checkpoints/<sampler>_<task>.pt (+ .json)")
-    progress: bool = arg(True, "hide the progress bar")
-    threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
-    modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
-                             metavar="MODULE", append=True)
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""

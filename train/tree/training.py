@@ -32,14 +32,14 @@ from tqdm.auto import tqdm
 
 from agents.checkpoints import load_training_state, save_checkpoint, save_training_state
 from train.args import arg, non_negative_int, positive_float, positive_int
-from train.run import RunError, TrainingRun, plot_learning_curve
+from train.run import RunError, RunFlags, TrainingRun, plot_learning_curve
 from train.tree.adapters import MODELS, adapter_for, task_scales
 from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
 
 
 @dataclass
-class TrainArgs:
-    """Flags of ``gnn-mp train sampler``."""
+class TrainArgs(RunFlags):
+    """Flags of ``gnn-mp train sampler`` (the run shell's from :class:`train.run.RunFlags`)."""
 
     task: str = arg("pendulum", "task (any registered task; --import adds your own)")
     model: str = arg("gnn", "model", choices=MODELS)
@@ -59,14 +59,7 @@ class TrainArgs:
                              parse=non_negative_int)
     seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=non_negative_int)
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
-    out: Path | None = arg(None, "run directory (default: runs/tree/<task>-<model>-seed<S>-<time>)")
-    overwrite: bool = arg(False, "reuse an --out that already holds a run")
-    ship: bool = arg(False, "also copy the checkpoint into the package (agents/checkpoints/)")
     resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
-    threads: int = arg(1, "torch threads", parse=positive_int)
-    modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
-                             metavar="MODULE", append=True)
-    progress: bool = arg(True, "hide progress bars")
 
 
 class TrainError(Exception):
