@@ -13,19 +13,24 @@ from train.benchmark.runs import checkpoint_of, run_episode
 
 
 def plot_report(report: dict[str, Any], path: Path) -> None:
-    """Box plots per sampler in the style of the paper: nodes expanded, collision checks, path length."""
+    """Box plots per sampler in the style of the paper: nodes expanded, collision checks, path length.
+
+    Counts that spread over more than a decade and a half get a log axis (a learned row's box
+    would otherwise be squashed under uniform's long tail)."""
     import matplotlib
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
     from gnn_mp_envs.registration import TASK_SPECS
     spec = TASK_SPECS.get(report["task"])
-    unit = f" [{spec.path_unit}]" if spec is not None else ""
-    panels = [("nodes_expanded", "nodes expanded", False), ("collision_checks", "collision checks", False),
-              ("path_length", f"path length{unit}, solved", True)]
+    unit = spec.path_unit if spec is not None else "state-space length"
+    panels = [("nodes_expanded", "nodes expanded", "nodes", False),
+              ("collision_checks", "collision checks", "checks", False),
+              ("path_length", "path length (solved runs)", unit, True)]
     names = list(report["results"])
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels) + 0.6, 3.6), squeeze=False)
-    for ax, (metric, label, success_only) in zip(axes[0], panels):
+    width = max(3.4, 0.45 * len(names) + 1.2)
+    fig, axes = plt.subplots(1, len(panels), figsize=(width * len(panels), 3.9), squeeze=False)
+    for ax, (metric, title, ylabel, success_only) in zip(axes[0], panels):
         data = []
         for name in names:
             runs = report["runs"][name]
@@ -33,7 +38,11 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
             data.append(values if values else [np.nan])
         ax.boxplot(data, showfliers=True)
         ax.set_xticks(range(1, len(names) + 1), names, rotation=30, ha="right")
-        ax.set_title(label)
+        finite = [v for d in data for v in d if np.isfinite(v) and v > 0]
+        if not success_only and finite and max(finite) / min(finite) > 30:
+            ax.set_yscale("log")
+        ax.set_title(title, fontsize=10)
+        ax.set_ylabel(ylabel)
         ax.grid(axis="y", alpha=0.3)
     rates = ", ".join(f"{n}: {100 * report['results'][n]['success_rate']:.0f}%" for n in names)
     # Two lines: the success rates of four or more samplers overflow a one-line title.
