@@ -75,9 +75,13 @@ def _bounds_for(name: str, task: str | None, bounds: tuple[Any, Any] | None) -> 
 
 def load_sampler(name: str, task: str | None = None, *, seed: int | None = None,
                  checkpoint: str | Path | None = None, bounds: tuple[Any, Any] | None = None,
-                 **settings: Any) -> "Sampler":
+                 threads: int | None = 1, **settings: Any) -> "Sampler":
     """Build the sampler ``name`` for ``task`` (its sampling bounds from the task's
-    :class:`~gnn_mp_envs.registration.TaskSpec`), or for ``bounds=(low, high)`` without a task."""
+    :class:`~gnn_mp_envs.registration.TaskSpec`), or for ``bounds=(low, high)`` without a task.
+
+    A learned sampler runs a small forward every step: loading one sets torch to ``threads``
+    threads for the process (:data:`agents.samplers.base.INFERENCE_THREADS`, the one thread
+    policy; ``threads=None`` leaves torch as it is)."""
     try:
         entry = SAMPLERS[name]
     except (KeyError, TypeError):
@@ -97,6 +101,9 @@ def load_sampler(name: str, task: str | None = None, *, seed: int | None = None,
         task = _checkpoint_task(checkpoint)
     low, high = _bounds_for(name, task, bounds)
     extra = {"checkpoint": checkpoint} if entry.learned else {}
+    if entry.learned:
+        from agents.samplers.base import use_inference_threads
+        use_inference_threads(threads)
     return entry.factory(low=low, high=high, task=task, seed=seed, **extra, **settings)
 
 

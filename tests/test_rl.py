@@ -161,6 +161,7 @@ def test_short_training_runs(tmp_path, lib, algo, task):
         warnings.simplefilter("ignore")
         result = (train_sb3 if lib == "sb3" else train_torchrl)(args)
     assert result.steps >= 256
+    assert torch.get_num_threads() == args.threads  # TorchRL's env close raises it; training puts it back
     assert 0 < result.buffer_bytes < 8 * 2**20     # bounded: the full padding would be 100-1000x more
     run = result.run_dir
     assert run == args.out

@@ -276,3 +276,25 @@ def test_torch_compatible_stream_makes_torchs_draws():
             np.testing.assert_array_equal(ours, theirs)
     with pytest.raises(ValueError, match="16"):
         TorchCompatibleStream(0).normal(16)
+
+
+def test_the_thread_policy():
+    """Loading a learned sampler puts torch on one thread (a step's forward is small; a second thread
+    costs up to 10x); threads=None opts out; classical samplers leave torch alone; the context
+    manager restores the count."""
+    from agents.samplers.base import inference_threads
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        load_sampler("uniform", task="maze2d")
+        assert torch.get_num_threads() == 2
+        load_sampler("cvae", task="maze2d", threads=None)
+        assert torch.get_num_threads() == 2
+        load_sampler("cvae", task="maze2d")
+        assert torch.get_num_threads() == 1
+        torch.set_num_threads(2)
+        with inference_threads():
+            assert torch.get_num_threads() == 1
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

@@ -24,6 +24,7 @@ probabilistically complete. A new learned sampler implements :meth:`ModelSampler
 
 from __future__ import annotations
 
+import contextlib
 from typing import Mapping
 
 import numpy as np
@@ -35,6 +36,30 @@ from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
 SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
+#: Torch threads of a process that runs a sampler's per-step forward. A step's forward is a few
+#: dozen small operations, where a second thread only adds synchronisation: measured on the
+#: 2-core machine, arm gnn-cvae's decode took ~15 ms per step with torch's default of 2 threads
+#: and ~0.2 ms with 1 (issue #17). ``load_sampler`` applies it; ``threads=None`` opts out.
+INFERENCE_THREADS = 1
+
+
+def use_inference_threads(threads: int | None = INFERENCE_THREADS) -> None:
+    """The one thread policy: set torch to ``threads`` threads (None: leave it as it is)."""
+    if threads is not None and torch.get_num_threads() != int(threads):
+        torch.set_num_threads(int(threads))
+
+
+@contextlib.contextmanager
+def inference_threads(threads: int | None = INFERENCE_THREADS):
+    """:func:`use_inference_threads` for a block (e.g. evaluation inside training), then torch's
+    thread count as it was."""
+    before = torch.get_num_threads()
+    use_inference_threads(threads)
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
 
 
 def active_target(obs: Mapping) -> np.ndarray:

@@ -211,10 +211,10 @@ class TreePlanningEnv(gym.Env):
         if a.shape != (self.state_dim,):
             raise ValueError(f"action must have shape ({self.state_dim},) within bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}; got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action must be finite (shape ({self.state_dim},), bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}); got {a.tolist()}")
-        return np.clip(a, self.problem.low, self.problem.high)
+        return np.minimum(np.maximum(a, self.problem.low), self.problem.high)   # np.clip, without its overhead
 
     def _observation(self) -> dict:
         return self._obs.as_dict(copy=self.copy_observations)

@@ -59,10 +59,12 @@ class Evaluator:
 
     def evaluate(self, sampler: Any) -> dict[str, Any]:
         """Problems ``0..N-1`` of split ``val`` planned with ``sampler``: the figures of ``summarize``."""
+        from agents.samplers.base import inference_threads
         from gnn_mp_envs.evaluation import plan_problems, summarize
         a = self.args
-        return summarize(plan_problems(sampler, self.env, range(a.eval_problems), a.seed, max_steps=a.eval_max_steps,
-                                       progress=a.progress, desc="val"))
+        with inference_threads():
+            return summarize(plan_problems(sampler, self.env, range(a.eval_problems), a.seed,
+                                           max_steps=a.eval_max_steps, progress=a.progress, desc="val"))
 
     def save(self, name: str, policy: Any, kind: str, ctor_args: dict, uniform_mix: float, **meta: Any) -> Path:
         from agents.rl.sampler import policy_record
