@@ -15,13 +15,17 @@ import numpy as np
 import torch
 
 from agents.samplers.base import Sampler, active_target
-from agents.samplers.streams import TorchCompatibleStream
+from agents.samplers.streams import _MASK24, _UNIT24, TorchCompatibleStream
 
 class _TorchCompatible(Sampler):
     """Draws float32 uniforms exactly as ``torch.rand`` does from the same seed."""
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
+        super().__init__(low, high, seed)
+        self._scale32 = self.span32 * _UNIT24
 
     def uniform(self, batch_shape: tuple = ()) -> np.ndarray:
         """``(*batch_shape, d)`` float32 uniform states in the bounds."""
@@ -41,6 +45,9 @@ class UniformSampler(_TorchCompatible):
     reads = ("start",)
 
     def act(self, obs: Mapping) -> np.ndarray:
+        if np.shape(obs["start"]) == (self.state_dim,):     # one observation: uniform(()) without the reshapes
+            # (m * 2**-24) * span == m * (span * 2**-24) in float32: scaling by a power of two is exact
+            return self.low32 + (self.rng.bits.random_raw(self.state_dim) & _MASK24).astype(np.float32) * self._scale32
         return self.uniform(self.batch_shape(obs))
 
     def propose(self, obs: Mapping) -> torch.Tensor:

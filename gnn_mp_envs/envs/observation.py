@@ -115,6 +115,10 @@ class GraphObservation:
         self.active_tree = np.zeros(1, dtype=np.int64)
         self.obstacles = np.zeros(obstacles, dtype=np.float32)
         self._problem: Problem | None = None
+        #: The arrays themselves, in observation order (what ``as_dict(copy=False)`` hands out).
+        self._views = {"nodes": self.nodes, "node_features": self.node_features, "parent": self.parent,
+                       "mask": self.mask, "num_nodes": self.num_nodes, "start": self.start, "goal": self.goal,
+                       "active_tree": self.active_tree, "obstacles": self.obstacles}
 
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
@@ -155,7 +159,9 @@ class GraphObservation:
 
     def as_dict(self, copy: bool = True) -> dict:
         """The observation; ``copy=False`` returns live views that later steps overwrite."""
-        c = np.copy if copy else (lambda a: a)
+        if not copy:
+            return dict(self._views)
+        c = np.copy
         return {
             "nodes": c(self.nodes),
             "node_features": c(self.node_features),
