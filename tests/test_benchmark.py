@@ -18,10 +18,13 @@ def tiny_args(**overrides) -> bm.BenchmarkArgs:
     return bm.BenchmarkArgs(**kwargs)
 
 
+TIMES = ("wall_time_s", "sampler_time_s", "planner_time_s")
+
+
 def without_wall_time(report: dict) -> dict:
-    runs = {name: [{k: v for k, v in r.items() if k != "wall_time_s"} for r in rs]
+    runs = {name: [{k: v for k, v in r.items() if k not in TIMES} for r in rs]
             for name, rs in report["runs"].items()}
-    results = {name: {k: v for k, v in s.items() if k != "wall_time_s"} for name, s in report["results"].items()}
+    results = {name: {k: v for k, v in s.items() if k not in TIMES} for name, s in report["results"].items()}
     return {"runs": runs, "results": results}
 
 

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 STATS_KEYS = {"median", "mean", "q25", "q75"}
-METRICS = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s")
+METRICS = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s", "sampler_time_s",
+           "planner_time_s")
 
 
 def gnn_mp(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
@@ -65,6 +66,10 @@ def test_benchmark_end_to_end_json_plot_and_render(tmp_path: Path):
     for runs in report["runs"].values():
         assert [r["problem"] for r in runs] == [0, 1, 2]
         assert all(r["nodes_expanded"] <= 200 for r in runs)
+        # the planning loop's time, split into the sampler's and the planner's share
+        assert all(r["sampler_time_s"] + r["planner_time_s"] == pytest.approx(r["wall_time_s"], abs=1e-9)
+                   and r["sampler_time_s"] > 0 and r["planner_time_s"] > 0 for r in runs)
+    assert "sampler / planner [ms]" in result.stdout
     assert out_plot.stat().st_size > 0
     assert sorted(p.name for p in render_dir.iterdir()) == ["maze2d_goal-bias_problem0.png",
                                                             "maze2d_uniform_problem0.png"]

@@ -10,7 +10,8 @@ import numpy as np
 from train.benchmark.args import BenchmarkArgs, task_spec_for
 
 #: The counters every run reports, in table order.
-METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s")
+METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s",
+                            "sampler_time_s", "planner_time_s")
 #: Metrics summarised over successful runs only (a failed run has no path).
 SUCCESS_ONLY_METRICS: frozenset[str] = frozenset({"path_length"})
 
@@ -29,7 +30,7 @@ def sampler_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
     summary: dict[str, Any] = {"success_rate": float(np.mean([r["success"] for r in records])) if records else None}
     for metric in METRICS:
         runs = [r for r in records if r["success"]] if metric in SUCCESS_ONLY_METRICS else records
-        summary[metric] = summarize([r[metric] for r in runs])
+        summary[metric] = summarize([r.get(metric) for r in runs])
     return summary
 
 
