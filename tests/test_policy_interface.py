@@ -272,7 +272,7 @@ def test_model_sampler_is_seeded_bounded_and_mixes_at_its_rates():
     near = ~target & (np.linalg.norm(draws - obs["goal"], axis=1) < 0.01)
     assert abs(target.mean() - 0.2) < 0.025 and abs(near.mean() - 0.5) < 0.03
     td = TensorDict({k: torch.as_tensor(np.stack([obs[k]] * 3)) for k in OBSERVATION_KEYS}, batch_size=[3])
-    out = sampler(td)
+    out = sampler.as_module()(td)
     assert out["action"].shape == (3, 2) and out["action"].dtype == torch.float32
     with pytest.raises(ValueError, match="3-D states"):
         sampler.act({**obs, "start": np.zeros(3, np.float32)})

@@ -214,7 +214,7 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         # batched TorchRL use: full observations in, actions out
         from tensordict import TensorDict
         td = TensorDict({k: torch.as_tensor(np.stack([v] * 3)) for k, v in obs.items()}, batch_size=[3])
-        out = a(td)
+        out = a.as_module()(td)
         assert out["action"].shape == (3, 2) and torch.isfinite(out["action"]).all()
         with pytest.raises(ValueError, match="task"):
             load_sampler(name, task="pendulum", checkpoint=path)

@@ -52,7 +52,7 @@ def test_goal_bias_rate():
 
 def test_tensordict_module_batched():
     env, low, high = _bounds()
-    module = load_sampler("uniform", bounds=(low, high), seed=0)
+    module = load_sampler("uniform", bounds=(low, high), seed=0).as_module()
     assert list(module.in_keys) == list(SAMPLER_IN_KEYS) and list(module.out_keys) == ["action"]
     obs, _ = env.reset(seed=0)
     td = TensorDict({k: torch.as_tensor(np.stack([obs[k]] * 4)) for k in SAMPLER_IN_KEYS}, batch_size=[4])
@@ -130,7 +130,8 @@ def test_uniform_stream_is_pinned():
         td = TensorDict({k: torch.as_tensor(np.broadcast_to(obs[k], (*batch, *obs[k].shape)).copy())
                          for k in SAMPLER_IN_KEYS}, batch_size=list(batch))
         for _ in range(3):
-            np.testing.assert_array_equal(sampler(td)["action"].numpy(), _reference_uniform(g, low, high, batch).numpy())
+            np.testing.assert_array_equal(sampler.as_module()(td)["action"].numpy(),
+                                          _reference_uniform(g, low, high, batch).numpy())
 
 
 @pytest.mark.parametrize("goal_bias", [0.05, 0.7])
@@ -158,7 +159,7 @@ def test_goal_bias_stream_is_pinned(goal_bias):
     td["active_tree"] = torch.tensor([[0], [1], [0], [1], [1]])
     for _ in range(20):
         ref = _reference_goal_bias(g, low, high, td, goal_bias, batch)
-        np.testing.assert_array_equal(sampler(td)["action"].numpy(), ref.numpy())
+        np.testing.assert_array_equal(sampler.as_module()(td)["action"].numpy(), ref.numpy())
 
 
 def test_act_returns_a_fresh_array_not_a_view_of_the_observation():
@@ -177,8 +178,9 @@ def test_samplers_are_tensordict_modules_reading_only_what_they_need():
     obs, _ = env.reset(seed=0)
     for name in ["uniform", "goal-bias"]:
         sampler = load_sampler(name, bounds=(low, high), seed=0)
-        assert isinstance(sampler, TensorDictModuleBase)
-        assert list(sampler.in_keys) == list(SAMPLER_IN_KEYS) and list(sampler.out_keys) == ["action"]
+        module = sampler.as_module()
+        assert isinstance(module, TensorDictModuleBase) and module.sampler is sampler
+        assert list(module.in_keys) == list(SAMPLER_IN_KEYS) and list(module.out_keys) == ["action"]
         # propose() needs only the keys in `reads` (any batch shape)
         needed = {k: torch.as_tensor(np.stack([obs[k]] * 3)) for k in sampler.reads}
         assert set(needed) <= {"start", "goal", "active_tree"}
@@ -298,3 +300,26 @@ def test_the_thread_policy():
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_classical_samplers_run_without_torch():
+    """The environments and the classical samplers need no torch: a fresh interpreter that cannot
+    import torch or tensordict plans a problem with uniform and goal-bias samplers."""
+    import subprocess
+    import sys
+    code = (
+        "import sys\n"
+        "class Block:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] in ('torch', 'tensordict', 'torchrl', 'torch_geometric'):\n"
+        "            raise ImportError(f'blocked: {name}')\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "from agents.registry import load_sampler\n"
+        "from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize\n"
+        "env = evaluation_env('maze2d', 'test')\n"
+        "for name in ('uniform', 'goal-bias'):\n"
+        "    print(name, summarize(plan_problems(load_sampler(name, task='maze2d'), env, range(2), 0))['success_rate'])\n"
+        "assert not any(m.split('.')[0] in ('torch', 'tensordict') for m in sys.modules)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "uniform 1.0" in result.stdout and "goal-bias 1.0" in result.stdout

@@ -16,7 +16,7 @@ from agents.registry import SAMPLERS, available_samplers, descriptions, load_sam
 _LAZY = {"Sampler": "agents.samplers.base", "ModelSampler": "agents.samplers.base",
          "SAMPLER_IN_KEYS": "agents.samplers.base", "SAMPLER_OUT_KEYS": "agents.samplers.base",
          "active_target": "agents.samplers.base", "UniformSampler": "agents.samplers.baselines",
-         "GoalBiasSampler": "agents.samplers.baselines"}
+         "GoalBiasSampler": "agents.samplers.baselines", "SamplerModule": "agents.samplers.module"}
 
 
 def __getattr__(name: str):
@@ -26,5 +26,5 @@ def __getattr__(name: str):
 
 
 __all__ = ["SAMPLERS", "SAMPLER_IN_KEYS", "SAMPLER_OUT_KEYS", "GoalBiasSampler", "ModelSampler", "Sampler",
-           "UniformSampler", "active_target", "available_samplers", "descriptions", "load_sampler",
+           "SamplerModule", "UniformSampler", "active_target", "available_samplers", "descriptions", "load_sampler",
            "register_sampler"]

@@ -1,16 +1,21 @@
 """The sampler interface and its one base: observation in, next sample out.
 
-Every sampler (uniform, goal-biased, GNN, CVAE, GNN-CVAE, RL policy) is a :class:`Sampler`,
-which is a ``tensordict.nn.TensorDictModuleBase``: ``in_keys`` are the observation keys
-(:data:`SAMPLER_IN_KEYS`), ``out_keys`` are ``["action"]``.
+Every sampler (uniform, goal-biased, GNN, CVAE, GNN-CVAE, RL policy) is a :class:`Sampler`:
 
 * ``sampler.act(obs)`` serves plain Gymnasium loops: one numpy observation in, a float32
   numpy action out;
-* ``sampler(td)`` (``forward``) writes ``td["action"]`` for observations with any leading
-  batch shape (:meth:`Sampler.propose`), so a sampler drops into TorchRL
-  (``env.rollout(n, sampler)``, collectors) as it is;
-* ``sampler.reset(seed)`` reseeds the sampler's one random stream, ``self.rng`` (a numpy
-  ``Generator``; the benchmark calls it before every problem). All randomness comes from it.
+* ``sampler.propose(obs)`` does the same for observations with any leading batch shape (numpy
+  arrays or tensors in, a ``(*batch, d)`` float32 array out);
+* ``sampler.as_module()`` is the sampler as a TorchRL policy: a
+  ``tensordict.nn.TensorDictModuleBase`` whose ``in_keys`` are the observation keys
+  (:data:`SAMPLER_IN_KEYS`) and ``out_keys`` ``["action"]`` (``env.rollout(n, sampler.as_module())``,
+  collectors);
+* ``sampler.reset(seed)`` reseeds the sampler's one random stream, ``self.rng`` (the benchmark
+  calls it before every problem). All randomness comes from it.
+
+The base is numpy only: the classical samplers run without torch (an environments-only install,
+benchmark workers that start in a fraction of a second); torch and tensordict load with a
+learned sampler or with ``as_module``.
 
 The learned samplers derive from :class:`ModelSampler`, the one mixture of sample sources::
 
@@ -25,14 +30,14 @@ probabilistically complete. A new learned sampler implements :meth:`ModelSampler
 from __future__ import annotations
 
 import contextlib
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
-import torch
-from tensordict import TensorDictBase
-from tensordict.nn import TensorDictModuleBase
 
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
+
+if TYPE_CHECKING:
+    from agents.samplers.module import SamplerModule
 
 SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
@@ -45,6 +50,7 @@ INFERENCE_THREADS = 1
 
 def use_inference_threads(threads: int | None = INFERENCE_THREADS) -> None:
     """The one thread policy: set torch to ``threads`` threads (None: leave it as it is)."""
+    import torch
     if threads is not None and torch.get_num_threads() != int(threads):
         torch.set_num_threads(int(threads))
 
@@ -53,6 +59,7 @@ def use_inference_threads(threads: int | None = INFERENCE_THREADS) -> None:
 def inference_threads(threads: int | None = INFERENCE_THREADS):
     """:func:`use_inference_threads` for a block (e.g. evaluation inside training), then torch's
     thread count as it was."""
+    import torch
     before = torch.get_num_threads()
     use_inference_threads(threads)
     try:
@@ -75,7 +82,7 @@ def wrap_periodic(x: np.ndarray, periodic: np.ndarray) -> np.ndarray:
     return np.where(periodic, (x + np.pi) % (2 * np.pi) - np.pi, x)
 
 
-class Sampler(TensorDictModuleBase):
+class Sampler:
     """Base class: the sampling bounds and one seeded numpy stream, ``self.rng``.
 
     Subclasses implement :meth:`act` (one observation) and may override :meth:`propose`
@@ -85,11 +92,11 @@ class Sampler(TensorDictModuleBase):
 
     #: Observation keys the sampler reads.
     reads: tuple[str, ...] = SAMPLER_IN_KEYS
+    #: The TensorDict keys of :meth:`as_module`.
+    in_keys: tuple[str, ...] = SAMPLER_IN_KEYS
+    out_keys: tuple[str, ...] = SAMPLER_OUT_KEYS
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
-        super().__init__()
-        self.in_keys = list(SAMPLER_IN_KEYS)
-        self.out_keys = list(SAMPLER_OUT_KEYS)
         low64, high64 = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if low64.shape != high64.shape or low64.ndim != 1 or not np.all(high64 > low64):
             raise ValueError(f"sampler bounds must be 1-D with high > low, got {low64} and {high64}")
@@ -122,26 +129,36 @@ class Sampler(TensorDictModuleBase):
         """Next sample ``(d,)`` float32 for one (unbatched) numpy observation."""
         raise NotImplementedError
 
-    def propose(self, obs: Mapping) -> torch.Tensor:
-        """Next samples ``(*batch, d)`` for observations with leading batch shape ``batch``:
-        one :meth:`act` per observation, in batch order, from the same stream."""
-        arrays = {k: np.asarray(v.detach().cpu() if isinstance(v, torch.Tensor) else v) for k, v in obs.items()
-                  if k in SAMPLER_IN_KEYS}
+    def propose(self, obs: Mapping) -> np.ndarray:
+        """Next samples ``(*batch, d)`` float32 for observations with leading batch shape ``batch``
+        (numpy arrays or tensors): one :meth:`act` per observation, in batch order, from the same stream."""
+        arrays = as_arrays(obs)
         shape = arrays["start"].shape[:-1]
         flat = {k: v.reshape(-1, *v.shape[len(shape):]) for k, v in arrays.items()}
         out = [self.act_stateless({k: v[i] for k, v in flat.items()}) for i in range(int(np.prod(shape)))]
-        return torch.as_tensor(np.stack(out).reshape(*shape, self.state_dim) if out
-                               else np.zeros((*shape, self.state_dim), np.float32))
+        return (np.stack(out).reshape(*shape, self.state_dim) if out
+                else np.zeros((*shape, self.state_dim), np.float32))
 
     def act_stateless(self, obs: Mapping) -> np.ndarray:
         """:meth:`act` on an observation unrelated to the previous one (the batched path; samplers
         with per-episode caches clear them first)."""
         return self.act(obs)
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """TensorDict in (observation keys), the same TensorDict out with ``"action"`` set."""
-        tensordict.set("action", self.propose(tensordict))
-        return tensordict
+    def as_module(self) -> "SamplerModule":
+        """The sampler as a TorchRL policy (a ``TensorDictModuleBase``: observation keys in,
+        ``"action"`` out, any batch size), drawing from this sampler's stream."""
+        from agents.samplers.module import SamplerModule
+        return SamplerModule(self)
+
+
+def as_arrays(obs: Mapping) -> dict[str, np.ndarray]:
+    """The observation keys of ``obs`` (a dict or a TensorDict of arrays or tensors) as numpy arrays."""
+    out = {}
+    for k in SAMPLER_IN_KEYS:
+        if k in obs.keys():
+            v = obs[k]
+            out[k] = np.asarray(v.detach().cpu() if hasattr(v, "detach") else v)
+    return out
 
 
 class ModelSampler(Sampler):

@@ -12,9 +12,8 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
-import torch
 
-from agents.samplers.base import Sampler, active_target
+from agents.samplers.base import Sampler, active_target, as_arrays
 from agents.samplers.streams import _MASK24, _UNIT24, TorchCompatibleStream
 
 class _TorchCompatible(Sampler):
@@ -50,8 +49,8 @@ class UniformSampler(_TorchCompatible):
             return self.low32 + (self.rng.bits.random_raw(self.state_dim) & _MASK24).astype(np.float32) * self._scale32
         return self.uniform(self.batch_shape(obs))
 
-    def propose(self, obs: Mapping) -> torch.Tensor:
-        return torch.as_tensor(self.uniform(self.batch_shape(obs)))
+    def propose(self, obs: Mapping) -> np.ndarray:
+        return self.uniform(self.batch_shape(obs))
 
 
 class GoalBiasSampler(_TorchCompatible):
@@ -76,20 +75,18 @@ class GoalBiasSampler(_TorchCompatible):
     def act(self, obs: Mapping) -> np.ndarray:
         shape = self.batch_shape(obs)
         if shape:
-            return self.propose(obs).numpy()
+            return self.propose(obs)
         sample = self.uniform(())
         if self.rng.unit(1)[0] < self._goal_bias32:
             return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
         return sample
 
-    def propose(self, obs: Mapping) -> torch.Tensor:
+    def propose(self, obs: Mapping) -> np.ndarray:
         """All uniform states of the batch first, then all the choices (one ``unit`` call each)."""
         shape = self.batch_shape(obs)
         sample = self.uniform(shape)
-        start, goal = (np.asarray(obs[k].cpu() if isinstance(obs[k], torch.Tensor) else obs[k], np.float32)
-                       for k in ("start", "goal"))
-        active = np.asarray(obs["active_tree"].cpu() if isinstance(obs["active_tree"], torch.Tensor)
-                            else obs["active_tree"]).reshape(*shape, 1)
-        target = np.where(active == 1, start, goal)
+        arrays = as_arrays(obs)
+        target = np.where(arrays["active_tree"].reshape(*shape, 1) == 1, arrays["start"].astype(np.float32),
+                          arrays["goal"].astype(np.float32))
         pick = self.rng.unit(int(np.prod(shape, dtype=np.int64))).reshape(*shape, 1) < self._goal_bias32
-        return torch.as_tensor(np.where(pick, target, sample).astype(np.float32))
+        return np.where(pick, target, sample).astype(np.float32)

@@ -11,7 +11,7 @@ from gnn_mp_envs.utils.io import atomic_write_text
 from train.benchmark.args import BenchmarkArgs
 from train.benchmark.ompl_rows import write_ompl_logs
 from train.benchmark.plots import plot_report, render_growth
-from train.benchmark.runs import BenchmarkIncomplete, run_benchmark
+from train.benchmark.runs import BenchmarkIncomplete, WorkerPool, run_benchmark
 from train.benchmark.tables import format_table
 
 
@@ -39,11 +39,12 @@ def write_json(path: Path, report: dict[str, Any]) -> Path:
     return atomic_write_text(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
 
 
-def benchmark(args: BenchmarkArgs) -> dict[str, Any]:
+def benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[str, Any]:
     """Run, print the table, write outputs. When the run stops early, the finished runs go to
-    ``--json`` (marked ``"partial": true``) before the error is raised."""
+    ``--json`` (marked ``"partial": true``) before the error is raised. ``pool``: worker processes
+    shared with other calls (a suite's)."""
     try:
-        report = run_benchmark(args)
+        report = run_benchmark(args, pool)
     except BenchmarkIncomplete as exc:
         if args.json is not None:
             write_json(args.json, exc.report)

@@ -38,12 +38,17 @@ def cached_env(task: str, env_kwargs: dict[str, Any], render: bool = False):
     return _ENVS[key]
 
 
-def cached_sampler(name: str, task: str, checkpoint: str | None = None):
-    """One sampler per (name, task, checkpoint) and process; reseeded every episode."""
+def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any = None):
+    """One sampler per (name, task, checkpoint) and process; reseeded every episode. A new one runs
+    once on ``env``'s first problem, so lazy imports and first-call costs stay out of the
+    measured wall time (the benchmark reseeds it and resets the env before each problem)."""
     from agents.registry import load_sampler
     key = (name, task, checkpoint)
     if key not in _SAMPLERS:
-        _SAMPLERS[key] = load_sampler(name, task=task, seed=0, checkpoint=checkpoint)
+        sampler = load_sampler(name, task=task, seed=0, checkpoint=checkpoint)
+        if env is not None:
+            sampler.act(env.reset(seed=0, options={"index": 0})[0])
+        _SAMPLERS[key] = sampler
     return _SAMPLERS[key]
 
 
@@ -53,7 +58,7 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
     from gnn_mp_envs.evaluation import plan_problem, problem_seed
     snapshots_at = set(snapshot_iterations)
     env = cached_env(task, env_kwargs, render=bool(snapshots_at))
-    sampler = cached_sampler(sampler_name, task, checkpoint)
+    sampler = cached_sampler(sampler_name, task, checkpoint, env)
     snapshots: list[tuple[int, int, np.ndarray]] = []
 
     def snapshot(_obs: Any, info: dict[str, Any], done: bool) -> None:
@@ -94,18 +99,49 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
-def _warm_up_worker(task: str, env_kwargs: dict[str, Any],
-                    samplers: list[tuple[str, str | None]], modules: list[str], die_with_parent: bool = True) -> None:
-    """Worker initializer: die with the parent, import plugin modules, build the env and
-    samplers and run one inference each, so that lazy imports and first-call costs stay out
-    of the measured wall time (as in a serial run)."""
+def _init_worker(modules: list[str], die_with_parent: bool = True) -> None:
+    """Worker initializer: die with the parent and import the plugin modules. Envs and samplers
+    are built (and warmed up) by the first job that needs them, so one pool serves several tasks."""
     if die_with_parent:
         _die_with_parent()
     import_modules(modules)
-    env = cached_env(task, env_kwargs)
-    obs, _ = env.reset(seed=0, options={"index": 0})
-    for name, checkpoint in samplers:
-        cached_sampler(name, task, checkpoint).act(obs)
+
+
+class WorkerPool:
+    """``workers`` processes that plan benchmark jobs, reused across the tasks of a suite (each
+    pays its imports once). Forked while this process has not imported torch, else spawned
+    (:func:`worker_start_method`). On an error or Ctrl-C the workers are killed at once."""
+
+    def __init__(self, workers: int, modules: list[str] = ()) -> None:
+        context = multiprocessing.get_context(worker_start_method())
+        self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
+                                            initargs=(list(modules),))
+        self.killed = False
+
+    def run(self, jobs: list[tuple], finished) -> None:
+        try:
+            futures = [self.executor.submit(_run_episode_job, job) for job in jobs]
+            for future in as_completed(futures):
+                finished(future.result())
+        except BaseException:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        self.killed = True
+        processes = list((self.executor._processes or {}).values())   # the pool has no public kill
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.kill()
+        for process in processes:
+            process.join(timeout=5)
+
+    def __enter__(self) -> "WorkerPool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if not self.killed:
+            self.executor.shutdown()
 
 
 def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
@@ -122,18 +158,19 @@ def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list
         raise BenchmarkError(f"task {task!r} is not available: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise BenchmarkError(f"cannot build the {task} environment with {env_kwargs}: {exc}") from None
-    obs, _ = env.reset(seed=0, options={"index": 0})
     for name, checkpoint in samplers:
         try:
-            cached_sampler(name, task, checkpoint).act(obs)
+            cached_sampler(name, task, checkpoint, env)
         except FileNotFoundError as exc:
             raise BenchmarkError(f"sampler {name!r}: missing checkpoint ({exc})") from None
         except (ValueError, OSError, RuntimeError, KeyError) as exc:
             raise BenchmarkError(f"sampler {name!r} cannot be loaded for task {task!r}: {exc}") from None
 
 
-def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
-    """Run every sampler on the same problems; returns the report (see :func:`build_report`)."""
+def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[str, Any]:
+    """Run every sampler on the same problems; returns the report (see :func:`build_report`).
+    ``pool``: the worker processes to use (a suite passes one for all its tasks); by default
+    ``--workers`` > 1 starts a pool for this call."""
     from tqdm import tqdm
 
     from train.benchmark.ompl_rows import run_ompl_rows
@@ -163,12 +200,15 @@ def run_benchmark(args: BenchmarkArgs) -> dict[str, Any]:
     reason = None
     try:
         if args.ray is not None:
-            _run_on_ray(args, env_kwargs, learned, jobs, finished)
+            _run_on_ray(args, jobs, finished)
+        elif pool is not None:
+            pool.run(jobs, finished)
         elif args.workers == 1:
             for job in jobs:
                 finished(_run_episode_job(job))
         else:
-            _run_in_workers(args, env_kwargs, learned, jobs, finished)
+            with WorkerPool(args.workers, args.modules) as own:
+                own.run(jobs, finished)
     except KeyboardInterrupt:
         reason = "interrupted"
     except BrokenProcessPool:
@@ -199,17 +239,16 @@ class BenchmarkIncomplete(BenchmarkError):
 
 
 class _EpisodeActor:
-    """A Ray actor: one worker process with its env and samplers, warmed up as the local workers."""
+    """A Ray actor: one worker process with its envs and samplers, as the local workers."""
 
-    def __init__(self, task, env_kwargs, samplers, modules) -> None:
-        _warm_up_worker(task, env_kwargs, samplers, modules, die_with_parent=False)
+    def __init__(self, modules) -> None:
+        _init_worker(modules, die_with_parent=False)
 
     def run(self, job: tuple) -> dict[str, Any]:
         return _run_episode_job(job)
 
 
-def _run_on_ray(args: BenchmarkArgs, env_kwargs: dict[str, Any],
-                learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
+def _run_on_ray(args: BenchmarkArgs, jobs: list[tuple], finished) -> None:
     """Run ``jobs`` on ``args.workers`` Ray actors, locally (``--ray``) or on a cluster
     (``--ray auto`` / ``ray://HOST:10001``). Results equal a local run for the same seed."""
     try:
@@ -227,8 +266,7 @@ def _run_on_ray(args: BenchmarkArgs, env_kwargs: dict[str, Any],
             raise BenchmarkError(f"cannot reach Ray at {args.ray}: {str(exc).splitlines()[0]}") from None
     try:
         actor = ray.remote(num_cpus=1)(_EpisodeActor)
-        pool = ActorPool([actor.remote(args.task, env_kwargs, learned, args.modules)
-                          for _ in range(args.workers)])
+        pool = ActorPool([actor.remote(args.modules) for _ in range(args.workers)])
         for record in pool.map_unordered(lambda a, job: a.run.remote(job), jobs):
             finished(record)
     except ray.exceptions.RayTaskError as exc:
@@ -241,23 +279,8 @@ def _run_on_ray(args: BenchmarkArgs, env_kwargs: dict[str, Any],
             ray.shutdown()
 
 
-def _run_in_workers(args: BenchmarkArgs, env_kwargs: dict[str, Any],
-                    learned: list[tuple[str, str | None]], jobs: list[tuple], finished) -> None:
-    """Run ``jobs`` in ``args.workers`` spawned processes; on any error or Ctrl-C the workers
-    are killed at once instead of finishing the queue."""
-    context = multiprocessing.get_context("spawn")   # torch + fork can deadlock
-    pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=context, initializer=_warm_up_worker,
-                               initargs=(args.task, env_kwargs, learned, args.modules))
-    try:
-        futures = [pool.submit(_run_episode_job, job) for job in jobs]
-        for future in as_completed(futures):
-            finished(future.result())
-    except BaseException:
-        processes = list((pool._processes or {}).values())   # the pool has no public kill
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.kill()
-        for process in processes:
-            process.join(timeout=5)
-        raise
-    pool.shutdown()
+def worker_start_method() -> str:
+    """``"fork"`` while this process has not imported torch (classical samplers: the workers start
+    at once, with everything imported), ``"spawn"`` once it has (torch's thread pools do not survive
+    a fork: a forked worker can deadlock)."""
+    return "spawn" if "torch" in sys.modules else "fork"

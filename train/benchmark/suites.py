@@ -16,6 +16,7 @@ from train.benchmark.args import (
     ompl_available,
 )
 from train.benchmark.outputs import benchmark
+from train.benchmark.runs import WorkerPool
 from train.benchmark.tables import format_table
 
 
@@ -69,6 +70,14 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
     if with_ompl is None:
         with_ompl = ompl_available()
     out.mkdir(parents=True, exist_ok=True)
+    if workers > 1:   # one pool for every task of the suite: each worker pays its imports once
+        with WorkerPool(workers) as pool:
+            return _run_entries(name, out, seed, workers, progress, with_ompl, render, pool)
+    return _run_entries(name, out, seed, workers, progress, with_ompl, render, None)
+
+
+def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, with_ompl: bool,
+                 render: Path | None, pool: WorkerPool | None) -> dict[str, dict[str, Any]]:
     reports: dict[str, dict[str, Any]] = {}
     tables: list[str] = []
     suite_start = time.perf_counter()
@@ -83,7 +92,7 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
                              ompl_log=out / "ompl" if with_ompl else None,
                              progress=progress)
         task_start = time.perf_counter()
-        report = benchmark(args)
+        report = benchmark(args, pool)
         elapsed = time.perf_counter() - task_start
         table = format_table(report)
         atomic_write_text(out / f"{entry.task}.txt", table + "\n")
