@@ -151,7 +151,7 @@ for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d and pendu
                              ("rl-ppo-torchrl", "TorchRL PPO", "no shipped weights")):
     register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),
                      f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
-                     settings=("uniform_mix", "deterministic"), learned=True)
+                     settings=("uniform_mix", "deterministic", "proposals"), learned=True)
 
 
 __all__ = ["SAMPLERS", "SamplerEntry", "available_samplers", "descriptions", "load_sampler", "register_sampler"]

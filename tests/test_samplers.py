@@ -323,3 +323,39 @@ def test_classical_samplers_run_without_torch():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "uniform 1.0" in result.stdout and "goal-bias 1.0" in result.stdout
+
+
+def test_proposals_run_the_forward_once_per_k_model_samples():
+    """proposals=k: a learned sampler's forward runs once per k model samples of one episode and
+    active tree, again for a new episode; proposals=1 runs it every time."""
+    from agents.samplers import ModelSampler
+
+    class Counting(ModelSampler):
+        settings = ModelSampler.settings + ("proposals",)
+        forwards = 0
+
+        def forward_pass(self, obs):
+            Counting.forwards += 1
+            return np.asarray(obs["goal"], np.float64)
+
+        def model_sample(self, obs):
+            return self.refreshed(obs, self.forward_pass)
+
+    env = gym.make("GNNMP/Maze2DBiRRT-v0", disable_env_checker=True)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    for k, expected in ((1, 12), (4, 3)):          # 12 model samples with the same active tree
+        Counting.forwards = 0
+        sampler = Counting(env.action_space.low, env.action_space.high, 0, uniform_mix=0.0, proposals=k)
+        for _ in range(12):
+            sampler.act(obs)
+        assert Counting.forwards == expected
+    sampler = Counting(env.action_space.low, env.action_space.high, 0, uniform_mix=0.0, proposals=4)
+    Counting.forwards = 0
+    other = {**obs, "active_tree": np.array([1])}
+    sampler.act(obs), sampler.act(other), sampler.act(obs), sampler.act(other)
+    assert Counting.forwards == 2                    # one cached forward per active tree (BiRRT)
+    new_problem, _ = env.reset(seed=0, options={"index": 1})
+    sampler.act(new_problem)
+    assert Counting.forwards == 3                    # a new episode refreshes at once
+    with pytest.raises(ValueError, match="proposals"):
+        Counting(env.action_space.low, env.action_space.high, 0, proposals=0)

@@ -96,3 +96,13 @@ def test_files_regenerate_byte_identically_and_damage_is_named(tmp_path):
         load(cached)
     assert load_or_generate(config, tmp_path, progress=False).config == config
     assert cached.read_bytes() == a.read_bytes()
+
+
+def test_worker_processes_make_the_same_dataset_file(tmp_path):
+    """Dataset collection in the benchmark's worker processes assembles the problems in index order:
+    the file is byte-identical to a one-process run."""
+    from train.tree.data import TreeDataConfig, generate, save
+    config = TreeDataConfig(task="maze2d", problems=6, max_nodes=800)
+    one = save(generate(config, progress=False, workers=1), tmp_path / "one.npz")
+    two = save(generate(config, progress=False, workers=2), tmp_path / "two.npz")
+    assert one.read_bytes() == two.read_bytes()

@@ -59,12 +59,12 @@ class RLSampler(ModelSampler):
         periodic: ``(d,)`` bool, the coordinates the task wraps.
     """
 
-    settings = ("uniform_mix", "deterministic")
+    settings = ("uniform_mix", "deterministic", "proposals")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: RLPolicy,
                  view_nodes: int, uniform_mix: float = 0.0, deterministic: bool = False,
-                 action_frame: str = "absolute", periodic: list[bool] | None = None) -> None:
-        super().__init__(low, high, seed, uniform_mix=uniform_mix, periodic=periodic)
+                 action_frame: str = "absolute", periodic: list[bool] | None = None, proposals: int = 1) -> None:
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, periodic=periodic, proposals=proposals)
         if policy.action_dim != self.state_dim:
             raise ValueError(f"the policy acts in {policy.action_dim} dimensions, the bounds have {self.state_dim}")
         if action_frame not in ACTION_FRAMES:
@@ -77,11 +77,12 @@ class RLSampler(ModelSampler):
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
 
-    def params(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor]:
-        """The policy's ``(loc, scale)`` ``(d,)`` for one full observation (through its view)."""
+    def params(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray]:
+        """The policy's ``(loc, scale)`` ``(d,)`` float32 for one full observation (through its view)."""
         view = {k: torch.as_tensor(v) for k, v in tree_view(obs, self.view_nodes).items()}
         with torch.no_grad():
-            return self.policy(view)
+            loc, scale = self.policy(view)
+        return loc.numpy(), scale.numpy()
 
     def act(self, obs: Mapping) -> np.ndarray:
         """The policy's draw, mapped to a state, then (``uniform_mix > 0``) a uniform state taken
@@ -95,13 +96,16 @@ class RLSampler(ModelSampler):
         return uniform if self.rng.unit(1)[0] < np.float32(self.uniform_mix) else x
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        """The policy's state for one observation (float32, in the bounds)."""
-        loc, scale = self.params(obs)
-        z = loc if self.deterministic else loc + scale * torch.from_numpy(self.rng.normal(self.state_dim))
-        u = self.policy.squash_action(z).numpy()
+        """The policy's state for one observation (float32, in the bounds); the policy's forward runs
+        once per ``proposals`` samples (its Gaussian is reused in between)."""
+        loc, scale = self.refreshed(obs, self.params)
+        # float32 elementwise, as torch computed it; tanh through torch (numpy's differs in the last bit)
+        z = loc if self.deterministic else loc + scale * self.rng.normal(self.state_dim)
+        u = np.minimum(np.maximum(z, ACTION_LOW), ACTION_HIGH) if self.policy.squash == "clip" else \
+            self.policy.squash_action(torch.from_numpy(z)).numpy()
         x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
                                    np.asarray(active_target(obs), np.float32), self.periodic)
-        return np.clip(x, self.low32, self.high32)
+        return np.minimum(np.maximum(x, self.low32), self.high32)
 
 
 # ----------------------------------------------------------------------------- files
@@ -126,8 +130,8 @@ def save_policy(path: str | Path, policy: RLPolicy, kind: str, ctor_args: Mappin
 
 def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray, *, seed: int | None = None,
                             kind: str | None = None, task: str | None = None, uniform_mix: float | None = None,
-                            deterministic: bool = False) -> RLSampler:
-    """An :class:`RLSampler` from a policy checkpoint (``uniform_mix=None``: the file's default)."""
+                            deterministic: bool = False, proposals: int | None = None) -> RLSampler:
+    """An :class:`RLSampler` from a policy checkpoint (``uniform_mix`` / ``proposals`` None: the file's)."""
     policy, record = load_checkpoint(path, expected_kind=kind or list(POLICY_KINDS))
     meta, spec = record["meta"], record["obs_spec"] or {}
     if task is not None and meta.get("task") not in (None, task):
@@ -136,21 +140,22 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
                           or not np.allclose(spec["high"], high, atol=1e-5)):
         raise ValueError(f"{path}: trained for bounds {spec['low']}..{spec['high']}, "
                          f"not {np.asarray(low).tolist()}..{np.asarray(high).tolist()}")
-    if uniform_mix is None:
-        uniform_mix = float(meta.get("sampler", {}).get("uniform_mix", 0.0))
+    stored = meta.get("sampler", {})
+    uniform_mix = float(stored.get("uniform_mix", 0.0)) if uniform_mix is None else uniform_mix
+    proposals = int(stored.get("proposals", 1)) if proposals is None else proposals
     return RLSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
-                     uniform_mix=uniform_mix, deterministic=deterministic,
+                     uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
                      action_frame=spec.get("action_frame", "absolute"), periodic=spec.get("periodic"))
 
 
 def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | None = None, seed: int | None = None,
                     checkpoint: str | Path | None = None, uniform_mix: float | None = None,
-                    deterministic: bool = False) -> RLSampler:
+                    deterministic: bool = False, proposals: int | None = None) -> RLSampler:
     """The registry factory of ``rl-ppo``, ``rl-sac`` and ``rl-ppo-torchrl`` (the registry applies the
     thread policy: measured 0.8 ms per ``act`` with 1 thread against 12 ms with 2)."""
     path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train rl --task {task}")
     return sampler_from_checkpoint(path, low, high, seed=seed, kind=RL_SAMPLERS[name], task=task,
-                                   uniform_mix=uniform_mix, deterministic=deterministic)
+                                   uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals)
 
 
 __all__ = ["RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]

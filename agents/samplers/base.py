@@ -172,21 +172,31 @@ class ModelSampler(Sampler):
 
     Per call, ``act`` draws one ``rng.random()`` (the choice), then either ``rng.uniform(low,
     high)`` or whatever :meth:`model_sample` draws from ``self.rng``.
+
+    **Proposals per forward.** A model's forward pass costs more than a planner step, so a
+    sampler may run it once for ``proposals`` model samples (:meth:`refreshed`): the GNN and the
+    RL policies reuse the distribution they computed, the CVAEs decode ``proposals`` states at
+    once and hand them out one per step while the tree grows. ``proposals=1`` is a forward per
+    sample (and exactly the draws of one). The shipped value is a setting of each checkpoint,
+    chosen on split ``val`` for time to solution (``docs/learned_samplers.md``).
     """
 
     #: Sampling settings a checkpoint's ``meta["sampler"]`` may carry (the constructor's keywords).
     settings: tuple[str, ...] = ("uniform_mix", "goal_bias")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, uniform_mix: float = 0.25,
-                 goal_bias: float = 0.0, periodic: np.ndarray | None = None) -> None:
+                 goal_bias: float = 0.0, periodic: np.ndarray | None = None, proposals: int = 1) -> None:
         if not (0.0 <= uniform_mix <= 1.0 and 0.0 <= goal_bias <= 1.0 and uniform_mix + goal_bias <= 1.0):
             raise ValueError(f"uniform_mix and goal_bias must be in [0, 1] with a sum <= 1, got {uniform_mix}, "
                              f"{goal_bias}")
-        self.uniform_mix, self.goal_bias = float(uniform_mix), float(goal_bias)
+        if isinstance(proposals, bool) or int(proposals) != proposals or proposals < 1:
+            raise ValueError(f"proposals must be an integer >= 1, got {proposals!r}")
+        self.uniform_mix, self.goal_bias, self.proposals = float(uniform_mix), float(goal_bias), int(proposals)
         super().__init__(low, high, seed)
         self.periodic = np.zeros(self.state_dim, dtype=bool) if periodic is None else np.asarray(periodic, dtype=bool)
         if self.periodic.shape != (self.state_dim,):
             raise ValueError(f"periodic must have {self.state_dim} entries, got {self.periodic.shape}")
+        self._wraps = bool(self.periodic.any())
 
     def act(self, obs: Mapping) -> np.ndarray:
         if np.shape(obs["start"])[-1] != self.state_dim:
@@ -198,9 +208,39 @@ class ModelSampler(Sampler):
             return np.asarray(active_target(obs), dtype=np.float32).copy()   # a copy: obs may be live views
         return self.finish(self.model_sample(obs))
 
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self._forwards: dict = {}        # refresh key -> [value, model samples left]
+        self._episode: tuple | None = None
+
+    def refresh_key(self, obs: Mapping):
+        """What a reused forward must share besides the episode: the active tree (BiRRT grows
+        two, each with its own context)."""
+        return int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+
+    def refreshed(self, obs: Mapping, forward):
+        """``forward(obs)``, run once per ``proposals`` model samples of the same episode and
+        :meth:`refresh_key` (every time for ``proposals=1``)."""
+        if self.proposals == 1:
+            return forward(obs)
+        n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
+        episode = (np.asarray(obs["start"]).tobytes(), np.asarray(obs["goal"]).tobytes())
+        if self._episode is None or episode != self._episode[0] or n < self._episode[1]:
+            self._forwards.clear()
+        self._episode = (episode, n)
+        key = self.refresh_key(obs)
+        entry = self._forwards.get(key)
+        if entry is None or entry[1] <= 0:
+            entry = self._forwards[key] = [forward(obs), self.proposals]
+        entry[1] -= 1
+        return entry[0]
+
     def finish(self, x: np.ndarray) -> np.ndarray:
         """A model's state as an action: periodic coordinates wrapped, clipped to the bounds, float32."""
-        return np.clip(wrap_periodic(np.asarray(x, np.float64), self.periodic), self.low, self.high).astype(np.float32)
+        x = np.asarray(x, np.float64)
+        if self._wraps:
+            x = wrap_periodic(x, self.periodic)
+        return np.minimum(np.maximum(x, self.low), self.high).astype(np.float32)   # np.clip, without its overhead
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         """The model's next state ``(d,)`` for one observation (random draws from ``self.rng``)."""

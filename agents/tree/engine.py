@@ -21,7 +21,7 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.kernels import gelu, layer_norm, linears, mlp, norms_of, vector, wrap_periodic
+from agents.tree.kernels import gelu, layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 
@@ -136,26 +136,36 @@ class IncrementalTreeGNN(_Engine):
             later = np.arange(n)[None, :] >= np.arange(i0, n)[:, None]
             dist[later | (self.tree_id[None, :n] != tid[:, None])] = np.inf
             k = min(self.k, n)
-            near = np.argsort(dist, axis=1, kind="stable")[:, :k]   # ties to the earlier node, as the model
+            near = nearest_k(dist, k)                                   # ties to the earlier node, as the model
             near_ok = np.isfinite(np.take_along_axis(dist, near, 1))
         has_parent = parent >= 0
         par = np.where(has_parent, parent, 0)
+        any_parent = self.use_parent and bool(has_parent.any())
+        if any_parent:
+            sp = self.states[par]                                                    # (B, d)
+            wrapped_p = wrap_periodic(sp - x, self.periodic)
+        if self.use_knn and self.k:
+            sj = self.states[near]                                                   # (B, k, d)
+            rel = sj - x[:, None]
+            wrapped_k = wrap_periodic(rel, self.periodic) - rel
+            count = near_ok.sum(1, keepdims=True)
+            ok = near_ok[..., None]
+        # (each product below is computed once and reused: the same values as before, fewer calls)
         for layer in range(self.L):
             (wph, wpx, bp1, wp2, bp2), (wkh, wkx, bk1, wk2, bk2) = self.messages[layer]
-            self.sender[layer, 0, i0:n] = h @ wph + x @ wpx
-            self.sender[layer, 1, i0:n] = h @ wkh + x @ wkx
+            xp, xk = x @ wpx, x @ wkx
+            self.sender[layer, 0, i0:n] = h @ wph + xp
+            self.sender[layer, 1, i0:n] = h @ wkh + xk
             mp = np.zeros((B, H))
-            if self.use_parent and has_parent.any():
-                rel_p = wrap_periodic(self.states[par] - x, self.periodic) @ wpx - (self.states[par] @ wpx - x @ wpx)
-                pre = self.sender[layer, 0, par] - x @ wpx + rel_p + bp1
+            if any_parent:
+                rel_p = wrapped_p @ wpx - (sp @ wpx - xp)
+                pre = self.sender[layer, 0, par] - xp + rel_p + bp1
                 mp = np.where(has_parent[:, None], gelu(pre) @ wp2 + bp2, 0.0)
             mk = np.zeros((B, H))
             if self.use_knn and self.k:
-                sj = self.states[near]                                               # (B, k, d)
-                rel_k = (wrap_periodic(sj - x[:, None], self.periodic) - (sj - x[:, None])) @ wkx
-                pre = self.sender[layer, 1][near] - (x @ wkx)[:, None] + rel_k + bk1
-                g = gelu(pre) * near_ok[..., None]
-                count = near_ok.sum(1, keepdims=True)
+                rel_k = wrapped_k @ wkx
+                pre = self.sender[layer, 1][near] - xk[:, None] + rel_k + bk1
+                g = gelu(pre) * ok
                 mk = np.where(count > 0, (g.sum(1) / np.maximum(count, 1)) @ wk2 + bk2, 0.0)
             h = layer_norm(self.norms[layer], h + mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)))
         w, b = self.key
@@ -271,7 +281,7 @@ class IncrementalTreeScorer(_Engine):
         if self.k:
             dist = self._sq_dist(x, self.states[:n])
             dist[(np.arange(n)[None, :] >= rows[:, None]) | (self.tree_id[None, :n] != tid[:, None])] = np.inf
-            near = np.argsort(dist, axis=1, kind="stable")[:, :min(self.k, n)]
+            near = nearest_k(dist, min(self.k, n))
             near_ok = np.isfinite(np.take_along_axis(dist, near, 1))
         else:
             near, near_ok = np.zeros((B, 0), np.int64), np.zeros((B, 0), bool)

@@ -55,9 +55,24 @@ def layer_norm(norm: tuple[np.ndarray, np.ndarray, float], x: np.ndarray) -> np.
     return (x - mu) / np.sqrt(var + eps) * g + b
 
 
+def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
+    """``np.argsort(dist, axis=1, kind="stable")[:, :k]`` (ties to the lower index) without sorting
+    whole rows: ``argpartition`` finds each row's k-th smallest distance, then only the entries up
+    to it (all of them, ties included) are sorted stably."""
+    n = dist.shape[1]
+    if k >= n or n <= 64:
+        return np.argsort(dist, axis=1, kind="stable")[:, :k]
+    kth = np.partition(dist, k - 1, axis=1)[:, k - 1:k]                   # (B, 1)
+    out = np.empty((dist.shape[0], k), dtype=np.int64)
+    for r in range(dist.shape[0]):
+        cand = np.flatnonzero(dist[r] <= kth[r, 0])                       # increasing index order
+        out[r] = cand[np.argsort(dist[r, cand], kind="stable")[:k]]
+    return out
+
+
 def vector(t: torch.Tensor) -> np.ndarray:
     """A buffer as a float64 numpy copy."""
     return t.detach().numpy().astype(np.float64).copy()
 
 
-__all__ = ["gelu", "layer_norm", "linears", "mlp", "norms_of", "vector", "wrap_periodic"]
+__all__ = ["gelu", "layer_norm", "linears", "mlp", "nearest_k", "norms_of", "vector", "wrap_periodic"]

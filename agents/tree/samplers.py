@@ -61,24 +61,31 @@ class _EngineSampler(ModelSampler):
 
 class TreeGNNSampler(_EngineSampler):
     """The GNN sampler (Algorithm 1): a node ~ softmax(key . q / temperature), then a Gaussian
-    around its learned offset (scale times ``sigma_scale``)."""
+    around its learned offset (scale times ``sigma_scale``). With ``proposals`` > 1 the tree is
+    read and the mixture computed once per ``proposals`` samples (the nodes added since are not
+    candidates until the next refresh)."""
 
-    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale")
+    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNN,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, temperature: float = 1.0,
-                 sigma_scale: float = 1.0) -> None:
+                 sigma_scale: float = 1.0, proposals: int = 1) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy())
+                         periodic=model.periodic.numpy(), proposals=proposals)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model)
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
 
-    def model_sample(self, obs: Mapping) -> np.ndarray:
+    def mixture(self, obs: Mapping) -> tuple:
+        """The forward: ``(active tree, cumulative node probabilities, component shift)``."""
         q, active = self.tree_context(obs)
+        p, shift = self.engine.mixture(q, active, self.temperature)
+        return active, np.cumsum(p), shift
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        active, cumulative, shift = self.refreshed(obs, self.mixture)
         e = self.engine
-        p, shift = e.mixture(q, active, self.temperature)
-        m = min(int(np.searchsorted(np.cumsum(p), self.rng.random() * (1 - 1e-12), side="right")), e.n - 1)
+        m = min(int(np.searchsorted(cumulative, self.rng.random() * (1 - 1e-12), side="right")), len(cumulative) - 1)
         sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
         return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
 
@@ -121,44 +128,51 @@ class TreeCVAESampler(ModelSampler):
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeCVAE,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 32) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy())
+                         periodic=model.periodic.numpy(), proposals=proposals)
         self.model = model.eval()
-        self.proposals = int(proposals)
 
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        self._queue: list[np.ndarray] = []
-        self._key = None
+    def refresh_key(self, obs: Mapping):
+        return None        # the condition is the problem's, whichever tree is active
+
+    def decode(self, obs: Mapping) -> list[np.ndarray]:
+        """The forward: ``proposals`` states for the problem."""
+        condition = cvae_condition(self.model, obs)
+        z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
+                            dtype=torch.float32)
+        with torch.no_grad():
+            return list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        key = b"".join(np.asarray(obs[k]).tobytes() for k in ("start", "goal", "obstacles"))
-        if key != self._key:
-            self._queue, self._key = [], key
-        if not self._queue:
-            condition = cvae_condition(self.model, obs)
-            z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
-                                dtype=torch.float32)
-            with torch.no_grad():
-                self._queue = list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
-        return self._queue.pop()
+        if self.proposals == 1:
+            return self.decode(obs)[0]
+        return self.refreshed(obs, self.decode).pop()
 
 
 class TreeGNNCVAESampler(_EngineSampler):
     """The GNN-CVAE: the causal GNN summarises the tree (incrementally, as the GNN sampler),
-    the decoder turns a latent draw and that context into the next sample."""
+    the decoder turns latent draws and that context into the next samples: ``proposals`` of
+    them per forward, handed out one per step."""
+
+    settings = ("uniform_mix", "goal_bias", "proposals")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNCVAE,
-                 uniform_mix: float = 0.25, goal_bias: float = 0.0) -> None:
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 1) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.gnn.periodic.numpy())
+                         periodic=model.gnn.periodic.numpy(), proposals=proposals)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model.gnn)
 
-    def model_sample(self, obs: Mapping) -> np.ndarray:
+    def decode(self, obs: Mapping) -> list[np.ndarray]:
+        """The forward: the tree context, then ``proposals`` latent draws decoded at once."""
         q, _ = self.tree_context(obs)
-        z = torch.as_tensor(self.rng.standard_normal(self.model.latent_channels), dtype=torch.float32)
+        z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
+                            dtype=torch.float32)
+        context = torch.as_tensor(q, dtype=torch.float32)[None].expand(self.proposals, -1)
         with torch.no_grad():
-            return self.model.decode(z[None], torch.as_tensor(q, dtype=torch.float32)[None])[0].double().numpy()
+            return list(self.model.decode(z, context).double().numpy())
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        return self.refreshed(obs, self.decode).pop()
 
 
 def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:

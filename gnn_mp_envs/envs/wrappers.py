@@ -237,7 +237,7 @@ def policy_action_to_state(action: np.ndarray, frame: str, low: np.ndarray, high
     low = np.asarray(low)
     high = np.asarray(high, dtype=low.dtype)
     span = high - low
-    a = np.clip(np.asarray(action, dtype=low.dtype), ACTION_LOW, ACTION_HIGH)
+    a = np.minimum(np.maximum(np.asarray(action, dtype=low.dtype), ACTION_LOW), ACTION_HIGH)   # np.clip
     if frame == "absolute":
         x = low + span * (a - ACTION_LOW) / (ACTION_HIGH - ACTION_LOW)
     elif frame == "target":

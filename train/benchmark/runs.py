@@ -118,9 +118,11 @@ class WorkerPool:
                                             initargs=(list(modules),))
         self.killed = False
 
-    def run(self, jobs: list[tuple], finished) -> None:
+    def run(self, jobs: list[tuple], finished, fn=None) -> None:
+        """``finished(fn(job))`` for every job, in completion order (``fn``: a module-level function;
+        default: one benchmark episode)."""
         try:
-            futures = [self.executor.submit(_run_episode_job, job) for job in jobs]
+            futures = [self.executor.submit(fn or _run_episode_job, job) for job in jobs]
             for future in as_completed(futures):
                 finished(future.result())
         except BaseException:

@@ -144,55 +144,100 @@ def reindex(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return np.where(sub >= 0, remap[np.maximum(sub, 0)], -1).astype(np.int32)
 
 
-def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None) -> TreeDataset:
-    """Solve the config's problems with its sampler (uniform, or a learned one from
-    ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones."""
+#: Per process: the env and sampler a dataset job plans with (worker processes keep them across jobs).
+_SOLVERS: dict[tuple, tuple] = {}
+
+
+def _solver(config: TreeDataConfig, checkpoint: str | None) -> tuple:
     from agents.registry import load_sampler
-    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+    from gnn_mp_envs.evaluation import evaluation_env
+    key = (config.to_json(), checkpoint)
+    if key not in _SOLVERS:
+        for env, _ in _SOLVERS.values():
+            env.close()
+        _SOLVERS.clear()
+        env = evaluation_env(config.task, config.split, scene=config.scene, max_nodes=config.max_nodes)
+        _SOLVERS[key] = (env, load_sampler(config.sampler, task=config.task, seed=0, checkpoint=checkpoint))
+    return _SOLVERS[key]
 
-    env = evaluation_env(config.task, config.split, scene=config.scene, max_nodes=config.max_nodes)
+
+def solve_problem(config: TreeDataConfig, index: int, checkpoint: str | None = None) -> tuple | None:
+    """Problem ``index`` of the config's split planned by its sampler (the evaluation's seeding rule):
+    ``(index, tree arrays, path, start, goal, obstacles, iteration records)``, None when unsolved.
+    A pure function of its arguments, so a worker pool gives the same dataset as one process."""
+    from gnn_mp_envs.evaluation import plan_problem
+    env, sampler = _solver(config, checkpoint)
     base = env.unwrapped
-    sampler = load_sampler(config.sampler, task=config.task, seed=0, checkpoint=checkpoint)
-    trees, paths, starts, goals, obstacles, indices, iters = [], [], [], [], [], [], []
+    last: dict = {}
+    roots = 2 if base.planner_name == "birrt" else 1
+    iterations = [(roots, 0)]   # (tree size, active tree) before each iteration
+
+    def keep_last(obs, _info, done) -> None:
+        if done:   # live views: copy what the episode ends with
+            n = int(obs["num_nodes"][0])
+            last.update(features=np.array(obs["node_features"][:n]), obstacles=np.array(obs["obstacles"]))
+        else:
+            iterations.append((int(obs["num_nodes"][0]), int(obs["active_tree"][0])))
+
+    samples: list[np.ndarray] = []
+
+    def act(obs):
+        samples.append(sampler.act(obs))
+        return samples[-1]
+
+    record = plan_problem(env, sampler, index, config.seed, on_step=keep_last, policy=act)
+    if not record.success:
+        return None
+    tree = base.planner.tree
+    n = len(tree)
+    sizes = np.asarray(iterations + [(n, 0)], dtype=np.int64)[:, 0]
+    created = np.where(sizes[1:] > sizes[:-1], sizes[:-1], -1)
+    return (index, (tree.states[:n].astype(np.float32), tree.parent[:n].astype(np.int32),
+                    tree.tree_id[:n].astype(np.int8), last["features"].astype(np.float32)),
+            np.asarray(record.path_nodes, dtype=np.int32), base.problem.start.copy(), base.problem.goal.copy(),
+            last["obstacles"], (np.asarray(iterations, dtype=np.int32), np.stack(samples).astype(np.float32),
+                                created.astype(np.int32)))
+
+
+def _solve_job(job: tuple) -> tuple | None:
+    return solve_problem(*job)
+
+
+def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None,
+             workers: int = 1) -> TreeDataset:
+    """Solve the config's problems with its sampler (uniform, or a learned one from
+    ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones.
+    ``workers`` > 1 plans them in the benchmark's worker processes; the problems are assembled
+    in index order, so the dataset (and its file) is the same whatever the worker count."""
+    indices = range(config.first_problem, config.first_problem + config.problems)
+    bar = tqdm(total=config.problems, desc=f"{config.task} {config.sampler} solutions", unit="problem",
+               disable=not progress)
+    solved: dict[int, tuple] = {}
+
+    def finished(result: tuple | None) -> None:
+        bar.update(1)
+        if result is not None:
+            solved[result[0]] = result
+
     try:
-        first = config.first_problem
-        for i in tqdm(range(first, first + config.problems), desc=f"{config.task} {config.sampler} solutions",
-                      unit="problem", disable=not progress):
-            last: dict = {}
-            roots = 2 if base.planner_name == "birrt" else 1
-            iterations = [(roots, 0)]   # (tree size, active tree) before each iteration
-
-            def keep_last(obs, _info, done, store=last) -> None:
-                if done:   # live views: copy what the episode ends with
-                    n = int(obs["num_nodes"][0])
-                    store.update(features=np.array(obs["node_features"][:n]), obstacles=np.array(obs["obstacles"]))
-                else:
-                    iterations.append((int(obs["num_nodes"][0]), int(obs["active_tree"][0])))
-
-            samples: list[np.ndarray] = []
-
-            def act(obs, store=samples):
-                store.append(sampler.act(obs))
-                return store[-1]
-
-            record = plan_problem(env, sampler, i, config.seed, on_step=keep_last, policy=act)
-            if not record.success:
-                continue
-            tree = base.planner.tree
-            n = len(tree)
-            trees.append((tree.states[:n].astype(np.float32), tree.parent[:n].astype(np.int32),
-                          tree.tree_id[:n].astype(np.int8), last["features"].astype(np.float32)))
-            paths.append(np.asarray(record.path_nodes, dtype=np.int32))
-            starts.append(base.problem.start)
-            goals.append(base.problem.goal)
-            obstacles.append(last["obstacles"])
-            indices.append(i)
-            sizes = np.asarray(iterations + [(n, 0)], dtype=np.int64)[:, 0]
-            created = np.where(sizes[1:] > sizes[:-1], sizes[:-1], -1)
-            iters.append((np.asarray(iterations, dtype=np.int32), np.stack(samples).astype(np.float32),
-                          created.astype(np.int32)))
+        if workers > 1:
+            from train.benchmark.runs import WorkerPool
+            with WorkerPool(workers) as pool:
+                pool.run([(config, i, checkpoint) for i in indices], finished, _solve_job)
+        else:
+            for i in indices:
+                finished(solve_problem(config, i, checkpoint))
     finally:
-        env.close()
+        bar.close()
+        for env, _ in _SOLVERS.values():
+            env.close()
+        _SOLVERS.clear()
+    results = [solved[i] for i in sorted(solved)]
+    trees = [r[1] for r in results]
+    paths = [r[2] for r in results]
+    starts, goals, obstacles = [r[3] for r in results], [r[4] for r in results], [r[5] for r in results]
+    indices = [r[0] for r in results]
+    iters = [r[6] for r in results]
     if not trees:
         raise RuntimeError(f"no {config.task} problem of {config.problems} was solved")
     sizes = [len(t[0]) for t in trees]
@@ -232,8 +277,10 @@ def load(path: str | Path) -> TreeDataset:
         raise DatasetCacheError(f"{path}: unreadable dataset file ({type(exc).__name__}: {exc})") from None
 
 
-def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bool = True) -> TreeDataset:
-    """The cached dataset of ``config`` in ``directory``, generated first when missing or damaged."""
+def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bool = True,
+                     workers: int = 1) -> TreeDataset:
+    """The cached dataset of ``config`` in ``directory``, generated first (by ``workers`` processes)
+    when missing or damaged."""
     path = Path(directory) / config.file_name()
     if path.exists():
         try:
@@ -243,6 +290,6 @@ def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bo
             log.warning("%s: generated with another config; regenerating it", path)
         except DatasetCacheError as exc:
             log.warning("%s; regenerating it", exc)
-    dataset = generate(config, progress)
+    dataset = generate(config, progress, workers=workers)
     save(dataset, path)
     return dataset

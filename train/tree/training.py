@@ -59,6 +59,8 @@ class TrainArgs(RunFlags):
                              parse=non_negative_int)
     seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=non_negative_int)
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
+    workers: int = arg(1, "processes that plan the training problems (the dataset is the same for any count)",
+                       parse=positive_int)
     resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
 
 
@@ -168,7 +170,7 @@ def train(args: TrainArgs) -> dict[str, Any]:
     # 1. data: uniform solutions of training problems
     data_config = TreeDataConfig(task=args.task, split="train", scene=spec.training_scene(), problems=args.problems,
                                  seed=args.seed)
-    data = load_or_generate(data_config, args.data_dir, progress=args.progress)
+    data = load_or_generate(data_config, args.data_dir, progress=args.progress, workers=args.workers)
     rng = np.random.default_rng(args.seed)
     snapshots = args.max_snapshots
     if len(data) < 2:
@@ -248,7 +250,7 @@ def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_
         config = TreeDataConfig(task=args.task, split="train", scene=task_spec(args.task).training_scene(),
                                 problems=args.dagger_problems, seed=args.seed + 1000 * (round_index + 1),
                                 first_problem=args.problems + round_index * args.dagger_problems, sampler=args.model)
-        return generate(config, progress=args.progress, checkpoint=str(ckpt))
+        return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers)
 
 
 def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed: int,

@@ -1,0 +1,91 @@
+"""Choose a learned sampler's ``proposals`` (model samples per forward pass) on split ``val``.
+
+For each candidate value, problems ``0..N-1`` of split ``val`` (for the arm: the training scene
+families) are planned with the benchmark's seeding rule, one process. Among the values whose
+success rate is no lower than the first candidate's, the smallest one whose median wall time
+per problem (inference included) is within 5% of the fastest wins (fewer stale proposals when
+the timing cannot tell them apart). ``--write`` stores it in the shipped checkpoint's
+``meta["sampler"]`` and ``.json`` sidecar (the weights stay as they are).
+
+    .venv/bin/python -m tools.tune_proposals --sampler gnn-cvae --task arm --problems 40 --write
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from agents.checkpoints import load_checkpoint, save_checkpoint, shipped_checkpoint
+from agents.registry import load_sampler
+from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
+from gnn_mp_envs.utils.io import atomic_write_text
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+
+
+@dataclass
+class Args:
+    """Flags of ``python -m tools.tune_proposals``."""
+
+    sampler: str = arg("gnn-cvae", "learned sampler (gnn, cvae, gnn-cvae, rl-ppo, ...)")
+    task: str = arg("maze2d", "task")
+    candidates: list[int] = arg([1, 2, 4, 8, 16], "proposals values to try")
+    problems: int = arg(40, "validation problems 0..N-1", parse=positive_int)
+    seed: int = arg(0, "root seed of the problems' sampler seeds")
+    repeats: int = arg(2, "timing repeats per value (the fastest counts; counters are identical)",
+                       parse=positive_int)
+    write: bool = arg(False, "store the chosen value in the shipped checkpoint")
+
+
+def measure(sampler_name: str, task: str, problems: int, seed: int, repeats: int, **settings) -> dict:
+    env = evaluation_env(task, "val")
+    sampler = load_sampler(sampler_name, task=task, seed=0, **settings)
+    best = None
+    for _ in range(repeats):
+        row = summarize(plan_problems(sampler, env, range(problems), seed))
+        if best is None or row["median_wall_time_s"] < best["median_wall_time_s"]:
+            best = row
+    env.close()
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = OneLineParser(prog="python -m tools.tune_proposals", description=__doc__.splitlines()[0])
+    add_dataclass_arguments(parser, Args)
+    args = from_namespace(Args, parser.parse_args(argv))
+    rows = {"uniform": measure("uniform", args.task, args.problems, args.seed, args.repeats)}
+    for k in args.candidates:
+        rows[k] = measure(args.sampler, args.task, args.problems, args.seed, args.repeats, proposals=k)
+    print(f"{args.sampler} on {args.task}, {args.problems} val problems (median wall ms / nodes / success):")
+    for k, r in rows.items():
+        print(f"  {str(k):>8}: {1e3 * r['median_wall_time_s']:7.1f} ms  {r['median_nodes']:7.0f} nodes  "
+              f"{r['success_rate']:.2f}")
+    floor = rows[args.candidates[0]]["success_rate"]
+    allowed = [k for k in args.candidates if rows[k]["success_rate"] >= floor]
+    fastest = min(rows[k]["median_wall_time_s"] for k in allowed)
+    chosen = min(k for k in allowed if rows[k]["median_wall_time_s"] <= 1.05 * fastest)
+    print(f"chosen: proposals={chosen}")
+    if args.write:
+        path = shipped_checkpoint(args.sampler, args.task)
+        model, record = load_checkpoint(path)
+        meta = dict(record["meta"])
+        meta["sampler"] = {**meta.get("sampler", {}), "proposals": int(chosen)}
+        meta["proposals_tuning"] = {"command": "python -m tools.tune_proposals " + " ".join(sys.argv[1:] if argv is None
+                                                                                              else argv),
+                                    "val_problems": args.problems,
+                                    "rows": {str(k): {"median_wall_ms": 1e3 * r["median_wall_time_s"],
+                                                      "median_nodes": r["median_nodes"],
+                                                      "success_rate": r["success_rate"]} for k, r in rows.items()}}
+        save_checkpoint(path, model, record["kind"], record["ctor_args"], obs_spec=record["obs_spec"], meta=meta)
+        sidecar = Path(path).with_suffix(".json")
+        side = json.loads(sidecar.read_text()) if sidecar.exists() else {}
+        side["sampler"] = meta["sampler"]
+        side["proposals_tuning"] = meta["proposals_tuning"]
+        atomic_write_text(sidecar, json.dumps(side, indent=2) + "\n")
+        print(f"wrote {path} and its sidecar")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
