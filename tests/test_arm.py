@@ -361,3 +361,17 @@ def test_env_deep_copies_and_pickles_with_its_own_simulator():
         assert info["collision_checks"] == reference[4]["collision_checks"]
         clone.close()
     env.close()
+
+
+def test_a_typo_in_an_arm_problem_dict_is_refused():
+    from gnn_mp_envs.core.problem import InvalidProblemError
+    env = gym.make("GNNMP/ArmBiRRT-v0", disable_env_checker=True)
+    try:
+        q = np.zeros(6)
+        with pytest.raises(InvalidProblemError, match="unknown key.*'obstacle'"):
+            env.reset(options={"problem": {"start": q, "goal": q + 0.5, "obstacle": []}})
+        with pytest.raises(InvalidProblemError, match="unknown key.*'sise'"):
+            env.reset(options={"problem": {"start": q, "goal": q + 0.5,
+                                           "obstacles": [{"kind": "box", "sise": [0.1] * 3, "position": [0.5] * 3}]}})
+    finally:
+        env.close()

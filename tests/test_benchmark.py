@@ -146,3 +146,35 @@ def test_a_suite_draws_its_tree_growth_images(tmp_path, capsys):
                      "--no-progress"]) == 0
     assert not (tmp_path / "c" / "renders").exists()
     capsys.readouterr()
+
+
+def test_an_unreachable_ray_address_fails_at_once():
+    """Nothing listens on 127.0.0.1:1: one line, not Ray's minutes of retries (a hang times out here)."""
+    import subprocess
+    import sys
+    pytest.importorskip("ray")
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    result = subprocess.run([sys.executable, "-c", code, "benchmark", "--problems", "2", "--ray", "127.0.0.1:1",
+                             "--no-progress"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and result.stderr.strip().count("\n") == 0, result.stderr
+    assert "cannot reach Ray at 127.0.0.1:1" in result.stderr
+
+
+def test_a_setting_overrides_the_one_stored_with_the_weights(tmp_path):
+    """--setting SAMPLER.KEY=VALUE reaches the sampler instead of its stored value; a setting the
+    sampler does not take, or one for a sampler not benchmarked, is one line."""
+    report = bm.run_benchmark(tiny_args(task="maze2d", samplers=["uniform", "goal-bias"], problems=2,
+                                   settings=[("goal-bias", "goal_bias", 1.0)]))
+    # every sample is the goal: the tree grows straight to the first wall and stops there
+    assert report["results"]["goal-bias"]["success_rate"] == 0.0
+    assert max(r["nodes_expanded"] for r in report["runs"]["goal-bias"]) < 30
+    assert min(r["nodes_expanded"] for r in report["runs"]["uniform"]) > 30
+    from train.benchmark.runs import cached_sampler
+    assert cached_sampler("goal-bias", "maze2d", settings=(("goal_bias", 1.0),)).goal_bias == 1.0
+    with pytest.raises(bm.BenchmarkError, match="unknown: goal_bias"):
+        bm.run_benchmark(tiny_args(task="maze2d", samplers=["uniform"], problems=1, settings=[("uniform", "goal_bias", 1)]))
+    with pytest.raises(bm.BenchmarkError, match="not one of the --samplers"):
+        bm.run_benchmark(tiny_args(task="maze2d", samplers=["uniform"], problems=1, settings=[("gnn", "proposals", 1)]))
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["benchmark", "--samplers", "uniform", "--setting", "oops", "--problems", "1"])
+    assert exc.value.code == 2

@@ -115,3 +115,15 @@ def test_python_dash_m_train_critical(tmp_path):
                           "--checkpoints", str(ckpts), "--data", str(tmp_path / "d")], cwd=root,
                          capture_output=True, text=True)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "critical_cnn.pt" in bad.stderr, bad.stderr
+
+
+def test_evaluate_with_no_checkpoints_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
+    """An empty checkpoint directory: exit 2, one line naming it, before minutes of labelling."""
+    from train.critical import main
+    monkeypatch.chdir(tmp_path)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code = main(["evaluate", "--checkpoints", str(empty)])
+    err = capsys.readouterr().err
+    assert code == 2 and f"no checkpoints in {empty}" in err and err.strip().count("\n") == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["empty"]          # nothing labelled, nothing written

@@ -181,3 +181,15 @@ def test_uniform_rrt_solves_heldout_maze2d():
 def test_uniform_rrt_solves_heldout_pendulum():
     """Issue 2: at least 90% of held-out pendulum problems within 20,000 nodes."""
     assert _solve_rate("GNNMP/PendulumRRT-v0", 30) >= 0.90
+
+
+@pytest.mark.parametrize("env_id,problem", [
+    ("GNNMP/Maze2DRRT-v0", {"start": [0.1, 0.5], "goal": [0.9, 0.5], "wals": [[0.45, 0.0, 0.55, 1.0]]}),
+    ("GNNMP/PendulumRRT-v0", {"start": [0.0, 0.0], "goal": [3.1, 0.0], "torque": 5.0}),
+])
+def test_a_typo_in_a_problem_dict_is_refused(env_id, problem):
+    """A misspelt key would plan another problem than the one meant (an empty square, here): refused."""
+    from gnn_mp_envs.core.problem import InvalidProblemError
+    env = gym.make(env_id, disable_env_checker=True)
+    with pytest.raises(InvalidProblemError, match="unknown key"):
+        env.reset(options={"problem": problem})

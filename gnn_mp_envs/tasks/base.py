@@ -6,11 +6,19 @@ from typing import Any
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import Problem
+from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 
 #: Seed-sequence roots of the problem splits. ``Task.problem("test", i)`` is the i-th
 #: held-out problem on every machine; training never draws from the test stream.
 SPLIT_SEEDS = {"train": 0, "val": 1, "test": 2}
+
+
+def check_keys(spec: dict, known: tuple[str, ...], what: str) -> None:
+    """Refuse a problem dict with keys a task does not read (a typo such as ``"wals"`` would
+    otherwise plan another problem than the one meant)."""
+    unknown = sorted(set(spec) - set(known))
+    if unknown:
+        raise InvalidProblemError(f"unknown key(s) {unknown} in {what}; known: {', '.join(known)}")
 
 
 class Task:

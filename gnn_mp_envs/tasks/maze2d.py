@@ -20,7 +20,7 @@ import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
 from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
-from gnn_mp_envs.tasks.base import Task
+from gnn_mp_envs.tasks.base import Task, check_keys
 
 #: Extension length of RRT/BiRRT in the unit square.
 STEP_SIZE = 0.05
@@ -293,6 +293,7 @@ class Maze2DTask(Task):
 
     def make_problem(self, spec: Any) -> Problem:
         if isinstance(spec, dict):
+            check_keys(spec, ("start", "goal", "walls", "blobs"), "a maze2d problem dict")
             try:
                 maze = MazeMap(spec.get("walls", np.zeros((0, 4))), spec.get("blobs", np.zeros((0, 3))))
                 spec = Maze2DProblem(maze, spec["start"], spec["goal"], self.step_size)

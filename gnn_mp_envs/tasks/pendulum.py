@@ -25,7 +25,7 @@ import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
 from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
-from gnn_mp_envs.tasks.base import Task
+from gnn_mp_envs.tasks.base import Task, check_keys
 
 GRAVITY = 9.81          # m/s^2
 MASS = 1.0              # kg
@@ -157,6 +157,7 @@ class PendulumTask(Task):
 
     def make_problem(self, spec: Any) -> Problem:
         if isinstance(spec, dict):
+            check_keys(spec, ("start", "goal"), "a pendulum problem dict")
             try:
                 spec = PendulumProblem(spec.get("start", np.zeros(2)), spec["goal"])
             except KeyError:

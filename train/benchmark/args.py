@@ -29,6 +29,21 @@ def checkpoint_pair(text: str) -> tuple[str, Path]:
     return name.strip(), Path(path)
 
 
+def setting_triple(text: str) -> tuple[str, str, Any]:
+    """``SAMPLER.KEY=VALUE`` of ``--setting`` (VALUE read as JSON when it parses: 8, 0.5, true)."""
+    import argparse
+    import json as _json
+    target, sep, raw = text.partition("=")
+    name, dot, key = target.rpartition(".")
+    if not sep or not dot or not name.strip() or not key.strip() or not raw:
+        raise argparse.ArgumentTypeError(f"expected SAMPLER.KEY=VALUE, got {text!r}")
+    try:
+        value = _json.loads(raw)
+    except ValueError:
+        value = raw
+    return name.strip(), key.strip(), value
+
+
 @dataclass
 class BenchmarkArgs:
     """Flags of one benchmark run (one task, several samplers)."""
@@ -56,9 +71,16 @@ class BenchmarkArgs:
     checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable)",
                                        flag="--checkpoint", metavar="SAMPLER=PATH", parse=checkpoint_pair,
                                        append=True)
+    settings: list[tuple] = arg([], "a sampler setting instead of the one stored with its weights, e.g. "
+                                "gnn.proposals=1 or goal-bias.goal_bias=0.1 (repeatable)", flag="--setting",
+                                metavar="SAMPLER.KEY=VALUE", parse=setting_triple, append=True)
     modules: list[str] = arg([], "import MODULE first: it registers samplers or tasks (repeatable)",
                              flag=("--import", "--sampler-module"), metavar="MODULE", append=True)
     progress: bool = arg(True, "hide the progress bar")
+
+    def sampler_settings(self, name: str) -> tuple[tuple[str, Any], ...]:
+        """The ``--setting`` values of sampler ``name``, sorted (hashable: part of a job)."""
+        return tuple(sorted((key, value) for sampler, key, value in self.settings if sampler == name))
 
     def as_dict(self) -> dict[str, Any]:
         """The flags as a JSON-friendly dict (paths as strings)."""
@@ -140,6 +162,9 @@ def validate_args(args: BenchmarkArgs) -> None:
                                  f"(supported: {supported})")
         if name not in known:
             raise BenchmarkError(f"unknown sampler {name!r}; known: {', '.join(known)}")
+    for name, _, _ in args.settings:
+        if name not in args.samplers or is_ompl(name):
+            raise BenchmarkError(f"--setting given for {name!r}, which is not one of the --samplers")
     for name, path in args.checkpoints.items():
         if name not in args.samplers:
             raise BenchmarkError(f"--checkpoint given for {name!r}, which is not in --samplers")
@@ -153,6 +178,22 @@ def validate_args(args: BenchmarkArgs) -> None:
             check_output_path(flag, Path(path), is_dir)
     if any(is_ompl(n) for n in args.samplers):
         check_ompl()
+    if args.ray not in (None, "local", "auto"):
+        check_ray_address(args.ray)
+
+
+def check_ray_address(address: str, timeout: float = 5.0) -> None:
+    """Fail at once when nothing listens at a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``):
+    ``ray.init`` would retry for many minutes before giving up."""
+    import socket
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):
+            return
+    except ValueError:
+        raise BenchmarkError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT or auto") from None
+    except OSError as exc:
+        raise BenchmarkError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None
 
 
 def _specs():

@@ -85,8 +85,8 @@ def render_growth(args: BenchmarkArgs, directory: Path, index: int = 0) -> list[
     for name in args.samplers:
         if is_ompl(name):
             continue
-        record = run_episode(args.task, env_kwargs, name, index, args.seed,
-                             checkpoint_of(args, name), snapshot_schedule(max_nodes))
+        record = run_episode(args.task, env_kwargs, name, index, args.seed, checkpoint_of(args, name),
+                             args.sampler_settings(name), snapshot_schedule(max_nodes))
         outcome = "solved" if record["success"] else "not solved"
         path = directory / f"{args.task}_{name}_problem{index}.png"
         save_tree_growth(path, f"{args.task}, {name}, test problem {index} ({outcome})", record["snapshots"])

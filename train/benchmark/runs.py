@@ -38,14 +38,15 @@ def cached_env(task: str, env_kwargs: dict[str, Any], render: bool = False):
     return _ENVS[key]
 
 
-def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any = None):
+def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any = None,
+                   settings: tuple[tuple[str, Any], ...] = ()):
     """One sampler per (name, task, checkpoint) and process; reseeded every episode. A new one runs
     once on ``env``'s first problem, so lazy imports and first-call costs stay out of the
     measured wall time (the benchmark reseeds it and resets the env before each problem)."""
     from agents.registry import load_sampler
-    key = (name, task, checkpoint)
+    key = (name, task, checkpoint, settings)
     if key not in _SAMPLERS:
-        sampler = load_sampler(name, task=task, seed=0, checkpoint=checkpoint)
+        sampler = load_sampler(name, task=task, seed=0, checkpoint=checkpoint, **dict(settings))
         if env is not None:
             sampler.act(env.reset(seed=0, options={"index": 0})[0])
         _SAMPLERS[key] = sampler
@@ -53,12 +54,13 @@ def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any
 
 
 def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index: int, seed: int,
-                checkpoint: str | None = None, snapshot_iterations: Iterable[int] = ()) -> dict[str, Any]:
+                checkpoint: str | None = None, settings: tuple[tuple[str, Any], ...] = (),
+                snapshot_iterations: Iterable[int] = ()) -> dict[str, Any]:
     """Plan problem ``index`` with one sampler; the record of counters (and optional snapshots)."""
     from gnn_mp_envs.evaluation import plan_problem, problem_seed
     snapshots_at = set(snapshot_iterations)
     env = cached_env(task, env_kwargs, render=bool(snapshots_at))
-    sampler = cached_sampler(sampler_name, task, checkpoint, env)
+    sampler = cached_sampler(sampler_name, task, checkpoint, env, settings)
     snapshots: list[tuple[int, int, np.ndarray]] = []
 
     def snapshot(_obs: Any, info: dict[str, Any], done: bool) -> None:
@@ -151,7 +153,7 @@ def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
     return None if path is None else str(path)
 
 
-def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list[tuple[str, str | None]]) -> None:
+def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list[tuple]) -> None:
     """Build the env and every sampler once up front so bad input fails before the progress bar;
     one inference each warms up lazy imports (as the workers' initializer does)."""
     try:
@@ -160,9 +162,9 @@ def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list
         raise BenchmarkError(f"task {task!r} is not available: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise BenchmarkError(f"cannot build the {task} environment with {env_kwargs}: {exc}") from None
-    for name, checkpoint in samplers:
+    for name, checkpoint, settings in samplers:
         try:
-            cached_sampler(name, task, checkpoint, env)
+            cached_sampler(name, task, checkpoint, env, settings)
         except FileNotFoundError as exc:
             raise BenchmarkError(f"sampler {name!r}: missing checkpoint ({exc})") from None
         except (ValueError, OSError, RuntimeError, KeyError) as exc:
@@ -181,7 +183,7 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     validate_args(args)
     env_kwargs = env_kwargs_for(args)
     indices = list(range(args.problems))
-    learned = [(n, checkpoint_of(args, n)) for n in args.samplers if not is_ompl(n)]
+    learned = [(n, checkpoint_of(args, n), args.sampler_settings(n)) for n in args.samplers if not is_ompl(n)]
     check_env_and_samplers(args.task, env_kwargs, learned)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in args.samplers}
 
@@ -191,8 +193,8 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
                 print(f"{name}: {len(indices)} problems through the OMPL runner ...", file=sys.stderr)
             runs[name] = run_ompl_rows(args, name, indices)
 
-    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint)
-            for name, checkpoint in learned for i in indices]
+    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings)
+            for name, checkpoint, settings in learned for i in indices]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
 
     def finished(record: dict[str, Any]) -> None:

@@ -280,6 +280,11 @@ def evaluate(models: Sequence[str] = tuple(MODELS),
             found[name] = load_model(path, name)[0]
         loaded.append(found)
     names = [n for n in models if all(n in found for found in loaded)]
+    if not names:   # before any data is labelled (that takes minutes)
+        from agents.checkpoints import CheckpointError
+        where = ", ".join(str(d) for d in dirs)
+        raise CheckpointError(f"no checkpoints in {where} (expected critical_<model>.pt for "
+                              f"{', '.join(models)})")
     cfg = dataset or DatasetConfig()
     graph = halton_graph(cfg.graph_nodes)
     r = graph.radius

@@ -12,7 +12,7 @@ from gnn_mp_envs.tasks.arm.problem import RESOLUTION, STEP_SIZE, ArmProblem
 from gnn_mp_envs.tasks.arm.render import render_arm
 from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, Obstacle, sample_scene, start_target
 from gnn_mp_envs.tasks.arm.world import JOINT_HIGH, JOINT_LOW, ArmWorld
-from gnn_mp_envs.tasks.base import Task
+from gnn_mp_envs.tasks.base import Task, check_keys
 
 #: Scene and start/goal draws before a problem generator gives up.
 MAX_SCENE_TRIES = 50
@@ -82,6 +82,10 @@ class ArmTask(Task):
         """A Problem, or a dict ``{"start", "goal"[, "obstacles"]}`` where obstacles are
         :class:`Obstacle` or dicts ``{"kind", "size", "position"[, "yaw"]}`` (default: table only)."""
         if isinstance(spec, dict):
+            check_keys(spec, ("start", "goal", "obstacles"), "an arm problem dict")
+            for o in spec.get("obstacles", ()):
+                if isinstance(o, dict):
+                    check_keys(o, ("kind", "size", "position", "yaw"), "an arm obstacle dict")
             try:
                 obstacles = tuple(o if isinstance(o, Obstacle) else
                                   Obstacle(str(o["kind"]), o["size"], o["position"], o.get("yaw", 0.0))
