@@ -13,13 +13,11 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
-from agents.samplers.base import Sampler
-
-
 class SamplerModule(TensorDictModuleBase):
-    """``sampler.propose`` as a TensorDict module: the observation keys in, ``"action"`` out."""
+    """``sampler.propose`` as a TensorDict module: the observation keys in, ``"action"`` out
+    (``sampler``: an :class:`agents.samplers.base.Sampler`)."""
 
-    def __init__(self, sampler: Sampler) -> None:
+    def __init__(self, sampler) -> None:
         super().__init__()
         self.sampler = sampler
         self.in_keys = list(sampler.in_keys)
