@@ -294,6 +294,8 @@ def test_the_thread_policy():
         assert torch.get_num_threads() == 2
         load_sampler("cvae", task="maze2d")
         assert torch.get_num_threads() == 1
+        from threadpoolctl import threadpool_info
+        assert all(pool["num_threads"] == 1 for pool in threadpool_info() if pool["user_api"] == "blas")
         torch.set_num_threads(2)
         with inference_threads():
             assert torch.get_num_threads() == 1

@@ -41,32 +41,41 @@ if TYPE_CHECKING:
 
 SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
-#: Torch threads of a process that runs a sampler's per-step forward. A step's forward is a few
-#: dozen small operations, where a second thread only adds synchronisation: measured on the
-#: 2-core machine, arm gnn-cvae's decode took ~15 ms per step with torch's default of 2 threads
-#: and ~0.2 ms with 1 (issue #17). ``load_sampler`` applies it; ``threads=None`` opts out.
+#: Threads of torch and of numpy's BLAS in a process that runs a sampler's per-step forward. A
+#: step's forward is a few dozen small operations, where a second thread only adds synchronisation:
+#: measured on the 2-core machine, arm gnn-cvae's decode took ~15 ms per step with torch's default
+#: of 2 threads and ~0.2 ms with 1, and two benchmark workers running the numpy GNN engines with
+#: OpenBLAS's default thread pools were 2.1x slower than with one BLAS thread each (issue #17).
+#: ``load_sampler`` applies it; ``threads=None`` opts out.
 INFERENCE_THREADS = 1
 
 
 def use_inference_threads(threads: int | None = INFERENCE_THREADS) -> None:
-    """The one thread policy: set torch to ``threads`` threads (None: leave it as it is)."""
+    """The one thread policy: torch and numpy's BLAS (``threadpoolctl``) on ``threads`` threads
+    (None: leave them as they are)."""
+    if threads is None:
+        return
     import torch
-    if threads is not None and torch.get_num_threads() != int(threads):
+    from threadpoolctl import threadpool_limits
+    if torch.get_num_threads() != int(threads):
         torch.set_num_threads(int(threads))
+    threadpool_limits(limits=int(threads), user_api="blas")
 
 
 @contextlib.contextmanager
 def inference_threads(threads: int | None = INFERENCE_THREADS):
-    """:func:`use_inference_threads` for a block (e.g. evaluation inside training), then torch's
-    thread count as it was."""
+    """:func:`use_inference_threads` for a block (e.g. evaluation inside training), then the thread
+    counts as they were."""
     import torch
+    from threadpoolctl import threadpool_limits
     before = torch.get_num_threads()
-    use_inference_threads(threads)
-    try:
-        yield
-    finally:
-        if torch.get_num_threads() != before:
-            torch.set_num_threads(before)
+    with threadpool_limits(limits=threads, user_api="blas"):
+        use_inference_threads(threads)
+        try:
+            yield
+        finally:
+            if torch.get_num_threads() != before:
+                torch.set_num_threads(before)
 
 
 def active_target(obs: Mapping) -> np.ndarray:
