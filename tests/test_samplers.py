@@ -361,3 +361,24 @@ def test_proposals_run_the_forward_once_per_k_model_samples():
     assert Counting.forwards == 3                    # a new episode refreshes at once
     with pytest.raises(ValueError, match="proposals"):
         Counting(env.action_space.low, env.action_space.high, 0, proposals=0)
+
+
+def test_the_mixture_uniform_draw_is_generator_uniform():
+    """ModelSampler's uniform share draws rng.uniform(low, high)'s exact values (written without its
+    broadcasting overhead): the tree samplers' recorded counters depend on them."""
+    from agents.samplers import ModelSampler
+
+    class Never(ModelSampler):
+        def model_sample(self, obs):
+            raise AssertionError("uniform_mix=1 never asks the model")
+
+    for task in ("maze2d", "pendulum", "arm"):
+        from gnn_mp_envs.registration import task_spec
+        low, high = task_spec(task).state_bounds()
+        sampler = Never(low, high, 11, uniform_mix=1.0)
+        ref = np.random.default_rng(11)
+        obs = {"start": np.zeros(len(low), np.float32)}
+        for _ in range(500):
+            want = ref.random()                                   # the mixture's choice
+            assert want < 1.0
+            np.testing.assert_array_equal(sampler.act(obs), ref.uniform(sampler.low, sampler.high).astype(np.float32))

@@ -76,10 +76,11 @@ class GoalBiasSampler(_TorchCompatible):
         shape = self.batch_shape(obs)
         if shape:
             return self.propose(obs)
-        sample = self.uniform(())
-        if self.rng.unit(1)[0] < self._goal_bias32:
+        # uniform(()) then the choice: d + 1 draws of the stream, in that order
+        raw = self.rng.bits.random_raw(self.state_dim + 1) & _MASK24
+        if np.float32(raw[-1]) * _UNIT24 < self._goal_bias32:
             return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
-        return sample
+        return self.low32 + raw[:-1].astype(np.float32) * self._scale32
 
     def propose(self, obs: Mapping) -> np.ndarray:
         """All uniform states of the batch first, then all the choices (one ``unit`` call each)."""

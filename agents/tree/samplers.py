@@ -111,7 +111,8 @@ class TreeScorerSampler(_EngineSampler):
     def model_sample(self, obs: Mapping) -> np.ndarray:
         e = self.engine
         e.ingest(obs)
-        cands = self.rng.uniform(self.low, self.high, size=(self.candidates, e.d))
+        # rng.uniform(low, high, (M, d))'s values, without its broadcasting cost
+        cands = self.low + (self.high - self.low) * self.rng.random((self.candidates, e.d))
         logits = e.logits(cands, e.nearest(cands, self.active(obs))) / self.temperature
         p = np.exp(logits - logits.max())
         c = np.cumsum(p)
