@@ -299,3 +299,25 @@ def test_io_errors_name_the_target_file(tmp_path):
     with pytest.raises(OSError) as info:
         save_checkpoint(blocker / "m.pt", _small_gnn(), "critical/gnn", SMALL)
     assert str(blocker / "m.pt") in str(info.value)
+
+
+def test_a_failed_write_is_an_os_error_naming_the_file_and_keeps_the_old_one(tmp_path, monkeypatch):
+    """Disk full during torch.save (torch raises RuntimeError from its stream writer): one OSError
+    naming the checkpoint, which the CLIs print as one line; the earlier file stays whole."""
+    path = tmp_path / "model.pt"
+    model = _small_gnn()
+    save_checkpoint(path, model, "critical/gnn", SMALL)
+    before = path.read_bytes()
+
+    def full_disk(*args, **kwargs):
+        raise RuntimeError("[enforce fail at inline_container.cc:603] . PytorchStreamWriter failed writing file "
+                           "data/0: file write failed")
+    monkeypatch.setattr(torch, "save", full_disk)
+    for write in (lambda: save_checkpoint(path, model, "critical/gnn", SMALL),
+                  lambda: save_training_state(path, {"step": 1})):
+        with pytest.raises(OSError) as exc:
+            write()
+        assert exc.value.filename == str(path) and "file write failed" in exc.value.strerror
+        assert "\n" not in f"{exc.value.strerror}: {exc.value.filename}"
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.pt"]      # no temporary file left

@@ -79,6 +79,8 @@ def test_benchmark_end_to_end_json_plot_and_render(tmp_path: Path):
     (["benchmark", "--samplers", "uniform,no-such-sampler", "--problems", "1"], ["no-such-sampler", "uniform"]),
     (["benchmark", "--task", "no-such-task"], ["no-such-task", "maze2d"]),
     (["benchmark", "--problems", "-3"], ["--problems"]),
+    (["benchmark", "--problems", "1000000000"], ["--problems", "1,000,000"]),
+    (["benchmark", "--problems", str(2**63)], ["--problems"]),
 ])
 def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     assert_one_line_error(gnn_mp(*args), *fragments)
@@ -94,6 +96,8 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["benchmark", "--samplers", "uniform,ompl-rrt", "--seed", str(2**70)], ["--seed"]),
     (["benchmark", "--problems", "1", "--json", "/"], ["--json", "expected a file"]),
     (["train", "no-such-model"], ["train"]),
+    (["train", "sampler", "--seed", str(2**64)], ["--seed", "2**32"]),
+    (["critical", "train", "--seed", str(2**64)], ["--seed", "2**32"]),
     (["no-such-command"], ["no-such-command"]),
 ])
 def test_bad_input_in_process(args: list[str], fragments: list[str], capsys):

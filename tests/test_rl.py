@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -393,3 +394,48 @@ def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     state = policy["state_dict"]
     for key, value in gnn.items():
         assert torch.allclose(state[f"encoder.gnn.{key}"], value, atol=1e-5), key
+
+
+@pytest.mark.parametrize("extra, fragment", [
+    (["--planner", "nope"], "nope"),
+    (["--max-nodes", "1"], "--max-nodes"),
+    (["--n-steps", "1", "--n-envs", "1"], "--n-steps"),
+    (["--net-arch=-5"], "--net-arch"),
+    (["--net-arch", "0"], "--net-arch"),
+    (["--view-nodes", "100000000"], "--view-nodes"),
+    (["--algo", "sac", "--buffer-size", "1000000000"], "--buffer-size"),
+    (["--gamma", "1.5"], "--gamma"),
+    (["--gae-lambda", "7"], "--gae-lambda"),
+    (["--clip-range", "3"], "--clip-range"),
+    (["--seed", str(2**64)], "--seed"),
+    (["--init-from", "{dir}"], "no such file"),
+    (["--init-from", "{truncated}"], "truncated.pt"),
+    (["--init-from", "{crafted}"], "crafted.pt"),
+])
+def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment, tmp_path, capsys):
+    """Values that cannot train (issue #21, item 14) end in one line and rc 2 before any env is built."""
+    from train.cli import main
+    shipped = Path(__file__).resolve().parents[1] / "agents" / "checkpoints" / "rl-ppo_maze2d.pt"
+    (tmp_path / "truncated.pt").write_bytes(shipped.read_bytes()[:1000])
+    (tmp_path / "crafted.pt").write_bytes(b"PK\x03\x04 not a checkpoint")
+    files = {"{dir}": str(tmp_path), "{truncated}": str(tmp_path / "truncated.pt"),
+             "{crafted}": str(tmp_path / "crafted.pt")}
+    extra = [files.get(a, a) for a in extra]
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "rl", "--out", str(tmp_path / "run"), *extra])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys):
+    """A checkpoint without a backbone of the run's size: found when the model exists, still one line, rc 2."""
+    from train.cli import main
+    gnn = Path(__file__).resolve().parents[1] / "agents" / "checkpoints" / "gnn_maze2d.pt"
+    code = main(["train", "rl", "--init-from", str(gnn), "--total-steps", "64",
+                 "--n-envs", "1", "--n-steps", "32", "--batch-size", "32", "--out", str(tmp_path / "run"),
+                 "--no-progress"])
+    assert code == 2
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
+    assert len(err) == 1 and "--init-from" in err[0], err

@@ -351,6 +351,9 @@ def test_proposals_run_the_forward_once_per_k_model_samples():
         for _ in range(12):
             sampler.act(obs)
         assert Counting.forwards == expected
+        assert sampler.forward_calls == expected and sampler.forward_time_s > 0   # the inference accounting
+        sampler.reset(1)
+        assert sampler.forward_calls == expected                                 # kept across resets
     sampler = Counting(env.action_space.low, env.action_space.high, 0, uniform_mix=0.0, proposals=4)
     Counting.forwards = 0
     other = {**obs, "active_tree": np.array([1])}
@@ -361,6 +364,19 @@ def test_proposals_run_the_forward_once_per_k_model_samples():
     assert Counting.forwards == 3                    # a new episode refreshes at once
     with pytest.raises(ValueError, match="proposals"):
         Counting(env.action_space.low, env.action_space.high, 0, proposals=0)
+
+
+def test_the_proposals_tuning_rule():
+    """tools/tune_proposals: the smallest value within 5% of the fastest among those as successful
+    as the first; with an inference-share bound, the smallest value under it (else the largest)."""
+    from tools.tune_proposals import choose
+    rows = {1: dict(success_rate=1.0, median_wall_time_s=0.100, inference_share=0.50),
+            8: dict(success_rate=1.0, median_wall_time_s=0.052, inference_share=0.20),
+            16: dict(success_rate=1.0, median_wall_time_s=0.050, inference_share=0.08),
+            32: dict(success_rate=0.9, median_wall_time_s=0.040, inference_share=0.05)}
+    assert choose(rows, [1, 8, 16, 32]) == 8          # 32 fails more often; 8 is within 5% of 16
+    assert choose(rows, [1, 8, 16, 32], inference_share=0.1) == 16
+    assert choose(rows, [1, 8], inference_share=0.1) == 8
 
 
 def test_the_mixture_uniform_draw_is_generator_uniform():

@@ -146,7 +146,7 @@ def test_scorer_engine_equals_the_torch_model():
 
 
 def test_nearest_k_is_the_stable_argsort():
-    """The engines' k-NN: argpartition, then a stable sort of what is left, equals a full stable
+    """The engines' k-NN: argpartition, then the chosen k ordered by (distance, index), equals a full stable
     argsort's first k (ties, many of them with integer distances, go to the lower index)."""
     from agents.tree.kernels import nearest_k
     rng = np.random.default_rng(0)

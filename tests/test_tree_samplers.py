@@ -125,3 +125,27 @@ def test_training_resumes_from_its_state(tmp_path):
     second = fit(fresh, adapter, items, items, minutes=0.3, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
                  progress=False, resume=state)
     assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]
+
+
+@pytest.mark.parametrize("name, proposals", [("gnn", 1), ("gnn", 8), ("gnn-cvae", 1), ("gnn-cvae", 4)])
+def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(name, proposals):
+    """Two envs plan the same problem with different actions, one sampler serves both in turn
+    (issue #21, item 17): every forward reads the tree of the observation it was given, as a
+    sampler that only ever saw that env would (the caches recognise another tree of the same size)."""
+    import gymnasium as gym
+    from agents.registry import load_sampler
+    envs = [gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True) for _ in range(2)]
+    obs = [env.reset(seed=0, options={"index": 0})[0] for env in envs]
+    rngs = [np.random.default_rng(s) for s in (1, 2)]
+    for step in range(30):               # two different trees of the same size
+        for i, env in enumerate(envs):
+            obs[i] = env.step(rngs[i].uniform(0, 1, 2).astype(np.float32))[0]
+    assert not np.array_equal(obs[0]["nodes"][1], obs[1]["nodes"][1])
+    shared = load_sampler(name, task="maze2d", seed=0, proposals=proposals, uniform_mix=0.0)   # every act reads the tree
+    for step in range(12):
+        for i in (0, 1):
+            shared.act(obs[i])
+            engine = shared.engine
+            n = int(obs[i]["num_nodes"][0])
+            assert engine.n == n
+            np.testing.assert_array_equal(engine.states[:n], np.asarray(obs[i]["nodes"][:n], np.float64))

@@ -77,6 +77,14 @@ positive_float = bounded(float, 0, True, "a positive number")
 non_negative_float = bounded(float, 0, False, "a non-negative number")
 
 
+def seed_int(text: str) -> int:
+    """An argparse type: a seed in ``[0, 2**32)`` (what numpy's and torch's generators both take)."""
+    value = non_negative_int(text)
+    if value >= 2 ** 32:
+        raise argparse.ArgumentTypeError(f"a seed must be below 2**32, got {text}")
+    return value
+
+
 def name_list(text: str) -> list[str]:
     """A comma-separated list of names (at least one)."""
     names = [n.strip() for n in text.split(",") if n.strip()]

@@ -30,6 +30,7 @@ state dicts, epoch, history) with the same guarantees.
 
 from __future__ import annotations
 
+import errno
 import importlib
 import inspect
 import math
@@ -156,6 +157,22 @@ def _complete_ctor_args(cls: Callable[..., nn.Module], ctor_args: Mapping[str, A
 # ----------------------------------------------------------------------------- saving
 
 
+def _save_named(record: Mapping[str, Any], tmp: Path, path: Path) -> None:
+    """``torch.save(record, tmp)``; a failed write (disk full, file-size limit: torch raises a
+    ``RuntimeError`` from its stream writer) becomes an ``OSError`` naming ``path``, which the
+    CLIs print as one line."""
+    try:
+        torch.save(record, tmp)
+    except RuntimeError as exc:
+        raise OSError(errno.EIO, f"could not write the checkpoint ({str(exc).splitlines()[0]})", str(path)) from None
+
+
+def _write(record: Mapping[str, Any], path: Path) -> None:
+    """``record`` to ``path`` atomically (a temporary file renamed into place)."""
+    with atomic_path(path) as tmp:
+        _save_named(record, tmp, path)
+
+
 def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tensor], kind: str,
                     ctor_args: Mapping[str, Any], *, obs_spec: Mapping[str, Any] | None = None,
                     meta: Mapping[str, Any] | None = None) -> Path:
@@ -188,8 +205,7 @@ def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tens
         "meta": plain(dict(meta or {}), "meta"),
     }
     path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save(record, tmp)
+    _write(record, path)
     return path
 
 
@@ -201,7 +217,7 @@ def save_training_state(path: str | Path, state: Mapping[str, Any]) -> Path:
     """
     path = Path(path)
     with atomic_path(path) as tmp:
-        torch.save({"format_version": FORMAT_VERSION, "training_state": dict(state)}, tmp)
+        _save_named({"format_version": FORMAT_VERSION, "training_state": dict(state)}, tmp, Path(path))
     return path
 
 

@@ -73,6 +73,8 @@ class RLSampler(ModelSampler):
         self.view_nodes = int(view_nodes)
         self.deterministic = bool(deterministic)
         self.action_frame = action_frame
+        self._mix32 = np.float32(self.uniform_mix)
+        self._periodic_or_none = self.periodic if self._wraps else None
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
@@ -80,7 +82,7 @@ class RLSampler(ModelSampler):
     def params(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """The policy's ``(loc, scale)`` ``(d,)`` float32 for one full observation (through its view)."""
         view = {k: torch.as_tensor(v) for k, v in tree_view(obs, self.view_nodes).items()}
-        with torch.no_grad():
+        with torch.inference_mode():
             loc, scale = self.policy(view)
         return loc.numpy(), scale.numpy()
 
@@ -92,8 +94,9 @@ class RLSampler(ModelSampler):
         x = self.model_sample(obs)
         if self.uniform_mix == 0.0 or self.deterministic:
             return x
-        uniform = self.low32 + self.rng.unit(self.state_dim) * self.span32
-        return uniform if self.rng.unit(1)[0] < np.float32(self.uniform_mix) else x
+        d = self.state_dim
+        draws = self.rng.unit(d + 1)          # a uniform state's d values, then the choice: one call
+        return self.low32 + draws[:d] * self.span32 if draws[d] < self._mix32 else x
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         """The policy's state for one observation (float32, in the bounds); the policy's forward runs
@@ -104,7 +107,7 @@ class RLSampler(ModelSampler):
         u = np.minimum(np.maximum(z, ACTION_LOW), ACTION_HIGH) if self.policy.squash == "clip" else \
             self.policy.squash_action(torch.from_numpy(z)).numpy()
         x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
-                                   np.asarray(active_target(obs), np.float32), self.periodic)
+                                   np.asarray(active_target(obs), np.float32), self._periodic_or_none)
         return np.minimum(np.maximum(x, self.low32), self.high32)
 
 

@@ -30,6 +30,7 @@ probabilistically complete. A new learned sampler implements :meth:`ModelSampler
 from __future__ import annotations
 
 import contextlib
+import time
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -223,6 +224,18 @@ class ModelSampler(Sampler):
         super().reset(seed)
         self._forwards: dict = {}        # refresh key -> [value, model samples left]
         self._episode: tuple | None = None
+        if not hasattr(self, "forward_time_s"):
+            #: Seconds spent in the model's forward passes, and their count, since construction
+            #: (resets keep them): the inference share of a step, which ``tools/tune_proposals`` reports.
+            self.forward_time_s, self.forward_calls = 0.0, 0
+
+    def timed(self, forward, obs: Mapping):
+        """``forward(obs)``, its time added to :attr:`forward_time_s`."""
+        t0 = time.perf_counter()
+        out = forward(obs)
+        self.forward_time_s += time.perf_counter() - t0
+        self.forward_calls += 1
+        return out
 
     def refresh_key(self, obs: Mapping):
         """What a reused forward must share besides the episode: the active tree (BiRRT grows
@@ -233,16 +246,20 @@ class ModelSampler(Sampler):
         """``forward(obs)``, run once per ``proposals`` model samples of the same episode and
         :meth:`refresh_key` (every time for ``proposals=1``)."""
         if self.proposals == 1:
-            return forward(obs)
+            return self.timed(forward, obs)
         n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
         episode = (np.asarray(obs["start"]).tobytes(), np.asarray(obs["goal"]).tobytes())
-        if self._episode is None or episode != self._episode[0] or n < self._episode[1]:
+        if (self._episode is None or episode != self._episode[0] or n < self._episode[1]
+                or np.asarray(obs["nodes"][self._episode[2]]).tobytes() != self._episode[3]):
+            # another episode, or another tree of it (rows are append-only: the anchor row stays)
             self._forwards.clear()
-        self._episode = (episode, n)
+            self._episode = (episode, n, n - 1, np.asarray(obs["nodes"][n - 1]).tobytes())
+        else:
+            self._episode = (episode, n, *self._episode[2:])
         key = self.refresh_key(obs)
         entry = self._forwards.get(key)
         if entry is None or entry[1] <= 0:
-            entry = self._forwards[key] = [forward(obs), self.proposals]
+            entry = self._forwards[key] = [self.timed(forward, obs), self.proposals]
         entry[1] -= 1
         return entry[0]
 

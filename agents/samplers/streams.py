@@ -39,25 +39,23 @@ class TorchCompatibleStream:
         """``n`` float32 uniforms in ``[0, 1)``: ``torch.rand(n)``."""
         return (self.bits.random_raw(n) & _MASK24).astype(np.float32) * _UNIT24
 
-    def _double(self) -> float:
-        hi, lo = self.bits.random_raw(2)
-        return ((int(hi) << 32 | int(lo)) & _MASK53) * 2.0 ** -53
-
     def normal(self, n: int) -> np.ndarray:
         """``n`` float32 standard normals: ``torch.randn(n)`` for ``n < 16``."""
         if n >= 16:
             raise ValueError("torch draws 16 or more normals with another algorithm; draw fewer per call")
-        out = np.empty(n, dtype=np.float64)
-        for i in range(n):
+        out = []
+        for _ in range(n):
             if self._normal is not None:
-                out[i], self._normal = self._normal, None
+                out.append(self._normal)
+                self._normal = None
                 continue
-            u1, u2 = self._double(), self._double()
+            hi1, lo1, hi2, lo2 = self.bits.random_raw(4).tolist()     # two 53-bit uniforms, as torch draws them
+            u1 = ((hi1 << 32 | lo1) & _MASK53) * 2.0 ** -53
+            u2 = ((hi2 << 32 | lo2) & _MASK53) * 2.0 ** -53
             r = math.sqrt(-2.0 * math.log1p(-u2))
             theta = 2.0 * math.pi * u1
             self._normal = r * math.sin(theta)
-            out[i] = r * math.cos(theta)
-        return out.astype(np.float32)
-
+            out.append(r * math.cos(theta))
+        return np.array(out, dtype=np.float32)
 
 __all__ = ["TorchCompatibleStream"]

@@ -56,14 +56,25 @@ class _Engine:
     def clear(self) -> None:
         self.n = 0
         self.problem = None
+        self._problem_key = b""
+
+    def same_tree(self, obs: Mapping[str, np.ndarray]) -> bool:
+        """Is the observation's tree the cached one grown further? Rows are append-only, so the
+        last cached node must still be there: another tree of the same problem and size (a second
+        env fed to the same sampler) differs in it."""
+        if self.n == 0:
+            return True
+        return bool(np.array_equal(np.asarray(obs["nodes"][self.n - 1], np.float64), self.states[self.n - 1]))
 
     def new_rows(self, obs: Mapping[str, np.ndarray]) -> tuple[int, int]:
         """``(i0, n)``: the observation's rows ``i0..n-1`` are new (a new episode clears the caches first)."""
         n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
-        problem = np.concatenate([np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64)])
-        if n < self.n or self.problem is None or not np.array_equal(problem, self.problem):
+        start, goal = np.asarray(obs["start"]), np.asarray(obs["goal"])
+        key = start.tobytes() + goal.tobytes()          # the episode's start and goal, cheaply compared
+        if n < self.n or self.problem is None or key != self._problem_key or not self.same_tree(obs):
             self.clear()
-            self.problem = problem
+            self.problem = np.concatenate([start.astype(np.float64), goal.astype(np.float64)])
+            self._problem_key = key
         if n > self.n:
             self._grow(n)
         return self.n, n
@@ -92,6 +103,9 @@ class IncrementalTreeGNN(_Engine):
                 (w1, b1), (w2, b2) = linears(conv.net)
                 split.append((w1[:H], w1[H:] / self.step[:, None], b1, w2, b2))
             self.messages.append(split)
+        # both edge types' sender weights side by side: one product per layer for the two
+        self.sender_weights = [(np.concatenate([p[0], k[0]], 1), np.concatenate([p[1], k[1]], 1))
+                               for p, k in self.messages]
         self.updates = [linears(u) for u in m.updates]
         self.norms = norms_of(m.norms)
         self.query = linears(m.query)
@@ -137,7 +151,7 @@ class IncrementalTreeGNN(_Engine):
             dist[later | (self.tree_id[None, :n] != tid[:, None])] = np.inf
             k = min(self.k, n)
             near = nearest_k(dist, k)                                   # ties to the earlier node, as the model
-            near_ok = np.isfinite(np.take_along_axis(dist, near, 1))
+            near_ok = np.isfinite(dist[np.arange(B)[:, None], near])
         has_parent = parent >= 0
         par = np.where(has_parent, parent, 0)
         any_parent = self.use_parent and bool(has_parent.any())
@@ -153,9 +167,10 @@ class IncrementalTreeGNN(_Engine):
         # (each product below is computed once and reused: the same values as before, fewer calls)
         for layer in range(self.L):
             (wph, wpx, bp1, wp2, bp2), (wkh, wkx, bk1, wk2, bk2) = self.messages[layer]
-            xp, xk = x @ wpx, x @ wkx
-            self.sender[layer, 0, i0:n] = h @ wph + xp
-            self.sender[layer, 1, i0:n] = h @ wkh + xk
+            wh, wx = self.sender_weights[layer]
+            xs = x @ wx
+            xp, xk = xs[:, :H], xs[:, H:]
+            self.sender[layer, :, i0:n] = (h @ wh + xs).reshape(B, 2, H).transpose(1, 0, 2)
             mp = np.zeros((B, H))
             if any_parent:
                 rel_p = wrapped_p @ wpx - (sp @ wpx - xp)
@@ -173,7 +188,7 @@ class IncrementalTreeGNN(_Engine):
         w, b = self.node_head
         o = (h @ w + b).reshape(B, self.trees, 2 * d)
         self.offsets[i0:n] = o[..., :d] * self.step
-        self.log_sigma[i0:n] = np.clip(o[..., d:], -4.0, 1.0)
+        self.log_sigma[i0:n] = np.minimum(np.maximum(o[..., d:], -4.0), 1.0)     # np.clip, without its wrapper
         np.add.at(self.sums, tid, h)
         np.add.at(self.counts, tid, 1.0)
         self.n = n
@@ -282,7 +297,7 @@ class IncrementalTreeScorer(_Engine):
             dist = self._sq_dist(x, self.states[:n])
             dist[(np.arange(n)[None, :] >= rows[:, None]) | (self.tree_id[None, :n] != tid[:, None])] = np.inf
             near = nearest_k(dist, min(self.k, n))
-            near_ok = np.isfinite(np.take_along_axis(dist, near, 1))
+            near_ok = np.isfinite(dist[np.arange(B)[:, None], near])
         else:
             near, near_ok = np.zeros((B, 0), np.int64), np.zeros((B, 0), bool)
         has_parent = parent >= 0

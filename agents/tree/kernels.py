@@ -50,23 +50,27 @@ def norms_of(modules: torch.nn.ModuleList) -> list[tuple[np.ndarray, np.ndarray,
 def layer_norm(norm: tuple[np.ndarray, np.ndarray, float], x: np.ndarray) -> np.ndarray:
     """``torch.nn.LayerNorm`` over the last axis."""
     g, b, eps = norm
-    mu = x.mean(-1, keepdims=True)
-    var = ((x - mu) ** 2).mean(-1, keepdims=True)
-    return (x - mu) / np.sqrt(var + eps) * g + b
+    width = x.shape[-1]
+    centred = x - x.sum(-1, keepdims=True) / width          # x.mean's values, without its wrapper
+    var = (centred * centred).sum(-1, keepdims=True) / width
+    return centred / np.sqrt(var + eps) * g + b
 
 
 def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     """``np.argsort(dist, axis=1, kind="stable")[:, :k]`` (ties to the lower index) without sorting
-    whole rows: ``argpartition`` finds each row's k-th smallest distance, then only the entries up
-    to it (all of them, ties included) are sorted stably."""
+    whole rows: ``argpartition`` finds each row's k smallest distances, which are then ordered by
+    (distance, index). A row whose k-th smallest value also occurs outside the chosen k (a tie at
+    the boundary, e.g. the infinities of a small tree) takes the exact stable sort."""
     n = dist.shape[1]
     if k >= n or n <= 64:
         return np.argsort(dist, axis=1, kind="stable")[:, :k]
-    kth = np.partition(dist, k - 1, axis=1)[:, k - 1:k]                   # (B, 1)
-    out = np.empty((dist.shape[0], k), dtype=np.int64)
-    for r in range(dist.shape[0]):
-        cand = np.flatnonzero(dist[r] <= kth[r, 0])                       # increasing index order
-        out[r] = cand[np.argsort(dist[r, cand], kind="stable")[:k]]
+    rows = np.arange(dist.shape[0])[:, None]
+    part = np.argpartition(dist, k - 1, axis=1)[:, :k]
+    vals = dist[rows, part]
+    out = part[rows, np.lexsort((part, vals), axis=-1)]
+    kth = vals.max(1, keepdims=True)
+    for r in np.flatnonzero(np.count_nonzero(dist == kth, axis=1) != np.count_nonzero(vals == kth, axis=1)):
+        out[r] = np.argsort(dist[r], kind="stable")[:k]
     return out
 
 

@@ -109,6 +109,10 @@ class TreeScorerSampler(_EngineSampler):
         self.candidates, self.temperature = int(candidates), float(temperature)
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
+        return self.timed(self.score_and_draw, obs)
+
+    def score_and_draw(self, obs: Mapping) -> np.ndarray:
+        """The forward: ingest the new nodes, score ``candidates`` uniform states, draw one."""
         e = self.engine
         e.ingest(obs)
         # rng.uniform(low, high, (M, d))'s values, without its broadcasting cost
@@ -140,12 +144,12 @@ class TreeCVAESampler(ModelSampler):
         condition = cvae_condition(self.model, obs)
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
-        with torch.no_grad():
+        with torch.inference_mode():
             return list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         if self.proposals == 1:
-            return self.decode(obs)[0]
+            return self.timed(self.decode, obs)[0]
         return self.refreshed(obs, self.decode).pop()
 
 
@@ -169,7 +173,7 @@ class TreeGNNCVAESampler(_EngineSampler):
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
         context = torch.as_tensor(q, dtype=torch.float32)[None].expand(self.proposals, -1)
-        with torch.no_grad():
+        with torch.inference_mode():
             return list(self.model.decode(z, context).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:

@@ -18,13 +18,18 @@ from typing import Any
 import numpy as np
 
 
+#: The control of a geometric edge: one shared, read-only empty array (no allocation per edge).
+NO_CONTROL = np.zeros(0)
+NO_CONTROL.setflags(write=False)
+
+
 @dataclass(frozen=True)
 class Edge:
     """The outcome of one successful extension: the new state and how it was reached."""
 
     state: np.ndarray
     cost: float
-    control: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    control: np.ndarray = field(default_factory=lambda: NO_CONTROL)
 
 
 class InvalidProblemError(ValueError):

@@ -66,7 +66,7 @@ class TreeStore:
     def add(self, state: np.ndarray, parent: int, tree: int, cost: float = 0.0,
             control: np.ndarray | None = None) -> int:
         """Append a node and return its global index."""
-        if self.full:
+        if self.size >= self.capacity:
             raise IndexError(f"tree store is full ({self.capacity} nodes)")
         i = self.size
         self.states[i] = state
@@ -97,7 +97,7 @@ class TreeStore:
         if start == k:
             return int(self._tree_index[tree][kd_idx])
         d = metric.distance(states[start:k], x)
-        j = int(np.argmin(d))
+        j = int(d.argmin())
         if start and kd_dist <= d[j]:
             return int(self._tree_index[tree][kd_idx])
         return int(self._tree_index[tree][start + j])

@@ -9,7 +9,7 @@ from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
 from train.args import import_modules as import_plugins
-from train.args import arg, name_list, non_negative_int, positive_float, positive_int
+from train.args import arg, name_list, non_negative_int, positive_float, positive_int, seed_int
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
@@ -44,6 +44,9 @@ def setting_triple(text: str) -> tuple[str, str, Any]:
     return name.strip(), key.strip(), value
 
 
+#: Problems per benchmark row at most: a job list and its records stay in memory (about 1 kB a run).
+MAX_PROBLEMS = 1_000_000
+
 @dataclass
 class BenchmarkArgs:
     """Flags of one benchmark run (one task, several samplers)."""
@@ -55,7 +58,7 @@ class BenchmarkArgs:
     problems: int = arg(20, "problems 0..N-1 of --split", parse=positive_int)
     split: str = arg("test", "problem split: test (held out, what results report) or val (for tuning)",
                      choices=("val", "test"))
-    seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=non_negative_int)
+    seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=seed_int)
     max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
     scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
     workers: int = arg(1, "worker processes over problems (with --ray: Ray actors)", parse=positive_int)
@@ -140,8 +143,8 @@ def validate_args(args: BenchmarkArgs) -> None:
         raise BenchmarkError(f"unknown scene {args.scene!r} for {args.task}; known: {', '.join(spec.scenes)}")
     if args.scene is None:
         args.scene = spec.benchmark_scene   # the held-out family, for both splits
-    if args.problems < 1:
-        raise BenchmarkError(f"--problems must be >= 1, got {args.problems}")
+    if not 1 <= args.problems <= MAX_PROBLEMS:
+        raise BenchmarkError(f"--problems must be in [1, {MAX_PROBLEMS:,}], got {args.problems}")
     if not 0 <= args.seed < MAX_SEED:
         raise BenchmarkError(f"--seed must be in [0, {MAX_SEED - 1}], got {args.seed}")
     if args.workers < 1:

@@ -18,7 +18,7 @@ from typing import Any
 from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
 from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
-from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
+from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int
 
 #: Where cached datasets go (git-ignored).
 DEFAULT_DATA_DIR = Path("data/critical")
@@ -116,7 +116,7 @@ class DataArgs:
     """Flags of every sub-command: the dataset (cache directory, seed) and torch threads."""
 
     data: Path = arg(DEFAULT_DATA_DIR, "dataset cache directory")
-    data_seed: int = arg(0, "seed of the generated dataset", parse=non_negative_int)
+    data_seed: int = arg(0, "seed of the generated dataset", parse=seed_int)
     threads: int = arg(2, "torch threads", parse=positive_int)
 
     def dataset(self) -> DatasetConfig:
@@ -143,7 +143,7 @@ class TrainArgs(DataArgs):
 
     model: str | None = arg(None, "model to train (required)%(default).0s", choices=sorted(MODELS))
     epochs: int | None = arg(None, _shown("passes over the training set", "the model's"), parse=positive_int)
-    seed: int = arg(0, "seed of initialisation and shuffling", parse=non_negative_int)
+    seed: int = arg(0, "seed of initialisation and shuffling", parse=seed_int)
     out: Path | None = arg(None, _shown("checkpoint file; its .json and resume state go beside it",
                                            "runs/critical/<model>-seed<S>-<time>/critical_<model>.pt"))
     ship: bool = arg(False, "when done, also copy the best checkpoint and its .json into "
@@ -256,5 +256,5 @@ class EvaluateArgs(DataArgs):
     min_sep: float = arg(MIN_SEP_R, "k samples: no two within this many graph radii r", parse=non_negative_float)
     select: str = arg("top", "k samples from a node distribution: the top-k nodes or draws from it "
                       "(both keep --min-sep)", choices=["top", "sample"])
-    seed: int = arg(0, "seed of CVAE samples and random reference points", parse=non_negative_int)
+    seed: int = arg(0, "seed of CVAE samples and random reference points", parse=seed_int)
     progress: bool = arg(True, "hide the progress bars")

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int
+from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int
 from train.run import RunFlags
 
 LIBS = ("sb3", "torchrl")
@@ -51,7 +51,7 @@ class RLArgs(RunFlags):
                     "active_tree)")
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
-    seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=non_negative_int)
+    seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
     # --- environment (make_rl_env)
     n_envs: int = arg(4, "environments stepped together (vectorised)", parse=positive_int)
     parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
@@ -147,13 +147,41 @@ def check_args(args: RLArgs) -> None:
     if (args.lib, args.algo) not in SAMPLER_NAMES:
         raise ValueError(f"--lib {args.lib} --algo {args.algo} is not available "
                          f"(available: {', '.join(f'{l}/{a}' for l, a in SAMPLER_NAMES)})")
-    task_spec(args.task)
-    if args.view_nodes < 2:
-        raise ValueError("--view-nodes must be >= 2")
-    if args.init_from is not None and not Path(args.init_from).exists():
-        raise ValueError(f"--init-from {args.init_from}: no such file")
-    if args.uniform_mix > 1:
-        raise ValueError("--uniform-mix must be in [0, 1]")
+    spec = task_spec(args.task)
+    env_id = spec.env_id_for(args.planner)
+    max_nodes = args.max_nodes if args.max_nodes is not None else spec.max_nodes
+    if max_nodes < spec.num_trees(env_id) + 2:
+        raise ValueError(f"--max-nodes {max_nodes}: the tree needs room for its {spec.num_trees(env_id)} root(s) "
+                         f"and at least 2 more nodes")
+    if not 2 <= args.view_nodes <= max_nodes:
+        raise ValueError(f"--view-nodes must be in [2, {max_nodes}] (the tree's node budget), got {args.view_nodes}")
+    for name, value in (("--gamma", args.gamma), ("--gae-lambda", args.gae_lambda), ("--uniform-mix", args.uniform_mix)):
+        if not 0.0 <= value <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {value}")
+    if args.clip_range >= 1.0:
+        raise ValueError(f"--clip-range must be in (0, 1), got {args.clip_range}")
+    if not args.net_arch or any(w < 1 or w > 65536 for w in args.net_arch):
+        raise ValueError(f"--net-arch needs widths in [1, 65536], got {args.net_arch}")
+    if args.algo == "ppo" and args.n_steps * args.n_envs < 2:
+        raise ValueError(f"PPO needs at least 2 steps per rollout (--n-steps x --n-envs), got "
+                         f"{args.n_steps} x {args.n_envs}")
+    if args.algo == "sac":
+        per_transition = 2 * 4 * args.view_nodes * 16            # observation and next one, float32, ~16 values a row
+        if args.buffer_size * per_transition > memory_bytes() // 2:
+            raise ValueError(f"--buffer-size {args.buffer_size:,} x --view-nodes {args.view_nodes} needs about "
+                             f"{args.buffer_size * per_transition / 2**30:.1f} GiB, more than half this machine's memory")
+    if args.init_from is not None:
+        from agents.checkpoints import read_checkpoint
+        path = Path(args.init_from)
+        if not path.is_file():
+            raise ValueError(f"--init-from {path}: no such file")
+        read_checkpoint(path)        # a CheckpointError (a ValueError) names the file and what is wrong
+
+
+def memory_bytes() -> int:
+    """Physical memory of this machine (bytes)."""
+    import os
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
 def run_config(args: RLArgs) -> dict[str, Any]:

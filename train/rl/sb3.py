@@ -30,7 +30,7 @@ from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RLArgs, RunResult, check_args, run_config
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
-from train.run import TrainingRun
+from train.run import RunError, TrainingRun
 
 
 class EvalCallback(BaseCallback):
@@ -105,7 +105,10 @@ def train(args: RLArgs) -> RunResult:
     # 2. the agent, the optional warm start of its encoder(s)
     model = build_model(args, vec_env, run.dir)
     if args.init_from is not None:
-        source = warm_start_encoder(args.init_from, *encoders_of(model))
+        try:
+            source = warm_start_encoder(args.init_from, *encoders_of(model))
+        except ValueError as exc:        # no backbone of this run's size in the file
+            raise RunError(f"--init-from: {exc}") from None
         print(f"encoder initialised from {args.init_from} ({source})")
     buffer = model.rollout_buffer if args.algo == "ppo" else model.replay_buffer
     buffer_bytes = sb3_buffer_nbytes(buffer)

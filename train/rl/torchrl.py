@@ -30,7 +30,7 @@ from agents.rl.torchrl import make_actor, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RLArgs, RunResult, check_args, run_config
 from train.rl.evaluation import Evaluator
-from train.run import TrainingRun
+from train.run import RunError, TrainingRun
 
 
 def keep_threads(threads: int) -> None:
@@ -75,7 +75,11 @@ def train(args: RLArgs) -> RunResult:
     value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
     if args.init_from is not None:
         encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ in ("TreeEncoder", "TreeGNNEncoder")]
-        print(f"encoders initialised from {args.init_from} ({warm_start_encoder(args.init_from, *encoders)})")
+        try:
+            source = warm_start_encoder(args.init_from, *encoders)
+        except ValueError as exc:        # no backbone of this run's size in the file
+            raise RunError(f"--init-from: {exc}") from None
+        print(f"encoders initialised from {args.init_from} ({source})")
 
     # 3. collector, advantage, loss, optimiser, logger
     frames_per_batch = args.n_steps * args.n_envs

@@ -31,7 +31,7 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.checkpoints import load_training_state, save_checkpoint, save_training_state
-from train.args import arg, non_negative_int, positive_float, positive_int
+from train.args import arg, non_negative_int, positive_float, positive_int, seed_int
 from train.run import RunError, RunFlags, TrainingRun, plot_learning_curve
 from train.tree.adapters import MODELS, adapter_for, task_scales
 from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
@@ -57,7 +57,7 @@ class TrainArgs(RunFlags):
                              parse=positive_int)
     eval_problems: int = arg(60, "validation problems planned at the end (sampler and uniform)",
                              parse=non_negative_int)
-    seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=non_negative_int)
+    seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=seed_int)
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
     workers: int = arg(1, "processes that plan the training problems (the dataset is the same for any count)",
                        parse=positive_int)
