@@ -73,6 +73,30 @@ def _bounds_for(name: str, task: str | None, bounds: tuple[Any, Any] | None) -> 
     return spec_low, spec_high
 
 
+#: Modules the learned samplers import, all from the ``agents`` extra.
+LEARNED_MODULES = ("torch", "tensordict", "torch_geometric", "threadpoolctl")
+#: What an environments-only install runs to get them.
+AGENTS_EXTRA_HINT = "pip install 'gnn-mp-envs[agents]'"
+
+
+def missing_learned_modules() -> list[str]:
+    """The modules of :data:`LEARNED_MODULES` this interpreter cannot import (an environments-only
+    install lacks all of them); found without importing them."""
+    import importlib.util
+
+    def missing(module: str) -> bool:
+        try:
+            return importlib.util.find_spec(module) is None
+        except (ImportError, ValueError):
+            return True
+    return [m for m in LEARNED_MODULES if missing(m)]
+
+
+def missing_extra_message(what: str, missing: list[str]) -> str:
+    """One line: ``what`` needs the agents extra (``missing`` modules), and the command that installs it."""
+    return f"{what} needs the 'agents' extra ({', '.join(missing)} not installed): {AGENTS_EXTRA_HINT}"
+
+
 def load_sampler(name: str, task: str | None = None, *, seed: int | None = None,
                  checkpoint: str | Path | None = None, bounds: tuple[Any, Any] | None = None,
                  threads: int | None = 1, **settings: Any) -> "Sampler":
@@ -95,6 +119,10 @@ def load_sampler(name: str, task: str | None = None, *, seed: int | None = None,
             raise ValueError(f"sampler {name!r} takes {takes}; unknown: {', '.join(unknown)}")
     if checkpoint is not None and not entry.learned:
         raise ValueError(f"sampler {name!r} has no weights (checkpoint= is for learned samplers)")
+    if entry.learned:
+        missing = missing_learned_modules()
+        if missing:
+            raise ValueError(missing_extra_message(f"sampler {name!r}", missing))
     if entry.learned and task is None and checkpoint is None:
         raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=PATH")
     if entry.learned and task is None:

@@ -327,6 +327,40 @@ def test_classical_samplers_run_without_torch():
     assert "uniform 1.0" in result.stdout and "goal-bias 1.0" in result.stdout
 
 
+@pytest.mark.parametrize("argv, code, fragment", [
+    (["benchmark", "--task", "maze2d", "--samplers", "uniform,goal-bias", "--problems", "2", "--no-progress"], 0,
+     None),
+    (["benchmark", "--task", "maze2d", "--samplers", "uniform,gnn", "--problems", "1", "--no-progress"], 2,
+     "pip install 'gnn-mp-envs[agents]'"),
+    (["train", "sampler", "--help"], 2, "pip install 'gnn-mp-envs[agents]'"),
+    (["samplers"], 0, "gnn"),
+])
+def test_an_environments_only_install_plans_classically_and_refuses_learned_samplers_in_one_line(argv, code, fragment):
+    """Without the agents extra (torch and friends cannot be imported), the CLI plans with the
+    classical samplers and refuses anything learned in one line naming the extra, rc 2 (issue #21, item 4)."""
+    import subprocess
+    import sys
+    blocker = (
+        "import sys\n"
+        "class Block:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] in ('torch', 'tensordict', 'torchrl', 'torch_geometric', 'threadpoolctl',\n"
+        "                                  'stable_baselines3', 'tensorboard'):\n"
+        "            raise ModuleNotFoundError(f'No module named {name!r}', name=name)\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "from train.cli import main\n"
+        f"sys.exit(main({argv!r}))\n")
+    result = subprocess.run([sys.executable, "-c", blocker], capture_output=True, text=True, timeout=300)
+    assert result.returncode == code, result.stderr[-2000:]
+    if code == 2:
+        err = result.stderr.strip().splitlines()
+        assert len(err) == 1 and fragment in err[0], err
+    elif argv == ["samplers"]:
+        gnn_line = next(line for line in result.stdout.splitlines() if line.startswith("gnn "))
+        assert "needs the 'agents' extra" in gnn_line
+        assert "needs the" not in next(line for line in result.stdout.splitlines() if line.startswith("uniform "))
+
+
 def test_proposals_run_the_forward_once_per_k_model_samples():
     """proposals=k: a learned sampler's forward runs once per k model samples of one episode and
     active tree, again for a new episode; proposals=1 runs it every time."""

@@ -8,8 +8,8 @@
     gnn-mp train sampler --task maze2d --model gnn       # learned tree sampler (train.tree)
     gnn-mp train rl --algo ppo --lib sb3 --task maze2d   # RL sampler          (train.rl)
 
-Speed probes live outside the package: ``python tools/bench_env.py``, ``tools/bench_sampler.py``,
-``tools/bench_arm.py``.
+Speed probes live outside the package: ``python -m tools.bench_env``, ``tools.bench_sampler``,
+``tools.bench_arm``, ``tools.tune_proposals``.
 
 Bad input exits with status 2 and one line on stderr (no traceback).
 """
@@ -23,6 +23,7 @@ import sys
 from typing import Callable, Sequence
 
 from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+from agents.registry import LEARNED_MODULES, missing_extra_message
 
 PROG = "gnn-mp"
 
@@ -92,16 +93,19 @@ def cmd_samplers() -> int:
     from gnn_mp_envs.baselines.ompl_runner import ompl_available
     from gnn_mp_envs.registration import TASK_SPECS
     from train.benchmark.args import OMPL_PREFIX
+    from agents.registry import SAMPLERS, missing_learned_modules
     names = available_samplers()
     about = descriptions()
+    missing = missing_learned_modules()
     width = max(len(n) for n in names + ["ompl-rrtconnect"])
     for name in names:
-        print(f"{name.ljust(width)}  {about.get(name, '')}")
+        note = " (needs the 'agents' extra)" if missing and SAMPLERS[name].learned else ""
+        print(f"{name.ljust(width)}  {about.get(name, '')}{note}")
     planner_tasks: dict[str, list[str]] = {}
     for task, spec in TASK_SPECS.items():
         for planner in spec.ompl_planners:
             planner_tasks.setdefault(planner, []).append(task)
-    status = "installed" if ompl_available() else "needs `pip install -e .[ompl]`"
+    status = "installed" if ompl_available() else "needs `pip install 'gnn-mp-envs[ompl]'`"
     for planner, tasks in planner_tasks.items():
         print(f"{(OMPL_PREFIX + planner).ljust(width)}  OMPL {planner} baseline for {', '.join(tasks)} "
               f"(isolated runner; {status})")
@@ -130,6 +134,18 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
     return 0
 
 
+#: Top-level modules of the ``agents`` extra (torch and the libraries built on it).
+EXTRA_MODULES = (*LEARNED_MODULES, "stable_baselines3", "torchrl", "tensorboard")
+
+
+def missing_extra(exc: ModuleNotFoundError, what: str) -> CLIError | None:
+    """A one-line CLIError when ``exc`` is a module of the agents extra (an environments-only install)."""
+    top = (exc.name or "").split(".")[0]
+    if top not in EXTRA_MODULES:
+        return None
+    return CLIError(missing_extra_message(what, [top]))
+
+
 def load_module_main(module: str) -> Callable[[list[str]], int | None]:
     """``module.main``, or a CLIError if the module is not part of this checkout."""
     try:
@@ -137,7 +153,7 @@ def load_module_main(module: str) -> Callable[[list[str]], int | None]:
     except ModuleNotFoundError as exc:
         if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
             raise CLIError(f"{module} is not available in this checkout") from None
-        raise CLIError(f"{module} cannot be imported: {exc}") from None
+        raise missing_extra(exc, module) or CLIError(f"{module} cannot be imported: {exc}") from None
     except ImportError as exc:
         raise CLIError(f"{module} cannot be imported: {exc}") from None
     main_fn = getattr(mod, "main", None)
@@ -152,6 +168,8 @@ def run_passthrough(module: str, argv: list[str], prog: str) -> int:
     saved_argv0, sys.argv[0] = sys.argv[0], prog
     try:
         code = main_fn(argv)
+    except ModuleNotFoundError as exc:
+        raise missing_extra(exc, prog) or exc from None
     finally:
         sys.argv[0] = saved_argv0
     return int(code or 0)

@@ -13,7 +13,8 @@ from train.args import arg, name_list, non_negative_int, positive_float, positiv
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
-OMPL_INSTALL_HINT = "OMPL is not installed; install the optional extra with `pip install -e .[ompl]`"
+OMPL_INSTALL_HINT = ("OMPL is not installed; install the optional extra with `pip install 'gnn-mp-envs[ompl]'` "
+                     "(in a checkout: `pip install -e '.[ompl]'`)")
 
 
 class BenchmarkError(Exception):
