@@ -375,3 +375,16 @@ def test_a_typo_in_an_arm_problem_dict_is_refused():
                                            "obstacles": [{"kind": "box", "sise": [0.1] * 3, "position": [0.5] * 3}]}})
     finally:
         env.close()
+
+
+def test_importing_pybullet_prints_nothing_on_stdout():
+    """pybullet's C module prints its build time on fd 1 at import; the arm world silences it, so a
+    table or JSON piped from the CLI stays clean (issue #21, item 10)."""
+    import subprocess
+    import sys
+    code = ("import sys; sys.modules.pop('pybullet', None)\n"
+            "from gnn_mp_envs.tasks.arm.world import ArmWorld\n"
+            "ArmWorld(); print('clean')\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout == "clean\n"

@@ -68,7 +68,7 @@ def test_unknown_sampler_lists_known_names():
 def test_ompl_rows_fail_early_with_an_install_hint(monkeypatch):
     from gnn_mp_envs.baselines import ompl_runner
     monkeypatch.setattr(ompl_runner, "ompl_available", lambda: False)
-    with pytest.raises(bm.BenchmarkError, match=r"pip install -e \.\[ompl\]|OMPL runner is not available"):
+    with pytest.raises(bm.BenchmarkError, match=r"pip install .gnn-mp-envs\[ompl\].|OMPL runner is not available"):
         bm.validate_args(tiny_args(samplers=["uniform", "ompl-rrtconnect"]))
 
 

@@ -142,3 +142,22 @@ def test_listing_the_samplers_imports_no_torch():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     lines = result.stdout.strip().splitlines()
     assert lines[-1] == "False" and any(line.startswith("gnn ") for line in lines)
+
+
+def test_version_and_render_without_a_mode(capsys):
+    """`gnn-mp --version` names the installed version; render() without a render mode warns as
+    Gymnasium's own envs do instead of returning None silently (issue #21, item 10)."""
+    import warnings
+
+    import gymnasium as gym
+    from importlib.metadata import version
+    from train.cli import main
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"gnn-mp {version('gnn-mp-envs')}"
+    env = gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True)
+    env.reset(seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert env.render() is None
+    assert any("render_mode='rgb_array'" in str(w.message) for w in caught)

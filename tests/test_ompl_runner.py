@@ -53,6 +53,19 @@ def test_runner_process_without_ompl_reports_unavailable(tmp_path):
         run_ompl("maze2d", [0], python=str(wrapper))
 
 
+def test_a_runner_past_its_timeout_is_killed_and_reported(tmp_path):
+    """A runner that hangs: killed with its children at the timeout (a hang bound, not a speed
+    target: the child sleeps 60 s), TimeoutExpired (the benchmark's one line)."""
+    import time
+    wrapper = tmp_path / "python_that_hangs"
+    wrapper.write_text("#!/bin/sh\nsleep 60\n")
+    wrapper.chmod(0o755)
+    started = time.monotonic()
+    with pytest.raises(subprocess.TimeoutExpired):
+        run_ompl("maze2d", [0], python=str(wrapper), timeout=1.0)
+    assert time.monotonic() - started < 30
+
+
 def test_unknown_planner_is_refused():
     with pytest.raises(ValueError, match="rrtconnect"):
         run_ompl("maze2d", [0], planner="prm")
@@ -124,8 +137,9 @@ def test_write_ompl_log_rejects_bad_names(tmp_path):
 # ---------------------------------------------------------------------- with OMPL
 @needs_ompl
 def test_rrtconnect_solves_maze2d_with_the_same_checker():
-    results = run_ompl("maze2d", "0-2", split="test", time_limit=5.0, seed=1)
-    assert [r["index"] for r in results] == [0, 1, 2]
+    reported = []     # the runner reports each problem as it finishes (the benchmark's progress bar)
+    results = run_ompl("maze2d", "0-2", split="test", time_limit=5.0, seed=1, on_problem=reported.append)
+    assert [r["index"] for r in results] == [0, 1, 2] and reported == [0, 1, 2]
     for r in results:
         assert r["solved"] and r["path_valid"]
         assert r["collision_checks"] > 0 and r["nodes"] >= 2 and r["path_length"] > 0

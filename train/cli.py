@@ -64,12 +64,22 @@ def fail(message: str, code: int = 2):
 
 
 # ---------------------------------------------------------------------------- parsers
+def package_version() -> str:
+    """The installed ``gnn-mp-envs`` version (a checkout that is not installed: ``unknown``)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("gnn-mp-envs")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     from train.benchmark.args import BenchmarkArgs
     from train.benchmark.suites import SuiteOptions
 
     parser = OneLineParser(prog=PROG, description="Sampling-based motion planning environments and "
                            "sampler benchmarks (Khan et al. 2020, 'Graph Neural Networks for Motion Planning').")
+    parser.add_argument("--version", action="version", version=f"{PROG} {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
 
     sub.add_parser("samplers", help="list the registered samplers with descriptions")

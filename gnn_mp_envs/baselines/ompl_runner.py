@@ -94,11 +94,12 @@ def parse_indices(spec: str | int | list[int] | tuple[int, ...] | range) -> list
 def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str, Any] | None = None,
              planner: str = "rrtconnect", time_limit: float = 10.0, seed: int = 0,
              timeout: float | None = None, python: str | None = None,
-             keep_paths: bool = False) -> list[dict[str, Any]]:
+             keep_paths: bool = False, on_problem: Callable[[int], None] | None = None) -> list[dict[str, Any]]:
     """Solve ``make_task(task, **task_kwargs).problem(split, i)`` for each index with OMPL,
     in a subprocess; one result dict per problem (see :func:`solve_problem`). Solution
     paths (``path``; for control planners also ``controls`` and ``durations``) are kept
-    only with ``keep_paths``.
+    only with ``keep_paths``. ``on_problem(index)`` is called as each problem finishes (a
+    progress bar: the runner reports on its standard error).
 
     Raises :class:`OMPLUnavailableError` when OMPL is not installed, ``ValueError`` for an
     unknown planner, a planner that does not fit the task (geometric vs. kinodynamic) or a
@@ -121,7 +122,7 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
             cmd += ["--task-kwargs", json.dumps(task_kwargs)]
         if keep_paths:
             cmd.append("--keep-paths")
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        proc = _run_reporting(cmd, timeout, on_problem)
         data = json.loads(out.read_text()) if out.exists() else None
         if proc.returncode == EXIT_NO_OMPL or (data or {}).get("error") == "ompl_unavailable":
             msg = (data or {}).get("message", proc.stderr.strip()[-500:])
@@ -132,6 +133,51 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
             detail = (data or {}).get("message") or proc.stderr.strip()[-2000:]
             raise RuntimeError(f"OMPL runner failed (exit code {proc.returncode}): {detail}")
         return data["results"]
+
+
+#: The line prefix of the runner's per-problem report on its standard error.
+PROGRESS_MARK = "ompl-runner: solved "
+
+
+def _run_reporting(cmd: list[str], timeout: float, on_problem: Callable[[int], None] | None
+                   ) -> subprocess.CompletedProcess:
+    """``subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)``, calling
+    ``on_problem`` for each progress line the runner writes on its standard error."""
+    import threading
+    # its own process group, so that a timeout ends the runner's children too
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    expired = threading.Event()
+
+    def kill() -> None:
+        expired.set()
+        try:
+            os.killpg(proc.pid, 9)
+        except ProcessLookupError:
+            pass
+    timer = threading.Timer(timeout, kill)
+    stdout: list[str] = []
+    drain = threading.Thread(target=lambda: stdout.append(proc.stdout.read()), daemon=True)
+    timer.start()
+    drain.start()
+    stderr = []
+    try:
+        for line in proc.stderr:
+            if line.startswith(PROGRESS_MARK):
+                if on_problem is not None:
+                    on_problem(int(line[len(PROGRESS_MARK):]))
+            else:
+                stderr.append(line)
+        proc.wait()
+        drain.join()
+    finally:
+        timer.cancel()
+        if proc.poll() is None:
+            kill()
+            expired.clear()
+            proc.wait()
+    if expired.is_set():
+        raise subprocess.TimeoutExpired(cmd, timeout)
+    return subprocess.CompletedProcess(cmd, proc.returncode, "".join(stdout), "".join(stderr))
 
 
 # ---------------------------------------------------------------------- runner side
@@ -487,6 +533,7 @@ def main(argv: list[str] | None = None) -> None:
                     for key in ("path", "controls", "durations"):
                         r.pop(key, None)
                 results.append(r)
+                print(f"{PROGRESS_MARK}{i}", file=sys.stderr, flush=True)
         finally:
             task.close()
         try:

@@ -195,6 +195,8 @@ class TreePlanningEnv(gym.Env):
 
     def render(self):
         if self.render_mode != "rgb_array":
+            gym.logger.warn("render() without a render mode returns None; make the env with "
+                            "render_mode='rgb_array' to get images")
             return None
         if self.planner is None:
             raise RuntimeError("call reset() before render()")

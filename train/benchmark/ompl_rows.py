@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 from typing import Any
+
+from tqdm import tqdm
 
 from train.benchmark.args import (
     OMPL_INSTALL_HINT,
@@ -50,8 +53,11 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
     planner = planner_row[len(OMPL_PREFIX):]
     task_kwargs = {"scene": args.scene} if args.scene is not None else None
     try:
-        results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
-                                       planner=planner, time_limit=args.ompl_time_limit, seed=args.seed)
+        with tqdm(total=len(indices), desc=f"{args.task} {planner_row}", unit="run", disable=not args.progress,
+                  file=sys.stderr) as bar:
+            results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
+                                           planner=planner, time_limit=args.ompl_time_limit, seed=args.seed,
+                                           on_problem=lambda _: bar.update(1))
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
     except subprocess.TimeoutExpired as exc:

@@ -189,8 +189,6 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
 
     for name in args.samplers:   # first: an unsupported OMPL combination fails before the long part
         if is_ompl(name):
-            if args.progress:
-                print(f"{name}: {len(indices)} problems through the OMPL runner ...", file=sys.stderr)
             runs[name] = run_ompl_rows(args, name, indices)
 
     jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings)

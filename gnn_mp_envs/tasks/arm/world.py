@@ -80,12 +80,31 @@ def tool_quaternion(axis: tuple[float, float, float], roll: float) -> np.ndarray
     return _quat_mul(align, _axis_angle(z, roll))
 
 
+def import_pybullet():
+    """``import pybullet`` without the "pybullet build time: ..." line its C module prints on
+    the process's standard output at import (file descriptor 1, so ``sys.stdout`` redirection
+    cannot catch it): it would land in the middle of tables and JSON piped from the CLI."""
+    import sys
+    if "pybullet" in sys.modules:
+        return sys.modules["pybullet"]
+    import os
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            import pybullet
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return pybullet
+
+
 class ArmWorld:
     """One pybullet client with the robot, the table and a pool of obstacle bodies."""
 
     def __init__(self) -> None:
-        import pybullet as p
-
+        p = import_pybullet()
         self.p = p
         self._joints = list(JOINTS)
         self._reset = p.resetJointStatesMultiDof
