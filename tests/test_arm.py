@@ -388,3 +388,46 @@ def test_importing_pybullet_prints_nothing_on_stdout():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout == "clean\n"
+
+
+def test_a_collision_answer_does_not_depend_on_the_queries_before_it():
+    """Configurations on the collision boundary (bisected to ~1e-7 rad) get the same answer
+    checked alone (after a far configuration) and at the end of a sweep arriving from the other
+    side, and a grazing edge with valid ends gets the same answer in both directions (issue #21,
+    item 12: pybullet's persistent contacts must not leak between queries)."""
+    from gnn_mp_envs.registration import make_task
+    task = make_task("arm", scene="test")
+    rng = np.random.default_rng(3)
+    boundary = edges = 0
+    for idx in range(2):
+        prob = task.problem("test", idx)
+        w, lo, hi = prob.world, prob.low, prob.high
+        while boundary < 20 * (idx + 1):
+            a, b = rng.uniform(lo, hi), rng.uniform(lo, hi)
+            ca = w.collides(a)
+            if ca == w.collides(b):
+                continue
+            free, hit = (b, a) if ca else (a, b)
+            for _ in range(25):
+                m = (free + hit) / 2
+                if w.collides(m):
+                    hit = m
+                else:
+                    free = m
+            for q, other in ((free, hit), (hit, free)):
+                w.collides((lo + hi) / 2)
+                alone = w.collides(q)
+                for s in np.linspace(0.0, 1.0, 5):
+                    w.collides(other + (q - other) * s)
+                assert w.collides(q) == alone
+            boundary += 1
+            for _ in range(10):                  # a short edge through the boundary region, both ends valid
+                d = rng.normal(size=6)
+                d *= 0.02 / np.linalg.norm(d)
+                p0, p1 = free - d, free + d
+                if not (w.collides(p0) or w.collides(p1)):
+                    assert prob.check_motion(p0, p1) == prob.check_motion(p1, p0)
+                    edges += 1
+                    break
+    task.close()
+    assert boundary == 40 and edges > 0

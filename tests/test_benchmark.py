@@ -178,3 +178,17 @@ def test_a_setting_overrides_the_one_stored_with_the_weights(tmp_path):
     with pytest.raises(SystemExit) as exc:
         cli.main(["benchmark", "--samplers", "uniform", "--setting", "oops", "--problems", "1"])
     assert exc.value.code == 2
+
+
+def test_every_returned_path_is_rechecked_and_failures_are_named():
+    """The benchmark re-checks each solved run's path edge by edge (problem.path_valid) and the
+    table says how many passed; a failing row is named (issue #21, item 12)."""
+    from train.benchmark.tables import path_check_note
+    report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "goal-bias"], max_nodes=3000))
+    records = [r for runs in report["runs"].values() for r in runs]
+    assert all(r["path_valid"] is (True if r["success"] else None) for r in records)
+    solved = sum(r["success"] for r in records)
+    assert solved >= 2
+    assert path_check_note(report) == f"returned paths re-checked edge by edge: {solved} of {solved} valid"
+    next(r for r in report["runs"]["goal-bias"] if r["success"])["path_valid"] = False   # a hand-made failure
+    assert path_check_note(report).endswith(f"1 of {solved} INVALID (goal-bias: 1)")

@@ -149,3 +149,17 @@ def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(name, proposal
             n = int(obs[i]["num_nodes"][0])
             assert engine.n == n
             np.testing.assert_array_equal(engine.states[:n], np.asarray(obs[i]["nodes"][:n], np.float64))
+
+
+def test_a_non_finite_loss_stops_training_in_one_line():
+    """--lr 1e6: the loss turns NaN/inf; training stops with a one-line RunError before any
+    non-finite weights are kept (issue #21, item 22)."""
+    from train.run import RunError
+    data = generate(TreeDataConfig(task="maze2d", problems=6, max_nodes=1500), progress=False)
+    adapter = adapter_for("gnn", "maze2d")
+    net, _ = adapter.build(task_scales("maze2d"))
+    items = adapter.items(net, data, "grown", np.random.default_rng(0), 16)
+    with pytest.raises(RunError, match="lower --lr") as exc:
+        fit(net, adapter, items, items, minutes=0.2, lr=1e12, batch_size=4, seed=0, writer=None, phase="t",
+            progress=False)
+    assert "\n" not in str(exc.value)

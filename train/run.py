@@ -18,6 +18,7 @@ directory; only :meth:`TrainingRun.ship` writes there, and it reads the file bac
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,16 @@ RUN_MARKERS = ("config.json",)
 
 class RunError(Exception):
     """A user-facing error about a run directory (one line)."""
+
+
+def finite_loss(loss, where: str, lr: float) -> float:
+    """``loss`` as a float, or a one-line :class:`RunError` when it is NaN or infinite (a learning
+    rate too large for the model: stop before non-finite weights are saved)."""
+    value = float(loss.detach())
+    if not math.isfinite(value):
+        raise RunError(f"the training loss became {value} at {where} (learning rate {lr:g}): lower --lr; "
+                       "nothing was saved from this phase")
+    return value
 
 
 @dataclass

@@ -39,6 +39,7 @@ def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]
         "collision_checks": as_int(result.get("collision_checks")),
         "iterations": None,
         "path_length": _finite_or_none(result.get("path_length")) if success else None,
+        "path_valid": bool(result.get("path_valid")) if success else None,   # re-checked by the runner
         "wall_time_s": _finite_or_none(result.get("time")),       # OMPL's solve() time
         "ompl": {k: v for k, v in result.items() if isinstance(v, (int, float, str, bool))},
     }

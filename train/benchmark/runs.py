@@ -73,6 +73,11 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {message}") from None
     record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters()}
+    # every returned path re-checked edge by edge with the problem's own checker (after the counters
+    # were read, so the re-check counts nowhere): a planner or checker fault shows as False
+    solution = env.planner.solution if run.success else None
+    record["path_valid"] = (bool(env.problem.path_valid(solution.states, solution.controls))
+                            if solution is not None else None)
     # where the planning loop's wall time went: inside env.step (the planner) and outside it (the sampler)
     record["planner_time_s"] = record.pop("env_time_s")
     record["sampler_time_s"] = max(run.wall_time_s - run.env_time_s, 0.0)

@@ -18,6 +18,18 @@ def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -
     return f"{_fmt(m, digits)} [{_fmt(lo, digits)}, {_fmt(hi, digits)}]"
 
 
+def path_check_note(report: dict[str, Any]) -> str:
+    """How many returned paths passed the re-check of every edge (``problem.path_valid``); the
+    rows with failures are named."""
+    checked = [r for runs in report["runs"].values() for r in runs if r.get("path_valid") is not None]
+    bad = {name: sum(r.get("path_valid") is False for r in runs) for name, runs in report["runs"].items()}
+    bad = {name: n for name, n in bad.items() if n}
+    if not bad:
+        return f"returned paths re-checked edge by edge: {len(checked)} of {len(checked)} valid"
+    return (f"returned paths re-checked edge by edge: {sum(bad.values())} of {len(checked)} INVALID ("
+            + ", ".join(f"{name}: {n}" for name, n in bad.items()) + ")")
+
+
 def format_table(report: dict[str, Any]) -> str:
     """A fixed-width table: success rate and median [q25, q75] per metric."""
     header = ["sampler", "success", "nodes expanded", "edges", "collision checks", "path length*",
@@ -45,5 +57,6 @@ def format_table(report: dict[str, Any]) -> str:
              "edges = extensions checked, blocked ones and goal connections included (so they can exceed nodes)",
              "wall time = planning loop incl. sampler inference (OMPL: solve time); it varies with machine load, "
              "the counters do not",
-             "sampler / planner = medians of the time in the sampler (inference) and in env.step (the planner)"]
+             "sampler / planner = medians of the time in the sampler (inference) and in env.step (the planner)",
+             path_check_note(report)]
     return "\n".join([title, *lines, *notes])

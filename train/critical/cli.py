@@ -79,9 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("train: the following argument is required: --model")
     torch.set_num_threads(args.threads)
     from train.critical.training import TrainError
+    from train.run import RunError
     try:
         RUN[type(args)](args)
-    except (CheckpointError, DatasetCacheError, TrainError) as exc:
+    except (CheckpointError, DatasetCacheError, TrainError, RunError) as exc:
         return _fail(prog, str(exc))
     except OSError as exc:   # unreadable / unwritable files
         return _fail(prog, f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))

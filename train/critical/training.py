@@ -44,7 +44,7 @@ from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim,
 from train.critical.data import inputs_for
 from train.critical.evaluate import validation_scores
 from train.critical.losses import loss as loss_fn
-from train.run import inside
+from train.run import finite_loss, inside
 
 
 #: Validation metric that picks the best epoch: the mean hit rate of the k = 1, 3, 10 samples
@@ -174,10 +174,11 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
                 for group in opt.param_groups:
                     group["lr"] = optim.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * frac)))
             loss = loss_fn(model, name, inputs(idx), optim, gen)
+            value = finite_loss(loss, f"{name} epoch {epoch + 1}, step {step}", optim.lr)
             opt.zero_grad()
             loss.backward()
             opt.step()
-            losses.append(loss.item())
+            losses.append(value)
             done_steps += 1
             bar.set_postfix(loss=f"{np.mean(losses[-20:]):.4f}")
             if budget_s is not None and time.perf_counter() - t_start > budget_s:

@@ -12,6 +12,7 @@ from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 def main(argv: Sequence[str] | None = None) -> int:
     from agents.checkpoints import CheckpointError
     from gnn_mp_envs.utils.npz import DatasetCacheError
+    from train.run import RunError
     from train.tree.training import TrainArgs, TrainError, train
     parser = OneLineParser(prog="gnn-mp train sampler",
                            description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
@@ -20,7 +21,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = from_namespace(TrainArgs, parser.parse_args(argv))
     try:
         summary = train(args)
-    except (TrainError, CheckpointError, DatasetCacheError) as exc:
+    except (TrainError, RunError, CheckpointError, DatasetCacheError) as exc:
         print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: summary[k] for k in ("run_dir", "checkpoint", "items", "train_seconds", "validation",

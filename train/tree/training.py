@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 
 from agents.checkpoints import load_training_state, save_checkpoint, save_training_state
 from train.args import arg, non_negative_int, positive_float, positive_int, seed_int
-from train.run import RunError, RunFlags, TrainingRun, plot_learning_curve
+from train.run import RunError, RunFlags, TrainingRun, finite_loss, plot_learning_curve
 from train.tree.adapters import MODELS, adapter_for, task_scales
 from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
 
@@ -99,11 +99,12 @@ def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, min
             for group in opt.param_groups:
                 group["lr"] = lr * 0.5 * (1 + math.cos(math.pi * min(frac, 1.0)))
             loss, _, _ = adapter.loss(model, [train_items[i] for i in order[k:k + batch_size]], gen)
+            value = finite_loss(loss, f"{phase} epoch {epoch + 1}", lr)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
             opt.step()
-            losses.append(loss.item())
+            losses.append(value)
             bar.n = min(round(time.perf_counter() - t0), round(budget))
             bar.refresh()
         val = evaluate_loss(model, adapter, val_items)
