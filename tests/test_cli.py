@@ -89,7 +89,11 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
 @pytest.mark.parametrize("args, fragments", [
     (["benchmark", "--workers", "0"], ["--workers"]),
     (["benchmark", "--max-nodes", "-1"], ["--max-nodes"]),
-    (["benchmark", "--problems", "1", "--checkpoint", "uniform=/no/such/file.pt"], ["missing checkpoint"]),
+    (["benchmark", "--problems", "1", "--checkpoint", "gnn=/no/such/file.pt", "--samplers", "gnn"],
+     ["missing checkpoint"]),
+    (["benchmark", "--problems", "1", "--checkpoint", "uniform=agents/checkpoints/gnn_maze2d.pt"], ["no weights"]),
+    (["benchmark", "--samplers", "gnn", "--checkpoint", "gnn=a.pt", "--checkpoint", "gnn=b.pt"],
+     ["--checkpoint given twice", "'gnn'"]),
     (["benchmark", "--samplers", "ompl-kpiece", "--task", "maze2d"], ["ompl-kpiece"]),
     (["benchmark", "--suite", "no-such-suite"], ["no-such-suite"]),
     (["benchmark", "--samplers", "ompl-rrt", "--ompl-time-limit", "inf"], ["--ompl-time-limit", "finite"]),
@@ -161,3 +165,14 @@ def test_version_and_render_without_a_mode(capsys):
         warnings.simplefilter("always")
         assert env.render() is None
     assert any("render_mode='rgb_array'" in str(w.message) for w in caught)
+
+
+def test_an_import_module_that_raises_is_one_line(tmp_path, monkeypatch, capsys):
+    """--import of a module whose own code fails (not an ImportError): one line naming the module
+    and the error, rc 2 (issue #21, item 22)."""
+    from train.cli import main
+    (tmp_path / "raising_plugin.py").write_text("raise RuntimeError('boom at import')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    code = main(["benchmark", "--import", "raising_plugin", "--problems", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "raising_plugin" in err[0] and "boom at import" in err[0], err

@@ -439,3 +439,22 @@ def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys
     assert code == 2
     err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
     assert len(err) == 1 and "--init-from" in err[0], err
+
+
+@pytest.mark.parametrize("kwargs, fragment", [
+    ({"view_nodes": 2.5}, "view_nodes"), ({"view_nodes": 10**8}, "view_nodes"), ({"view_nodes": 1}, "view_nodes"),
+    ({"uniform_mix": -0.1}, "uniform_mix"), ({"uniform_mix": float("nan")}, "uniform_mix"),
+    ({"reward_scale": float("nan")}, "reward_scale"), ({"reward_scale": 0.0}, "reward_scale"),
+])
+def test_make_rl_env_refuses_values_it_would_silently_bend(kwargs, fragment):
+    """2.5 rows, a NaN mixing rate or reward scale: refused, not rounded or switched off (issue #21, item 22)."""
+    from gnn_mp_envs.envs.wrappers import make_rl_env
+    with pytest.raises(ValueError, match=fragment):
+        make_rl_env("maze2d", **kwargs)
+
+
+def test_a_complex_action_is_refused():
+    env = gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="real"):
+        env.step(np.array([0.5 + 1j, 0.5]))

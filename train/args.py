@@ -116,6 +116,10 @@ def import_modules(modules: typing.Iterable[str]) -> None:
             importlib.import_module(module)
         except ImportError as exc:
             raise ValueError(f"cannot import module {module!r}: {exc}") from None
+        except Exception as exc:     # the module's own code failed: say where, in one line
+            line = str(exc).splitlines()[0] if str(exc) else ""
+            raise ValueError(f"--import {module}: the module raised {type(exc).__name__}"
+                             + (f": {line}" if line else "")) from None
 
 
 # ---------------------------------------------------------------------------- dataclass -> flags
@@ -189,10 +193,17 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, skip: ty
 def from_namespace(cls: type, ns: argparse.Namespace, **overrides: Any):
     """The dataclass ``cls`` built from parsed flags (fields absent from ``ns`` keep their default)."""
     hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    names = set(fields)
     values = {k: v for k, v in vars(ns).items() if k in names}
     for name, value in values.items():
         if typing.get_origin(_unwrap_optional(hints[name])[0]) is dict and isinstance(value, list):
+            keys = [k for k, _ in value]
+            repeated = sorted({k for k in keys if keys.count(k) > 1})
+            if repeated:     # --checkpoint gnn=A --checkpoint gnn=B: which one was meant?
+                flag = fields[name].metadata.get("flag") or f"--{name.replace('_', '-')}"
+                flag = flag if isinstance(flag, str) else flag[0]
+                raise ValueError(f"{flag} given twice for {', '.join(map(repr, repeated))}")
             values[name] = dict(value)   # repeated KEY=VALUE flags
     values.update(overrides)
     return cls(**values)

@@ -125,7 +125,10 @@ def cmd_samplers() -> int:
 def cmd_benchmark(ns: argparse.Namespace) -> int:
     from train import benchmark as bm
     from train.benchmark.suites import SuiteOptions
-    args = from_namespace(bm.BenchmarkArgs, ns)
+    try:
+        args = from_namespace(bm.BenchmarkArgs, ns)
+    except ValueError as exc:        # e.g. --checkpoint repeated for one sampler
+        return fail(f"benchmark: {exc}")
     suite = from_namespace(SuiteOptions, ns)
     try:
         if suite.suite is not None:

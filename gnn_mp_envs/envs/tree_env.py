@@ -209,6 +209,8 @@ class TreePlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
+        if np.iscomplexobj(action):
+            raise ValueError(f"action must be real (shape ({self.state_dim},)); got a complex {type(action).__name__}")
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (self.state_dim,):
             raise ValueError(f"action must have shape ({self.state_dim},) within bounds "

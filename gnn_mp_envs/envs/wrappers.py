@@ -26,6 +26,7 @@ gives it. Everything here is numpy; no torch.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping
 
 import gymnasium as gym
@@ -303,10 +304,20 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     """
     from gnn_mp_envs.registration import task_spec
 
-    env_id = task_spec(task).env_id_for(planner)
+    spec = task_spec(task)
+    env_id = spec.env_id_for(planner)
     env_kwargs.setdefault("copy_observations", view_nodes is None)
     if action_frame not in ACTION_FRAMES:
         raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
+    budget = int(env_kwargs.get("max_nodes", spec.max_nodes))
+    if view_nodes is not None and (isinstance(view_nodes, bool) or not isinstance(view_nodes, (int, np.integer))
+                                   or not 2 <= view_nodes <= budget):
+        raise ValueError(f"view_nodes must be an integer in [2, {budget}] (the tree's node budget) or None, "
+                         f"got {view_nodes!r}")
+    if not (isinstance(uniform_mix, (int, float)) and 0.0 <= uniform_mix <= 1.0):     # NaN fails too
+        raise ValueError(f"uniform_mix must be a number in [0, 1], got {uniform_mix!r}")
+    if not (isinstance(reward_scale, (int, float)) and math.isfinite(reward_scale) and reward_scale > 0):
+        raise ValueError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
     env = gym.make(env_id, split=split, disable_env_checker=True, **env_kwargs)
     if uniform_mix > 0.0:
         env = UniformMixAction(env, uniform_mix)      # state-space samples: uniform over the box

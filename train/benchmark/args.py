@@ -169,9 +169,12 @@ def validate_args(args: BenchmarkArgs) -> None:
     for name, _, _ in args.settings:
         if name not in args.samplers or is_ompl(name):
             raise BenchmarkError(f"--setting given for {name!r}, which is not one of the --samplers")
+    from agents.registry import SAMPLERS
     for name, path in args.checkpoints.items():
         if name not in args.samplers:
             raise BenchmarkError(f"--checkpoint given for {name!r}, which is not in --samplers")
+        if name in SAMPLERS and not SAMPLERS[name].learned:
+            raise BenchmarkError(f"--checkpoint given for {name!r}, which has no weights (a classical sampler)")
         if not Path(path).is_file():
             raise BenchmarkError(f"missing checkpoint for sampler {name!r}: {path} is not a file")
         if not os.access(path, os.R_OK):
