@@ -173,3 +173,33 @@ def test_a_killed_worker_is_one_line_and_the_finished_runs_are_written(tmp_path)
     finished = sum(map(len, report["runs"].values()))
     assert 0 < finished < 16
     assert all(r["problem"] != 5 for r in report["runs"]["killer"])
+
+
+@pytest.mark.parametrize("wait_for_runs", [True, False])
+def test_sigterm_keeps_the_finished_runs_and_an_older_file_when_none_finished(tmp_path, wait_for_runs):
+    """SIGTERM ends a benchmark like Ctrl-C (finished runs written, marked partial); stopped before
+    any run finished, an older complete --json is left whole (issue #21, item 22)."""
+    out = tmp_path / "runs.json"
+    out.write_text('{"complete": true}\n')
+    args = [a for a in LONG_RUN if a != "--no-progress"]
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    proc = subprocess.Popen([sys.executable, "-c", code, *args, "--json", str(out)], cwd=ROOT, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    err_chunks: list[str] = []
+    reader = threading.Thread(target=lambda: err_chunks.extend(iter(lambda: proc.stderr.read(64), "")))
+    reader.start()
+    deadline = time.time() + 120
+    pattern = r"\| *[2-9]\d*/120" if wait_for_runs else r"\| *0/120"      # runs finished / the bar just drawn
+    while not re.search(pattern, "".join(err_chunks)):
+        assert time.time() < deadline and proc.poll() is None, "".join(err_chunks)
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=30)
+    reader.join(timeout=10)
+    err = "".join(err_chunks)
+    assert proc.returncode == 130, err
+    if wait_for_runs or "wrote" in err:      # (a fast machine may finish a run before the signal lands)
+        report = json.loads(out.read_text())
+        assert report["partial"] is True and 0 < sum(map(len, report["runs"].values())) < 120
+    else:
+        assert out.read_text() == '{"complete": true}\n' and "left as it was" in err, err

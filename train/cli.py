@@ -64,6 +64,19 @@ def fail(message: str, code: int = 2):
 
 
 # ---------------------------------------------------------------------------- parsers
+def terminate_as_interrupt() -> None:
+    """SIGTERM (a scheduler's stop, ``kill``) ends a benchmark like Ctrl-C: the finished runs are
+    written (``"partial": true``) and the workers stopped, instead of dying without a word."""
+    import signal
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    try:
+        signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:       # not the main thread (an embedding application): leave it
+        pass
+
+
 def package_version() -> str:
     """The installed ``gnn-mp-envs`` version (a checkout that is not installed: ``unknown``)."""
     from importlib.metadata import PackageNotFoundError, version
@@ -129,6 +142,7 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         args = from_namespace(bm.BenchmarkArgs, ns)
     except ValueError as exc:        # e.g. --checkpoint repeated for one sampler
         return fail(f"benchmark: {exc}")
+    terminate_as_interrupt()
     suite = from_namespace(SuiteOptions, ns)
     try:
         if suite.suite is not None:

@@ -47,8 +47,11 @@ def benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[str, 
         report = run_benchmark(args, pool)
     except BenchmarkIncomplete as exc:
         if args.json is not None:
-            write_json(args.json, exc.report)
-            print(f"wrote {args.json} (partial)", file=sys.stderr)
+            if any(exc.report["runs"].values()):
+                write_json(args.json, exc.report)
+                print(f"wrote {args.json} (partial)", file=sys.stderr)
+            else:     # nothing to keep: an older complete file stays as it was
+                print(f"no run finished; {args.json} left as it was", file=sys.stderr)
         raise
     print(format_table(report))
     for kind, path in write_outputs(args, report).items():
