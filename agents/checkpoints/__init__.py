@@ -216,8 +216,7 @@ def save_training_state(path: str | Path, state: Mapping[str, Any]) -> Path:
     :func:`load_training_state`.
     """
     path = Path(path)
-    with atomic_path(path) as tmp:
-        _save_named({"format_version": FORMAT_VERSION, "training_state": dict(state)}, tmp, Path(path))
+    _write({"format_version": FORMAT_VERSION, "training_state": dict(state)}, path)
     return path
 
 
