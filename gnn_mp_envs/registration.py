@@ -75,6 +75,10 @@ class TaskSpec:
     #: Learned sampler name -> the sampling settings stored with its weights at training
     #: (chosen on split ``val``); missing names get :data:`DEFAULT_SAMPLER_SETTINGS`.
     sampler_settings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: A task whose shipped learned-sampler weights this one uses when it has none of its own
+    #: (a user's own maps in the maze2d state space: ``weights_from="maze2d"``). The state
+    #: bounds must be the same; each sampler checks the observations it is given.
+    weights_from: str | None = None
 
     @property
     def env_id(self) -> str:
@@ -159,6 +163,9 @@ def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
         raise ValueError(f"task {spec.name!r}: gnn_head must be one of {GNN_HEADS}, got {spec.gnn_head!r}")
     if spec.step_scale is not None and not spec.step_scale > 0:
         raise ValueError(f"task {spec.name!r}: step_scale must be > 0, got {spec.step_scale}")
+    if spec.weights_from is not None and spec.weights_from not in TASK_SPECS:
+        raise ValueError(f"task {spec.name!r}: weights_from names unknown task {spec.weights_from!r}; "
+                         f"known: {', '.join(sorted(TASK_SPECS))}")
     if spec.name in TASK_SPECS and not replace:
         if TASK_SPECS[spec.name] == spec:
             return spec

@@ -132,3 +132,38 @@ def test_an_outside_task_trains_and_its_sampler_benchmarks(tmp_path):
     again = subprocess.run([sys.executable, "-c", code, "train", "sampler", "--import", "tests.tiny_task", "--task",
                             "tiny", "--out", str(run)], capture_output=True, text=True, timeout=300)
     assert again.returncode == 2 and "already holds a run" in again.stderr    # a finished run is not overwritten
+
+
+def test_a_task_in_a_shipped_state_space_borrows_its_weights_with_weights_from():
+    """Your own maps in maze2d's state space (issue #21, item 21): with weights_from="maze2d" the
+    shipped learned samplers load and plan there; without it they are refused in one line naming
+    the remedy; a task with other state bounds cannot borrow them."""
+    from pathlib import Path
+
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
+    from gnn_mp_envs.registration import TaskSpec, register_task
+    from gnn_mp_envs.tasks.maze2d import Maze2DTask
+    specs = [TaskSpec("own-maze", Maze2DTask, envs={"Own/OwnMazeRRT-v0": {"planner": "rrt"}}, weights_from="maze2d"),
+             TaskSpec("own-maze-plain", Maze2DTask, envs={"Own/OwnMazePlainRRT-v0": {"planner": "rrt"}}),
+             TaskSpec("tiny-borrowing", tiny_task.TinyTask, envs={"Tiny/TinyBorrowRRT-v0": {"planner": "rrt"}},
+                      max_nodes=400, weights_from="maze2d")]
+    try:
+        for spec in specs:
+            register_task(spec, replace=True)
+        env = evaluation_env("own-maze", "test")
+        for name in ("gnn", "cvae", "gnn-cvae", "rl-ppo"):
+            row = summarize(plan_problems(load_sampler(name, task="own-maze", seed=0), env, range(2), 0))
+            assert row["success_rate"] == 1.0, name
+        shipped = Path(__file__).resolve().parents[1] / "agents" / "checkpoints" / "gnn_maze2d.pt"
+        with pytest.raises(ValueError, match="weights_from='maze2d'"):
+            load_sampler("gnn", task="own-maze-plain", checkpoint=str(shipped))
+        with pytest.raises(ValueError, match="state bounds differ"):
+            load_sampler("gnn", task="tiny-borrowing")
+        with pytest.raises(ValueError, match="unknown task 'no-such'"):
+            register_task(TaskSpec("x-task", Maze2DTask, envs={"X/X-v0": {}}, weights_from="no-such"))
+    finally:                  # other tests enumerate the registered tasks
+        for spec in specs:
+            TASK_SPECS.pop(spec.name, None)
+            for env_id in spec.envs:
+                gym.registry.pop(env_id, None)

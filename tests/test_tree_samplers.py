@@ -163,3 +163,19 @@ def test_a_non_finite_loss_stops_training_in_one_line():
         fit(net, adapter, items, items, minutes=0.2, lr=1e12, batch_size=4, seed=0, writer=None, phase="t",
             progress=False)
     assert "\n" not in str(exc.value)
+
+
+def test_the_cvae_refuses_an_observation_with_other_obstacle_rows_in_one_line():
+    """A map with more obstacle rows than the CVAE was trained on (issue #21, item 21): one line
+    naming the mismatch, not a torch shape error."""
+    import gymnasium as gym
+    from agents.registry import load_sampler
+    env = gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    sampler = load_sampler("cvae", task="maze2d", seed=0, uniform_mix=0.0)
+    sampler.act(obs)                                                     # the task's own rows: fine
+    more = {**obs, "obstacles": np.concatenate([obs["obstacles"], obs["obstacles"][:4]])}
+    sampler.reset(0)
+    with pytest.raises(ValueError, match="obstacle rows") as exc:
+        sampler.act(more)
+    assert "\n" not in str(exc.value)

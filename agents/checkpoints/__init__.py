@@ -77,10 +77,36 @@ def resolve_checkpoint(name: str, task: str | None, checkpoint: str | Path | Non
     if task is None:
         raise ValueError(f"sampler {name!r} needs task= (its shipped weights are per task) or checkpoint=PATH")
     shipped = shipped_checkpoint(name, task)
+    source = _weights_source(task)
+    if not shipped.is_file() and source is not None and shipped_checkpoint(name, source).is_file():
+        return shipped_checkpoint(name, source)        # a task that borrows another's weights
     if not shipped.is_file():
         raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({shipped.name}); "
                                 f"train them with `{train_command}` and pass checkpoint=")
     return shipped
+
+
+def _weights_source(task: str) -> str | None:
+    """``TaskSpec.weights_from`` of ``task`` (None for an unknown task)."""
+    from gnn_mp_envs.registration import TASK_SPECS
+    spec = TASK_SPECS.get(task)
+    return None if spec is None else spec.weights_from
+
+
+def check_trained_for(path: str | Path, trained_for: str | None, task: str | None) -> None:
+    """Refuse weights trained for another task, in one line; a task whose ``TaskSpec.weights_from``
+    names the weights' task takes them if both tasks have the same state bounds."""
+    if task is None or trained_for is None or trained_for == task:
+        return
+    if _weights_source(task) != trained_for:
+        raise ValueError(f"{path}: weights trained for task {trained_for!r}, not {task!r} (a task in the same "
+                         f"state space can use them with TaskSpec(weights_from={trained_for!r}))")
+    import numpy as np
+    from gnn_mp_envs.registration import task_spec
+    mine, theirs = task_spec(task).state_bounds(), task_spec(trained_for).state_bounds()
+    if mine[0].shape != theirs[0].shape or not (np.allclose(mine[0], theirs[0]) and np.allclose(mine[1], theirs[1])):
+        raise ValueError(f"{path}: task {task!r} takes weights from {trained_for!r}, but their state bounds differ "
+                         f"({mine[0].tolist()}..{mine[1].tolist()} vs {theirs[0].tolist()}..{theirs[1].tolist()})")
 
 
 def register_model_kind(kind: str, cls: Callable[..., nn.Module], *, overwrite: bool = False) -> None:

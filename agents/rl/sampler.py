@@ -34,7 +34,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from agents.checkpoints import load_checkpoint, resolve_checkpoint, save_checkpoint
+from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
 from agents.rl.policies import POLICY_KINDS, RLPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
@@ -137,8 +137,7 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
     """An :class:`RLSampler` from a policy checkpoint (``uniform_mix`` / ``proposals`` None: the file's)."""
     policy, record = load_checkpoint(path, expected_kind=kind or list(POLICY_KINDS))
     meta, spec = record["meta"], record["obs_spec"] or {}
-    if task is not None and meta.get("task") not in (None, task):
-        raise ValueError(f"{path}: weights trained for task {meta.get('task')!r}, not {task!r}")
+    check_trained_for(path, meta.get("task"), task)
     if "low" in spec and (len(spec["low"]) != len(low) or not np.allclose(spec["low"], low, atol=1e-5)
                           or not np.allclose(spec["high"], high, atol=1e-5)):
         raise ValueError(f"{path}: trained for bounds {spec['low']}..{spec['high']}, "

@@ -186,6 +186,12 @@ def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
     start = (np.asarray(obs["start"], np.float32) - center) / scale
     goal = (np.asarray(obs["goal"], np.float32) - center) / scale
     obstacles = np.asarray(obs["obstacles"], np.float32).reshape(-1)
+    width = 2 * len(start) + len(obstacles)
+    if width != model.condition_dim:
+        rows = np.shape(obs["obstacles"])
+        raise ValueError(f"this CVAE was trained on conditions of {model.condition_dim} values (start, goal and the "
+                         f"obstacle rows of its task); the observation gives {width} (obstacles {rows}): "
+                         "a map with another number or width of obstacle rows needs a CVAE trained for it")
     return torch.as_tensor(np.concatenate([start, goal, obstacles]), dtype=torch.float32)
 
 
@@ -205,7 +211,7 @@ def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | 
                       seed: int | None = None, checkpoint: str | Path | None = None, **settings) -> ModelSampler:
     """A tree sampler with its weights (``checkpoint`` or the shipped file for ``task``) and the
     sampling settings stored with them (``meta["sampler"]``), which ``settings`` override."""
-    from agents.checkpoints import load_checkpoint, resolve_checkpoint
+    from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint
     path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train sampler --task {task} --model {name}")
     model, record = load_checkpoint(path, expected_kind=NAME_KINDS[name])
     cls = KIND_SAMPLERS[record["kind"]]
@@ -214,9 +220,7 @@ def load_tree_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | 
     if unknown:
         raise ValueError(f"sampler {name!r} ({record['kind']}) takes {', '.join(cls.settings)}; "
                          f"unknown: {', '.join(unknown)}")
-    trained_for = meta.get("task")
-    if task is not None and trained_for is not None and trained_for != task:
-        raise ValueError(f"{path}: weights trained for task {trained_for!r}, not {task!r}")
+    check_trained_for(path, meta.get("task"), task)
     chosen = {k: v for k, v in dict(meta.get("sampler") or {}).items() if k in cls.settings}
     chosen.update(settings)
     return cls(low, high, seed, model=model, **chosen)
