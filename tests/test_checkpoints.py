@@ -321,3 +321,30 @@ def test_a_failed_write_is_an_os_error_naming_the_file_and_keeps_the_old_one(tmp
         assert "\n" not in f"{exc.value.strerror}: {exc.value.filename}"
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["model.pt"]      # no temporary file left
+
+
+def test_a_crafted_size_is_refused_before_the_model_is_allocated(tmp_path):
+    """A checkpoint whose constructor arguments were edited to a huge width (issue #21, item 22):
+    the weights are checked against a skeleton on the meta device, so the refusal comes before
+    the real model (gigabytes at 4096) is ever built."""
+    devices = []
+
+    class Probe(nn.Module):
+        def __init__(self, width: int = 4) -> None:
+            super().__init__()
+            devices.append(torch.empty(0).device.type)
+            self.lin = nn.Linear(width, width)
+
+    register_model_kind("test/probe", Probe, overwrite=True)
+    path = save_checkpoint(tmp_path / "p.pt", Probe(4), "test/probe", {"width": 4})
+    record = torch.load(path, weights_only=True)
+    record["ctor_args"]["width"] = 4096
+    torch.save(record, path)
+    devices.clear()
+    with pytest.raises(CheckpointError, match="shape mismatch"):
+        load_checkpoint(path)
+    assert devices == ["meta"]
+    save_checkpoint(path, Probe(4), "test/probe", {"width": 4})
+    devices.clear()
+    model, _ = load_checkpoint(path)                      # a good file: the skeleton, then the model
+    assert devices == ["meta", "cpu"] and model.lin.weight.device.type == "cpu"

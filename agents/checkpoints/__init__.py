@@ -353,6 +353,16 @@ def load_checkpoint(path: str | Path, expected_kind: str | Collection[str] | Non
     path = Path(path)
     record = read_checkpoint(path, expected_kind)
     kind = record["kind"]
+    # the stored weights checked against a skeleton on the meta device first: constructor arguments
+    # of a crafted file (hidden_channels=4096) cannot allocate gigabytes before they are refused
+    try:
+        with torch.device("meta"):
+            skeleton = _KINDS[kind](**record["ctor_args"])
+    except Exception:        # a constructor that cannot run on meta tensors: checked after building
+        skeleton = None
+    problem = _state_mismatch(skeleton, record["state_dict"]) if isinstance(skeleton, nn.Module) else None
+    if problem:
+        raise CheckpointError(f"{path}: weights do not fit {kind}: {problem}")
     try:
         model = _KINDS[kind](**record["ctor_args"])
     except (TypeError, ValueError, KeyError, RuntimeError, AssertionError) as exc:
