@@ -22,8 +22,8 @@ import os
 import sys
 from typing import Callable, Sequence
 
-from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 from agents.registry import LEARNED_MODULES, missing_extra_message
+from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 
 PROG = "gnn-mp"
 
@@ -112,11 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------------- commands
 def cmd_samplers() -> int:
-    from agents.registry import available_samplers, descriptions
+    from agents.registry import SAMPLERS, available_samplers, descriptions, missing_learned_modules
     from gnn_mp_envs.baselines.ompl_runner import ompl_available
     from gnn_mp_envs.registration import TASK_SPECS
     from train.benchmark.args import OMPL_PREFIX
-    from agents.registry import SAMPLERS, missing_learned_modules
     names = available_samplers()
     about = descriptions()
     missing = missing_learned_modules()

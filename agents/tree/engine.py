@@ -166,7 +166,7 @@ class IncrementalTreeGNN(_Engine):
             ok = near_ok[..., None]
         # (each product below is computed once and reused: the same values as before, fewer calls)
         for layer in range(self.L):
-            (wph, wpx, bp1, wp2, bp2), (wkh, wkx, bk1, wk2, bk2) = self.messages[layer]
+            (_, wpx, bp1, wp2, bp2), (_, wkx, bk1, wk2, bk2) = self.messages[layer]   # sender parts: below
             wh, wx = self.sender_weights[layer]
             xs = x @ wx
             xp, xk = xs[:, :H], xs[:, H:]

@@ -148,8 +148,6 @@ class TreeCVAESampler(ModelSampler):
             return list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        if self.proposals == 1:
-            return self.timed(self.decode, obs)[0]
         return self.refreshed(obs, self.decode).pop()
 
 
