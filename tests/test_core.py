@@ -165,6 +165,14 @@ def test_one_segment_test_equals_the_vectorised_one():
         w = maze.walls[i % len(maze.walls)]
         p[60:80], q[60:80] = w[:2], w[2:]                       # corner to corner
         p[80:100], q[80:100] = [w[0], -0.01], [w[0], 1.01]      # along a wall's face
+        # ending just short of or just inside a face, or running beside it, by 1e-12 .. 1e-8 (the bounding-box
+        # rejection's margin is 1e-9): the answers near the rounding scale must not change
+        gap = 10.0 ** rng.uniform(-12, -8, 100)
+        y = rng.uniform(w[1], w[3], 100)
+        p[100:150] = np.column_stack([w[0] - 0.03 * rng.random(50), y[:50]])
+        q[100:150] = np.column_stack([w[0] + gap[:50] * rng.choice([-1, 1], 50), y[:50] + rng.normal(0, 0.01, 50)])
+        p[150:200] = np.column_stack([w[0] - gap[50:], w[1] - 0.02 * rng.random(50)])
+        q[150:200] = np.column_stack([w[0] - gap[50:] * rng.random(50), w[3] + 0.02 * rng.random(50)])
         want = maze.segments_free(p, q)
         assert [maze.segment_free(a, b) for a, b in zip(p, q)] == want.tolist()
         assert 0 < want.sum() < len(want)
@@ -177,3 +185,6 @@ def test_maze_pair_distance_is_the_base_metric_bit_for_bit():
     a, b = rng.uniform(0, 1, (5000, 2)), rng.uniform(0, 1, (5000, 2))
     base = [float(Problem.distance(problem, x[None], y)[0]) for x, y in zip(a, b)]
     assert [problem.pair_distance(x, y) for x, y in zip(a, b)] == base
+    # rows against one state (the nearest-node scan) and one state against one
+    assert problem.distance(a, b[0]).tolist() == Problem.distance(problem, a, b[0]).tolist()
+    assert float(problem.distance(a[0], b[0])) == float(Problem.distance(problem, a[0], b[0]))
