@@ -57,6 +57,8 @@ class _Engine:
         self.n = 0
         self.problem = None
         self._problem_key = b""
+        #: Counts the clears: ``(generation, n)`` names the ingested tree (what a cached result is of).
+        self.generation = getattr(self, "generation", -1) + 1
 
     def same_tree(self, obs: Mapping[str, np.ndarray]) -> bool:
         """Is the observation's tree the cached one grown further? Rows are append-only, so the
