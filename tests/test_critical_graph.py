@@ -140,7 +140,33 @@ def _break_crc(path):
     path.write_bytes(bytes(data))
 
 
-@pytest.mark.parametrize("corrupt", [_truncate, _empty, _break_crc], ids=["truncated", "empty", "crc"])
+def _rewritten(path, **changes):
+    """A valid zip of the format whose contents do not fit (issue #21, item 22: an IndexError later)."""
+    from dataclasses import replace
+
+    from gnn_mp_envs.critical.dataset import save_problems
+    save_problems(replace(load_problems(path), **changes), path)
+
+
+def _label_outside_graph(path):
+    problems = load_problems(path)
+    _rewritten(path, label_nodes=problems.label_nodes + problems.config.graph_nodes)
+
+
+def _offsets_past_labels(path):
+    problems = load_problems(path)
+    _rewritten(path, label_ptr=problems.label_ptr * 3)
+
+
+def _another_graphs_edges(path):
+    problems = load_problems(path)
+    _rewritten(path, edge_free=problems.edge_free[:, :-7])
+
+
+@pytest.mark.parametrize("corrupt", [_truncate, _empty, _break_crc, _label_outside_graph, _offsets_past_labels,
+                                     _another_graphs_edges],
+                         ids=["truncated", "empty", "crc", "label-outside-graph", "offsets-past-labels",
+                              "another-graphs-edges"])
 def test_damaged_cache_is_regenerated_with_a_one_line_warning(tmp_path, corrupt, caplog):
     """Issue #11 item 8: no BadZipFile / EOFError / TypeError traceback; byte-identical regeneration."""
     from gnn_mp_envs.critical.dataset import DatasetCacheError, load_or_generate

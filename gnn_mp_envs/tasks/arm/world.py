@@ -81,22 +81,27 @@ def tool_quaternion(axis: tuple[float, float, float], roll: float) -> np.ndarray
 
 
 def import_pybullet():
-    """``import pybullet`` without the "pybullet build time: ..." line its C module prints on
-    the process's standard output at import (file descriptor 1, so ``sys.stdout`` redirection
-    cannot catch it): it would land in the middle of tables and JSON piped from the CLI."""
+    """``import pybullet`` without the "pybullet build time: ..." line its C module prints at
+    import, straight to a file descriptor (so ``sys.stdout`` / ``sys.stderr`` redirection cannot
+    catch it; this build writes it to stderr, others to stdout): it would land in the middle of
+    tables and JSON piped from the CLI, or under its one-line errors. Both descriptors point to
+    /dev/null for the import; an import error is raised (and printed) after they are restored."""
     import sys
     if "pybullet" in sys.modules:
         return sys.modules["pybullet"]
     import os
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
     try:
         with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 1)
+            for fd in saved:
+                os.dup2(devnull.fileno(), fd)
             import pybullet
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
     return pybullet
 
 
