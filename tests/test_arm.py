@@ -432,3 +432,50 @@ def test_a_collision_answer_does_not_depend_on_the_queries_before_it():
                     break
     task.close()
     assert boundary == 40 and edges > 0
+
+
+@pytest.fixture
+def restored_scene_families():
+    """Scene families registered by a test are gone after it (the shipped ones are asserted elsewhere)."""
+    from gnn_mp_envs.registration import TASK_SPECS
+    from gnn_mp_envs.tasks.arm.scenes import LAYOUTS
+    saved = dict(SCENE_FAMILIES), dict(LAYOUTS), TASK_SPECS["arm"]
+    yield
+    for table, copy in zip((SCENE_FAMILIES, LAYOUTS), saved[:2]):
+        table.clear()
+        table.update(copy)
+    TASK_SPECS["arm"] = saved[2]
+
+
+def test_scene_families_are_added_by_name(restored_scene_families):
+    """A family registered from outside the package (tests/arm_family.py: a shipped layout with other
+    ranges, and a layout of its own) is planned by name everywhere: the task, gym.make, the benchmark
+    (issue #21, item 21)."""
+    import importlib
+
+    import gymnasium as gym
+
+    from gnn_mp_envs.tasks.arm import register_scene_family
+    from tests import arm_family
+    from train import benchmark as bm
+    importlib.reload(arm_family)                    # registers (again: the fixture drops them after each test)
+    scene = sample_scene("narrow-crevice", np.random.default_rng(1))
+    assert 0.14 <= scene.meta["gap"] <= 0.16
+    env = gym.make("GNNMP/ArmBiRRT-v0", scene="lone-wall", split="test", disable_env_checker=True)
+    try:
+        env.reset(options={"index": 0})
+        assert env.unwrapped.task.scene == "lone-wall"
+        assert [ob.kind for ob in env.unwrapped.problem.scene.obstacles] == ["box"]
+    finally:
+        env.close()
+    report = bm.run_benchmark(bm.BenchmarkArgs(task="arm", scene="lone-wall", samplers=["uniform"], problems=2,
+                                               progress=False))
+    assert len(report["runs"]["uniform"]) == 2
+    with pytest.raises(ValueError, match="already exists"):
+        register_scene_family("lone-wall", {})
+    with pytest.raises(ValueError, match="unknown layout"):
+        register_scene_family("nowhere", {"layout": "spiral"})
+    with pytest.raises(ValueError, match="failed on a first draw"):
+        register_scene_family("broken", {"layout": "crevice"})          # no ranges for the crevice layout
+    with pytest.raises(ValueError, match="'train'"):
+        register_scene_family("train", dict(SCENE_FAMILIES["train-a"]))
