@@ -479,3 +479,20 @@ def test_scene_families_are_added_by_name(restored_scene_families):
         register_scene_family("broken", {"layout": "crevice"})          # no ranges for the crevice layout
     with pytest.raises(ValueError, match="'train'"):
         register_scene_family("train", dict(SCENE_FAMILIES["train-a"]))
+
+
+def test_a_parked_tower_does_not_reach_the_next_problem():
+    """An obstacle taller than 100 m, parked below the table between problems, reached the robot
+    in the next problem (its start was 'in collision'); parked bodies now wait their own size below
+    the table, so the next problem sees what a fresh world sees (issue #21, item 22)."""
+    import gymnasium as gym
+    start, goal = [0.0, 0.3, -0.6, 0.0, 0.3, 0.0], [1.0, 0.3, -0.6, 0.0, 0.3, 0.0]
+    tower = {"kind": "box", "size": [0.05, 0.05, 120.0], "position": [2.0, 2.0, 0.0]}
+    env = gym.make("GNNMP/ArmBiRRT-v0", disable_env_checker=True)
+    try:
+        env.reset(options={"problem": {"start": start, "goal": goal, "obstacles": [tower]}})
+        env.reset(options={"problem": {"start": start, "goal": goal, "obstacles": []}})
+        world = env.unwrapped.task.world
+        assert world.contacts(np.array(start)) == []
+    finally:
+        env.close()

@@ -39,7 +39,16 @@ CONTACT_DISTANCE = 0.0
 #: IK seeds tried per target.
 IK_TRIES = 20
 
-_PARK = (0.0, 0.0, -50.0)
+#: Unused obstacle bodies wait below the table, their top at least this far down (m).
+PARK_DEPTH = 50.0
+
+
+def park_position(size: tuple[float, ...]) -> tuple[float, float, float]:
+    """Where an unused body of ``size`` (half extents, or radius and height) waits: its top at
+    least :data:`PARK_DEPTH` below the table whatever its size (a 200 m tower parked at a fixed
+    depth still reached the robot)."""
+    return (0.0, 0.0, -PARK_DEPTH - 2.0 * max(float(v) for v in size))
+
 _POOL_LIMIT = 64
 #: pybullet never frees collision or visual shapes (there is no removeVisualShape, and
 #: removeCollisionShape refuses shapes a removed body used), and scene obstacles have random
@@ -179,7 +188,7 @@ class ArmWorld:
             raise ValueError(f"unknown obstacle kind {ob.kind!r} (box or cylinder)")
         self.bodies_created += 1
         self._bodies_in_client += 1
-        return p.createMultiBody(0, col, vis, basePosition=list(_PARK), physicsClientId=cid)
+        return p.createMultiBody(0, col, vis, basePosition=list(park_position(ob.size)), physicsClientId=cid)
 
     def load(self, scene: Scene | tuple[Obstacle, ...]) -> None:
         """Make ``scene`` (a Scene or a tuple of obstacles) the current one.
@@ -194,7 +203,7 @@ class ArmWorld:
             self._rebuild()
         p, cid = self.p, self.client
         for key, body in self._active:
-            p.resetBasePositionAndOrientation(body, _PARK, (0, 0, 0, 1), physicsClientId=cid)
+            p.resetBasePositionAndOrientation(body, park_position(key[1:]), (0, 0, 0, 1), physicsClientId=cid)
             self._pool.setdefault(key, []).append(body)
             self._pooled += 1
         self._active = []
