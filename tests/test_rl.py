@@ -411,6 +411,7 @@ def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     (["--init-from", "{dir}"], "no such file"),
     (["--init-from", "{truncated}"], "truncated.pt"),
     (["--init-from", "{crafted}"], "crafted.pt"),
+    (["--init-from", "gnm"], "shipped: cvae, gnn, gnn-cvae, rl-ppo"),
 ])
 def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment, tmp_path, capsys):
     """Values that cannot train (issue #21, item 14) end in one line and rc 2 before any env is built."""
@@ -427,6 +428,16 @@ def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
     assert not (tmp_path / "run").exists()
+
+
+def test_train_rl_init_from_takes_a_shipped_sampler_name(tmp_path, monkeypatch):
+    """`--init-from gnn` is the task's shipped gnn weights from any directory (docs/rl.md used a path
+    into the checkout, which failed elsewhere; issue #21, item 6)."""
+    from agents.checkpoints import shipped_checkpoint
+    from train.rl.cli import parse
+    monkeypatch.chdir(tmp_path)
+    args = parse(["--encoder", "tree-gnn", "--init-from", "gnn", "--task", "pendulum"])
+    assert args.init_from == shipped_checkpoint("gnn", "pendulum") and args.init_from.is_file()
 
 
 def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys):
