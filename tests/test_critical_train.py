@@ -143,3 +143,14 @@ def test_node_level_training_max_steps_and_selection(data_dir, tmp_path):
     model, _, record = load_model(res["checkpoint"], "cnn")
     assert model.readout == "heatmap" and record["meta"]["hparams"]["node_target"] == "any"
     assert record["meta"]["hparams"]["max_steps"] == 3
+
+
+def test_every_sub_command_takes_the_dataset_size_flags():
+    """generate-data's --num-maps / --pairs-per-map / --eval-problems made a cache that train and
+    evaluate did not use (they regenerated the full 4,800-problem set); the flags are now every
+    sub-command's, and the same flags name the same dataset."""
+    from train.critical.config import EvaluateArgs, GenerateArgs
+    flags = {"data_seed": TINY.seed, "num_maps": TINY.num_maps, "pairs_per_map": TINY.pairs_per_map,
+             "eval_problems": TINY.eval_problems}
+    assert GenerateArgs(**flags).dataset() == TrainArgs(model="gnn", **flags).dataset() == \
+        EvaluateArgs(**flags).dataset() == TINY
