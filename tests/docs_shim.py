@@ -23,8 +23,8 @@ import sys
 CRITICAL_DATA = ["--num-maps", "10", "--pairs-per-map", "1", "--eval-problems", "2"]
 #: Command (as its first words) -> flags appended to it. The longest matching prefix wins.
 BUDGET: dict[str, list[str]] = {
-    "gnn-mp benchmark": ["--problems", "2", "--ompl-time-limit", "2"],
-    "gnn-mp benchmark --suite": ["--suite", "smoke"],
+    "gnn-mp benchmark": ["--problems", "2", "--ompl-time-limit", "2", "--workers", "1"],
+    "gnn-mp benchmark --suite": ["--suite", "smoke", "--workers", "1"],
     "gnn-mp train sampler": ["--problems", "6", "--minutes", "0.01", "--dagger-problems", "3",
                              "--dagger-minutes", "0.01", "--eval-problems", "1"],
     "gnn-mp train rl": ["--total-steps", "32", "--n-envs", "2", "--n-steps", "16", "--batch-size", "16",

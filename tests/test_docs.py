@@ -89,7 +89,7 @@ def test_the_budget_table_of_the_docs_is_the_one_applied():
 def test_the_budget_is_appended_to_the_commands_it_names():
     from docs_shim import budget
     assert budget(["gnn-mp", "benchmark", "--task", "arm", "--problems", "20"])[:2] == ["--problems", "2"]
-    assert budget(["gnn-mp", "benchmark", "--workers", "2", "--suite", "default"]) == ["--suite", "smoke"]
+    assert budget(["gnn-mp", "benchmark", "--workers", "2", "--suite", "default"]) == ["--suite", "smoke", "--workers", "1"]
     assert budget(["gnn-mp", "critical", "train", "--model", "gnn"])[-2:] == ["--batch-size", "2"]
     assert budget(["gnn-mp", "train", "rl", "--help"]) == [] and budget(["gnn-mp", "samplers"]) == []
     assert budget(["python", "-m", "pytest", "-q"]) == ["tests/test_architecture.py"]
@@ -161,16 +161,40 @@ class DocsRunner:
         return clone
 
     def restore_shipped(self) -> None:
-        """Undo a page's ``--ship`` in the package copy the server imports."""
+        """Undo a page's ``--ship`` in the package copy the server imports (atomically per file: the
+        other page running meanwhile may be loading one)."""
         shipped = self.package / "agents" / "checkpoints"
         for path in shipped.iterdir():
             if path.is_file() and not (ROOT / "agents" / "checkpoints" / path.name).is_file():
                 path.unlink()
         for path in (ROOT / "agents" / "checkpoints").iterdir():
-            if path.is_file():
-                shutil.copy2(path, shipped / path.name)
+            if path.is_file() and path.read_bytes() != (shipped / path.name).read_bytes():
+                shutil.copy2(path, shipped / (path.name + ".restoring"))
+                os.replace(shipped / (path.name + ".restoring"), shipped / path.name)
+
+    def run_page(self, page: Path, target: Path) -> str | None:
+        """The page's bash blocks in order in a fresh clone; None, or what failed."""
+        clone = self.clone_for(page, target)
+        try:
+            for code in shell_blocks(page):
+                result = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", code], cwd=clone, env=self.env(),
+                                        capture_output=True, text=True, timeout=1200)
+                if result.returncode != 0:
+                    return (f"{page.name}: this block failed (rc {result.returncode}):\n{code}\n"
+                            f"--- stderr\n{result.stderr[-4000:]}\n--- stdout\n{result.stdout[-2000:]}")
+            return None
+        finally:
+            self.restore_shipped()
+
+    def start(self, pages: list[Path], base: Path, concurrent: int = 2) -> None:
+        """Run the pages two at a time (the commands mostly use one core each)."""
+        from concurrent.futures import ThreadPoolExecutor
+        self.pool = ThreadPoolExecutor(concurrent)
+        self.results = {page: self.pool.submit(self.run_page, page, base / page.stem) for page in pages}
 
     def close(self) -> None:
+        if hasattr(self, "pool"):
+            self.pool.shutdown(wait=True, cancel_futures=True)
         try:
             os.killpg(self.server.pid, 9)
         except ProcessLookupError:
@@ -180,21 +204,19 @@ class DocsRunner:
 
 
 @pytest.fixture(scope="module")
-def docs_runner(tmp_path_factory):
-    runner = DocsRunner(tmp_path_factory.mktemp("docs"))
+def docs_runner(tmp_path_factory, request):
+    """The server, running every selected page's commands (two pages at a time) from the start."""
+    base = tmp_path_factory.mktemp("docs")
+    runner = DocsRunner(base)
+    selected = [item.callspec.params["page"] for item in request.session.items
+                if getattr(item, "originalname", None) == "test_page_commands_run"]
+    runner.start(selected, base)
     yield runner
     runner.close()
 
 
 @pytest.mark.parametrize("page", WITH_COMMANDS, ids=lambda p: p.name)
-def test_page_commands_run(page, docs_runner, tmp_path):
+def test_page_commands_run(page, docs_runner):
     """The page's bash blocks, in order, in a fresh clone, with the budget flags appended."""
-    clone = docs_runner.clone_for(page, tmp_path / "clone")
-    try:
-        for code in shell_blocks(page):
-            result = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", code], cwd=clone, env=docs_runner.env(),
-                                    capture_output=True, text=True, timeout=1200)
-            assert result.returncode == 0, (f"{page.name}: this block failed (rc {result.returncode}):\n{code}\n"
-                                            f"--- stderr\n{result.stderr[-4000:]}\n--- stdout\n{result.stdout[-2000:]}")
-    finally:
-        docs_runner.restore_shipped()
+    failure = docs_runner.results[page].result()
+    assert failure is None, failure
