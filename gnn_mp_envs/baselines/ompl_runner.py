@@ -176,7 +176,8 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise RuntimeError(f"the OMPL runner wrote unreadable JSON ({exc})") from None
         if proc.returncode == EXIT_NO_OMPL or (isinstance(data, dict) and data.get("error") == "ompl_unavailable"):
-            msg = data.get("message", "") if isinstance(data, dict) else proc.stderr.strip()[-500:]
+            stderr = proc.stderr.strip()[-500:]
+            msg = data.get("message", stderr) if isinstance(data, dict) else stderr
             raise OMPLUnavailableError(f"cannot import ompl ({msg}). {INSTALL_HINT}")
         if isinstance(data, dict) and data.get("error") == "ValueError":
             raise ValueError(str(data.get("message")))
