@@ -106,10 +106,18 @@ def test_page_blocks_run(page, tmp_path):
 
 
 # ---------------------------------------------------------------------------- the bash blocks
+#: Not part of a fresh clone (when git cannot list the files, e.g. in an unpacked archive).
+NOT_CLONED = {".git", ".venv", "runs", "results", "data", "__pycache__", ".pytest_cache", ".hypothesis"}
+
+
 def fresh_clone(target: Path) -> Path:
     """The repository's files as ``git clone`` gives them (tracked and new, not ignored ones)."""
-    listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                            capture_output=True, check=True).stdout.decode().split("\0")
+    try:
+        listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
+                                capture_output=True, check=True).stdout.decode().split("\0")
+    except (OSError, subprocess.CalledProcessError):
+        listed = [str(p.relative_to(ROOT)) for p in ROOT.rglob("*")
+                  if not NOT_CLONED & set(p.relative_to(ROOT).parts)]
     for name in filter(None, listed):
         source = ROOT / name
         if source.is_file():
@@ -125,7 +133,8 @@ class DocsRunner:
         self.package = fresh_clone(base / "package")
         self.bin = base / "bin"
         self.bin.mkdir()
-        self.socket = base / "docs.sock"
+        import tempfile
+        self.socket = Path(tempfile.mkdtemp(prefix="gnnmp-docs-")) / "sock"   # short: AF_UNIX paths hold ~100 bytes
         shim = Path(__file__).with_name("docs_shim.py")
         for kind in ("gnn-mp", "python"):
             wrapper = self.bin / kind
@@ -201,6 +210,7 @@ class DocsRunner:
             pass
         self.server.wait()
         self.log.close()
+        shutil.rmtree(self.socket.parent, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
