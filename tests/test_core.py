@@ -213,3 +213,19 @@ def test_pendulum_steer_in_floats_is_the_vectorised_rule_bit_for_bit():
             assert np.array_equal(edge.state, problem.normalize(traj[-1, best]))
             assert edge.control.tolist() == [problem._controls[best]]
     assert 0 < blocked < 2000
+
+
+def test_pendulum_distance_and_goal_test_are_the_difference_rule_bit_for_bit():
+    from gnn_mp_envs.tasks.pendulum import PendulumProblem
+    rng = np.random.default_rng(5)
+    problem = PendulumProblem(np.zeros(2), np.array([3.0, 0.2]))
+    states = np.column_stack([rng.uniform(-np.pi, np.pi, 4000), rng.uniform(-8, 8, 4000)])
+    states[:200] = problem.goal + rng.uniform(-0.2, 0.2, (200, 2))      # around the goal box's edges
+    x = states[7]
+    want = np.sqrt(np.einsum("...i,...i->...", problem.difference(states, x) * problem._weights,
+                             problem.difference(states, x) * problem._weights))
+    assert problem.distance(states, x).tolist() == want.tolist()
+    assert float(problem.distance(states[3], x)) == float(want[3])
+    d = problem.difference(states, problem.goal)
+    inside = (np.abs(d[:, 0]) <= 0.15) & (np.abs(d[:, 1]) <= 0.5)
+    assert [problem.in_goal(s) for s in states] == inside.tolist() and 0 < inside.sum() < 200

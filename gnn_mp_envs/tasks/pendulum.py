@@ -104,6 +104,7 @@ class PendulumProblem(Problem):
         self.goal = self.normalize(self.goal)
         self._controls = np.linspace(-MAX_TORQUE, MAX_TORQUE, NUM_CONTROLS)
         self._control_list = self._controls.tolist()
+        self._goal_floats = self.goal.tolist()
         self._weights = np.array([1.0, VELOCITY_WEIGHT])
         # theta is periodic; omega's box is far larger than its range, i.e. not periodic.
         self.nn_boxsize = np.array([2 * np.pi, 1e6])
@@ -119,7 +120,12 @@ class PendulumProblem(Problem):
         return d
 
     def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
-        d = self.difference(states, x) * self._weights
+        d = np.asarray(states, dtype=np.float64) - x      # difference(states, x) * _weights, in place
+        angle = d[..., 0]
+        angle += np.pi
+        np.remainder(angle, 2 * np.pi, out=angle)
+        angle -= np.pi
+        d *= self._weights
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
     def nn_embed(self, states: np.ndarray) -> np.ndarray:
@@ -167,8 +173,9 @@ class PendulumProblem(Problem):
         return bool(arrived and self.is_state_valid(states).all())
 
     def in_goal(self, x: np.ndarray) -> bool:
-        d = self.difference(x, self.goal)
-        return bool(abs(d[0]) <= GOAL_ANGLE_TOLERANCE and abs(d[1]) <= GOAL_SPEED_TOLERANCE)
+        theta, omega = x.tolist()       # difference(x, goal) in floats
+        return (abs(_wrapped(theta - self._goal_floats[0])) <= GOAL_ANGLE_TOLERANCE
+                and abs(omega - self._goal_floats[1]) <= GOAL_SPEED_TOLERANCE)
 
 
 class PendulumTask(Task):
