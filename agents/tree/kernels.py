@@ -35,8 +35,9 @@ def linears(module: torch.nn.Module) -> list[Linear]:
 
 def mlp(layers: list[Linear], x: np.ndarray) -> np.ndarray:
     """A stack of linear layers with GELU between them (``agents.tree.models.mlp``)."""
+    dot = np.dot if x.ndim <= 2 else np.matmul      # np.dot: matmul's BLAS call, bit for bit, cheaper (1-D, 2-D)
     for i, (w, b) in enumerate(layers):
-        x = x @ w + b
+        x = dot(x, w) + b
         if i < len(layers) - 1:
             x = gelu(x)
     return x
