@@ -503,18 +503,30 @@ def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_duri
     import os
     import signal
     import threading
+    import time
 
     from helpers import report_sigint_ignored
     from train.rl.torchrl import start_workers_deaf_to_ctrl_c
     ctx = multiprocessing.get_context("spawn")
     answers, release = ctx.Queue(), threading.Event()
 
+    def ctrl_c_once_heard():     # as soon as this process listens to Ctrl-C again (a loaded machine is slow)
+        deadline = time.monotonic() + 30
+        while signal.getsignal(signal.SIGINT) is signal.SIG_IGN and time.monotonic() < deadline:
+            time.sleep(0.01)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    leftover = ctx.Process(target=time.sleep, args=(60,))       # a child of earlier work, which exits meanwhile
+    leftover.start()
+
     class SlowStartingEnv:       # a ParallelEnv's start: spawn the workers, then wait for them
         def start(self):
+            leftover.terminate()
+            leftover.join(10)
             self.workers = [ctx.Process(target=report_sigint_ignored, args=(answers,)) for _ in range(2)]
             for w in self.workers:
                 w.start()
-            threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()   # Ctrl-C meanwhile
+            threading.Thread(target=ctrl_c_once_heard, daemon=True).start()      # Ctrl-C meanwhile
             release.wait(60)     # an ignored Ctrl-C: start returns, and no KeyboardInterrupt is raised
 
     env = SlowStartingEnv()
@@ -526,7 +538,7 @@ def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_duri
         release.set()
     assert signal.getsignal(signal.SIGINT) is handler
     assert [answers.get(timeout=60), answers.get(timeout=60)] == [True, True]
-    for w in env.workers:
+    for w in [*env.workers, leftover]:
         w.join(10)
 
 

@@ -59,7 +59,7 @@ def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
     then, hanging the exit). The start runs on a helper thread: as soon as the workers exist
     (``multiprocessing.active_children``), Ctrl-C works here again, also while they import and
     build their envs (seconds)."""
-    before = len(multiprocessing.active_children())
+    before = set(multiprocessing.active_children())     # children of earlier work may exit meanwhile
     failure: list[BaseException] = []
 
     def start() -> None:
@@ -72,7 +72,7 @@ def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         starter.start()
-        while starter.is_alive() and len(multiprocessing.active_children()) < before + workers:
+        while starter.is_alive() and len(set(multiprocessing.active_children()) - before) < workers:
             time.sleep(0.005)
     finally:
         signal.signal(signal.SIGINT, previous)
