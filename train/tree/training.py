@@ -50,6 +50,8 @@ class TrainArgs(RunFlags):
                             "are refused")
     augment: bool = arg(False, "augment every training batch with the task's symmetries (TaskSpec.symmetries: "
                         "maze2d's eight rotations/reflections, the pendulum's mirror)")
+    relative_inputs: bool = arg(False, "gnn (node mixture) and gnn-cvae: read no absolute position, only the "
+                                "nodes' offsets to start and goal")
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
                     "start + path prefix)", choices=VIEWS)
     minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)
@@ -189,8 +191,10 @@ def train(args: TrainArgs) -> dict[str, Any]:
     torch.manual_seed(args.seed)
     adapter = adapter_for(args.model, args.task)
     scales = task_scales(args.task)
+    if args.relative_inputs and adapter.kind not in ("tree/gnn", "tree/gnn-cvae"):
+        raise TrainError(f"--relative-inputs applies to the node-mixture gnn and gnn-cvae, not {adapter.kind}")
     try:
-        model, ctor_args = adapter.build(scales)
+        model, ctor_args = adapter.build(scales, **({"relative_inputs": True} if args.relative_inputs else {}))
     except ValueError as exc:
         raise TrainError(f"--model {args.model} on task {args.task}: {exc}") from None
     started = time.perf_counter()
@@ -269,7 +273,8 @@ def train(args: TrainArgs) -> dict[str, Any]:
 def command_of(args: TrainArgs) -> str:
     """The command line that reproduces the run (what a shipped sidecar records)."""
     imports = "".join(f" --import {m}" for m in args.modules)
-    extra = (f" --scene {args.scene}" if args.scene is not None else "") + (" --augment" if args.augment else "")
+    extra = ((f" --scene {args.scene}" if args.scene is not None else "") + (" --augment" if args.augment else "")
+             + (" --relative-inputs" if args.relative_inputs else ""))
     return (f"gnn-mp train sampler{imports} --task {args.task}{extra} --model {args.model} --problems {args.problems} "
             f"--view {args.view} --minutes {args.minutes} --dagger-rounds {args.dagger_rounds} --dagger-problems "
             f"{args.dagger_problems} --dagger-minutes {args.dagger_minutes} --eval-problems {args.eval_problems} "
