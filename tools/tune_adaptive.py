@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         model, record = load_checkpoint(path)
         meta = dict(record["meta"])
         meta["sampler"] = {**meta.get("sampler", {}), "adaptive": json.loads(chosen)}
-        command = "python -m tools.tune_adaptive " + " ".join(sys.argv[1:] if argv is None else argv)
+        command = "python -m tools.tune_adaptive " + shlex.join(sys.argv[1:] if argv is None else argv)
         meta["adaptive_tuning"] = {"command": command, "val_problems_per_kind": args.problems, "rows": summary}
         save_checkpoint(path, model, record["kind"], record["ctor_args"], obs_spec=record["obs_spec"], meta=meta)
         sidecar = Path(path).with_suffix(".json")
