@@ -381,6 +381,22 @@ def test_bench_sampler_reports_both_measurements(capsys):
     assert exc.value.code == 2 and "unknown sampler" in capsys.readouterr().err
 
 
+def test_bench_sampler_takes_repeatable_flags_like_the_benchmark(capsys, tmp_path):
+    """--checkpoint NAME=PATH and --import MODULE repeat, as in `gnn-mp benchmark` (they were comma lists)."""
+    from agents.checkpoints import shipped_checkpoint
+    from tools.bench_sampler import Args, main
+    from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+    parser = OneLineParser()
+    add_dataclass_arguments(parser, Args)
+    gnn, cvae = shipped_checkpoint("gnn", "maze2d"), shipped_checkpoint("cvae", "maze2d")
+    args = from_namespace(Args, parser.parse_args(["--checkpoint", f"gnn={gnn}", "--checkpoint", f"cvae={cvae}",
+                                                   "--import", "tests.tiny_task", "--import", "json"]))
+    assert args.checkpoints == {"gnn": gnn, "cvae": cvae} and args.modules == ["tests.tiny_task", "json"]
+    with pytest.raises(SystemExit) as exc:
+        main(["--checkpoint", f"gnn={tmp_path / 'missing.pt'}"])
+    assert exc.value.code == 2 and "does not exist" in capsys.readouterr().err
+
+
 def test_bench_sampler_skips_a_task_whose_planner_solves_before_the_tree_size(capsys):
     """BiRRT ends when its trees connect whatever the goal test says: the arm never reaches
     1,000 nodes, and the timing says so instead of looping forever."""

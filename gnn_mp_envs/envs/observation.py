@@ -124,6 +124,14 @@ class GraphObservation:
                        "mask": self.mask, "num_nodes": self.num_nodes, "start": self.start, "goal": self.goal,
                        "active_tree": self.active_tree, "obstacles": self.obstacles}
 
+    def __getstate__(self) -> dict:
+        # the difference view is rebuilt on the copy's own arrays (a copied view would be detached)
+        return {k: v for k, v in self.__dict__.items() if k != "_differences"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._differences = self.node_features[:, :2 * self.state_dim].reshape(self.max_nodes, 2, self.state_dim)
+
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
         problem's ``obstacle_rows`` (k, w)."""
