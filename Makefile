@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test benchmark clean
+.PHONY: install test benchmark benchmark-ood clean
 
 install: $(STAMP)
 
@@ -22,6 +22,10 @@ test: install
 
 benchmark: install
 	$(BIN)/gnn-mp benchmark --suite default --out results --workers 2
+
+# The out-of-distribution suite (issue #18): every OOD scene family of every task, ratios in results/ood/ood.md.
+benchmark-ood: install
+	$(BIN)/gnn-mp benchmark --suite ood --out results/ood --workers 2 --no-render
 
 clean:
 	rm -rf $(VENV) results

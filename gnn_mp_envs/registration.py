@@ -52,6 +52,11 @@ class TaskSpec:
     scenes: tuple[str, ...] = ()
     #: Scene the benchmark plans when none is given (the held-out family).
     benchmark_scene: str | None = None
+    #: Scenes of kinds held out from training, on which training decisions are taken (split ``val``).
+    validation_scenes: tuple[str, ...] = ()
+    #: Out-of-distribution test scenes (``gnn-mp benchmark --suite ood``): never trained or tuned on;
+    #: ``gnn-mp train sampler --scene`` refuses them.
+    ood_scenes: tuple[str, ...] = ()
     #: OMPL planners the isolated runner can run on this task (rows ``ompl-<planner>``).
     ompl_planners: tuple[str, ...] = ()
     #: ``"module:function"`` building the OMPL control-space setup of a kinodynamic task
@@ -60,6 +65,9 @@ class TaskSpec:
     ompl_control_setup: str | None = None
     #: What a path length counts in (the sum of edge costs), for tables and plots.
     path_unit: str = "state-space length"
+    #: The run counter samplers are judged by on this task (the OOD suite's ratios): collision
+    #: checks where a check is the cost, nodes where an extension is (the pendulum's integration).
+    headline_metric: str = "collision_checks"
     # --- what learned samplers need (the models' scales and the shipped sampling settings)
     #: About one tree extension in state units: the unit of relative positions and offsets of
     #: the tree models (None: the problems' ``step_size``).
@@ -75,6 +83,11 @@ class TaskSpec:
     #: Learned sampler name -> the sampling settings stored with its weights at training
     #: (chosen on split ``val``); missing names get :data:`DEFAULT_SAMPLER_SETTINGS`.
     sampler_settings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Linear maps ``(d x d)`` of ``x - centre`` (the state box's middle; periodic coordinates wrapped
+    #: after) under which the task's problem distribution is invariant: training augments its
+    #: examples with them (``gnn-mp train sampler --augment``). Maze2D: the square's eight
+    #: rotations and reflections; the pendulum: ``(theta, omega) -> (-theta, -omega)``.
+    symmetries: tuple[tuple[tuple[float, ...], ...], ...] = ()
     #: A task whose shipped learned-sampler weights this one uses when it has none of its own
     #: (a user's own maps in the maze2d state space: ``weights_from="maze2d"``). The state
     #: bounds must be the same; each sampler checks the observations it is given.
@@ -166,6 +179,15 @@ def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
     if spec.weights_from is not None and spec.weights_from not in TASK_SPECS:
         raise ValueError(f"task {spec.name!r}: weights_from names unknown task {spec.weights_from!r}; "
                          f"known: {', '.join(sorted(TASK_SPECS))}")
+    unknown = sorted(set(spec.validation_scenes + spec.ood_scenes) - set(spec.scenes))
+    if unknown:
+        raise ValueError(f"task {spec.name!r}: validation/OOD scene(s) {unknown} are not among its scenes")
+    for m in spec.symmetries:
+        a = np.asarray(m, dtype=np.float64)
+        if a.ndim != 2 or a.shape[0] != a.shape[1] or not np.allclose(a @ a.T, np.eye(len(a))):
+            raise ValueError(f"task {spec.name!r}: a symmetry must be an orthogonal square matrix, got {m}")
+    if set(spec.validation_scenes) & set(spec.ood_scenes):
+        raise ValueError(f"task {spec.name!r}: a scene cannot be both a validation and an OOD scene")
     if spec.name in TASK_SPECS and not replace:
         if TASK_SPECS[spec.name] == spec:
             return spec
@@ -204,26 +226,47 @@ def make_task(name: str, **kwargs: Any):
     return task_spec(name).task_class()(**kwargs)
 
 
+#: The eight rotations and reflections of the square, as matrices of ``x - centre``.
+SQUARE_SYMMETRIES = tuple(
+    tuple(tuple(float(v) for v in row) for row in m)
+    for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
+              [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[1, 0], [0, -1]], [[0, -1], [-1, 0]]))
+
 BUILTIN_TASKS = (
     # maze2d: step_scale is the extension length (tasks/maze2d.py STEP_SIZE).
-    TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d:Maze2DTask",
+    # Scenes (tasks/maze2d_scenes.py): "walls" is every split's family; "mixed" the training
+    # domain randomisation; pockets, slits held-out validation kinds; the rest the OOD test kinds.
+    TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d_scenes:Maze2DScenesTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length",
-             step_scale=0.05),
+             step_scale=0.05,
+             scenes=("walls", "mixed", "pockets", "slits", "trap", "goal-trap", "corridor", "spiral", "forest",
+                     "rotated"),
+             validation_scenes=("pockets", "slits"),
+             ood_scenes=("trap", "goal-trap", "corridor", "spiral", "forest", "rotated"),
+             symmetries=SQUARE_SYMMETRIES),
     # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by
     # tasks/pendulum.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",
              envs={"GNNMP/PendulumRRT-v0": {"planner": "rrt"}},
              max_nodes=20000, ompl_planners=("rrt", "kpiece"),
              ompl_control_setup="gnn_mp_envs.baselines.ompl_runner:pendulum_setup",
-             path_unit="seconds of motion", step_scale=0.4, periodic=(0,), metric_weights=(1.0, 0.4),
+             path_unit="seconds of motion", headline_metric="nodes_expanded", step_scale=0.4, periodic=(0,),
+             metric_weights=(1.0, 0.4),
              gnn_head="scorer",
+             # Scenes (tasks/pendulum.py SCENE_FAMILIES): other goals, starts and torque limits.
+             scenes=("upright", "mixed", "far-goal", "lively", "side-goal", "fast-goal", "moving-start", "weak",
+                     "strong", "hang"),
+             validation_scenes=("far-goal", "lively"),
+             ood_scenes=("side-goal", "fast-goal", "moving-start", "weak", "strong", "hang"),
+             symmetries=(((1.0, 0.0), (0.0, 1.0)), ((-1.0, 0.0), (0.0, -1.0))),
              sampler_settings={"gnn": {"uniform_mix": 0.2, "goal_bias": 0.05, "candidates": 16, "temperature": 1.0}}),
     # Held-out arm problems solve in < 500 nodes; 5,000 keeps the per-step observation copy
     # small (pass max_nodes=20000 for a 20,000-node budget). step_scale: tasks/arm STEP_SIZE (rad).
     TaskSpec("arm", "gnn_mp_envs.tasks.arm:ArmTask",
              envs={"GNNMP/ArmBiRRT-v0": {"planner": "birrt"}},
-             max_nodes=5000, scenes=("train-a", "train-b", "train", "test"), benchmark_scene="test",
+             max_nodes=5000, scenes=("train-a", "train-b", "train", "test", "pillars", "tall-clutter", "shelves", "bins"),
+             benchmark_scene="test", validation_scenes=("pillars",), ood_scenes=("tall-clutter", "shelves", "bins"),
              ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4),
 )
 

@@ -136,7 +136,7 @@ def test_buffer_formula_matches_sb3_buffers():
     # the figures of docs/rl.md: SAC's 100k-transition buffer and a 2,048-step PPO rollout on maze2d
     full, view = (make_rl_env("maze2d", view_nodes=k).observation_space for k in (None, 64))
     assert sb3_buffer_bytes(full, 2, 100_000, 1, "replay") > 30 * 2**30     # ~34 GiB, full padding
-    assert sb3_buffer_bytes(view, 2, 100_000, 1, "replay") < 600 * 2**20    # a few hundred MiB, 64-row view
+    assert sb3_buffer_bytes(view, 2, 100_000, 1, "replay") < 900 * 2**20    # 850 MiB, 64-row view
     assert sb3_buffer_bytes(view, 2, 2048, 1, "rollout") < 20 * 2**20
 
 

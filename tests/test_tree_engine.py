@@ -111,6 +111,21 @@ def test_gnn_mixture_engine_equals_the_torch_model(task, min_nodes):
     check_mixture_engine(model.double(), snapshots, temperature=record["meta"]["sampler"]["temperature"])
 
 
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_gnn_engine_with_relative_inputs_equals_the_torch_model(task):
+    """The position-free variant (``relative_inputs``: offsets to start and goal only; the context's
+    start and goal as their wrapped difference), untrained weights, on a grown tree."""
+    from agents.tree.models import TreeGNN
+    spec = gnn_mp_envs.task_spec(task)
+    low, high = spec.state_bounds()
+    torch.manual_seed(0)
+    model = TreeGNN(2, 32, 2, 6, state_center=((low + high) / 2).tolist(), state_scale=((high - low) / 2).tolist(),
+                    feature_scale=[*(high - low), *(high - low), 1.0], step_scale=[spec.step_scale] * 2,
+                    periodic=spec.periodic, num_trees=1, relative_inputs=True)
+    assert model.input[0].in_features == 5
+    check_mixture_engine(model.double(), grown(task, 200))
+
+
 @pytest.mark.parametrize("task,min_nodes", [("maze2d", 200), ("pendulum", 200), ("arm", 60)])
 def test_gnn_cvae_engine_equals_the_torch_model(task, min_nodes):
     model, _ = load_checkpoint(shipped_checkpoint("gnn-cvae", task), expected_kind="tree/gnn-cvae")

@@ -165,7 +165,8 @@ def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(task, name, pr
             obs[i] = env.step(rngs[i].uniform(low, high).astype(np.float32))[0]
     assert not np.array_equal(obs[0]["nodes"][1], obs[1]["nodes"][1])
     settings = {"goal_bias": 0.0} if proposals is None else {"proposals": proposals}
-    shared = load_sampler(name, task=task, seed=0, uniform_mix=0.0, **settings)   # every act reads the tree
+    # every act reads the tree: no uniform share, fixed (an adaptive share would hand out uniform draws)
+    shared = load_sampler(name, task=task, seed=0, uniform_mix=0.0, adaptive=False, **settings)
     for step in range(12):
         for i in (0, 1):
             shared.act(obs[i])

@@ -24,7 +24,10 @@ The learned samplers derive from :class:`ModelSampler`, the one mixture of sampl
     otherwise                          -> model_sample(obs), wrapped (periodic coordinates) and clipped
 
 A uniform share never reaches zero unless asked (``uniform_mix=0``), so the planner stays
-probabilistically complete. A new learned sampler implements :meth:`ModelSampler.model_sample`.
+probabilistically complete. With ``adaptive`` set, the model's share moves per problem between a
+floor and ``1 - uniform_mix - goal_bias`` with how useful its samples turn out to be compared with
+uniform's (:mod:`agents.samplers.adaptive`: a sampler that cannot be much worse than uniform).
+A new learned sampler implements :meth:`ModelSampler.model_sample`.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+from agents.samplers.adaptive import MODEL, OTHER, UNIFORM, AdaptiveShare
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
 if TYPE_CHECKING:
@@ -177,6 +181,9 @@ class ModelSampler(Sampler):
         uniform_mix: probability of a uniform sample.
         goal_bias: probability of the active tree's target.
         periodic: ``(d,)`` bool, coordinates wrapped into ``[-pi, pi)`` before clipping.
+        adaptive: False (fixed shares), True (the model's share adapts per problem, the settings of
+            :data:`agents.samplers.adaptive.DEFAULTS`) or a dict overriding some of them
+            (:class:`~agents.samplers.adaptive.AdaptiveShare`); ``uniform_mix`` stays the least uniform share.
 
     Per call, ``act`` draws one ``rng.random()`` (the choice), then either ``rng.uniform(low,
     high)`` or whatever :meth:`model_sample` draws from ``self.rng``.
@@ -190,10 +197,11 @@ class ModelSampler(Sampler):
     """
 
     #: Sampling settings a checkpoint's ``meta["sampler"]`` may carry (the constructor's keywords).
-    settings: tuple[str, ...] = ("uniform_mix", "goal_bias")
+    settings: tuple[str, ...] = ("uniform_mix", "goal_bias", "adaptive")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, uniform_mix: float = 0.25,
-                 goal_bias: float = 0.0, periodic: np.ndarray | None = None, proposals: int = 1) -> None:
+                 goal_bias: float = 0.0, periodic: np.ndarray | None = None, proposals: int = 1,
+                 adaptive: bool | Mapping = False) -> None:
         if not (0.0 <= uniform_mix <= 1.0 and 0.0 <= goal_bias <= 1.0 and uniform_mix + goal_bias <= 1.0):
             raise ValueError(f"uniform_mix and goal_bias must be in [0, 1] with a sum <= 1, got {uniform_mix}, "
                              f"{goal_bias}")
@@ -206,11 +214,27 @@ class ModelSampler(Sampler):
             raise ValueError(f"periodic must have {self.state_dim} entries, got {self.periodic.shape}")
         self._wraps = bool(self.periodic.any())
         self._range = self.high - self.low
+        if isinstance(adaptive, (bool, np.bool_)) or adaptive is None:
+            options = {} if adaptive else None
+        elif isinstance(adaptive, Mapping):
+            options = dict(adaptive)
+        else:
+            raise ValueError(f"adaptive must be true, false or a dict of its settings, got {adaptive!r}")
+        #: The adaptive share of the model (None: fixed shares).
+        self.adaptive: AdaptiveShare | None = None
+        if options is not None:
+            try:
+                self.adaptive = AdaptiveShare(self.low, self.high, self.periodic,
+                                              1.0 - self.uniform_mix - self.goal_bias, **options)
+            except TypeError as exc:
+                raise ValueError(f"unknown adaptive setting ({exc})") from None
 
     def act(self, obs: Mapping) -> np.ndarray:
         if np.shape(obs["start"])[-1] != self.state_dim:
             self.check_observation(obs)
         u = self.rng.random()
+        if self.adaptive is not None:
+            return self._act_adaptive(obs, u)
         if u < self.uniform_mix:
             # rng.uniform(low, high)'s values (low + (high - low) * next_double), without its broadcasting cost
             return (self.low + self._range * self.rng.random(self.state_dim)).astype(np.float32)
@@ -218,8 +242,23 @@ class ModelSampler(Sampler):
             return np.asarray(active_target(obs), dtype=np.float32).copy()   # a copy: obs may be live views
         return self.finish(self.model_sample(obs))
 
+    def _act_adaptive(self, obs: Mapping, u: float) -> np.ndarray:
+        """:meth:`act` with the model's share from :class:`AdaptiveShare` (the same draws)."""
+        adaptive = self.adaptive
+        p_uniform = 1.0 - self.goal_bias - adaptive.observe(obs)
+        if u < p_uniform:
+            adaptive.chose(UNIFORM)
+            return (self.low + self._range * self.rng.random(self.state_dim)).astype(np.float32)
+        if u < p_uniform + self.goal_bias:
+            adaptive.chose(OTHER)
+            return np.asarray(active_target(obs), dtype=np.float32).copy()
+        adaptive.chose(MODEL)
+        return self.finish(self.model_sample(obs))
+
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
+        if getattr(self, "adaptive", None) is not None:
+            self.adaptive.clear()
         self._forwards: dict = {}        # refresh key -> [value, model samples left]
         self._episode: tuple | None = None
         if not hasattr(self, "forward_time_s"):

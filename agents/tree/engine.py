@@ -119,6 +119,7 @@ class IncrementalTreeGNN(_Engine):
         self.node_head = linears(m.node_head)[0]
         self.query_shift = linears(m.query_shift)[0]
         self.use_parent, self.use_knn, self.use_context = m.use_parent, m.use_knn, m.use_context
+        self.relative_inputs = m.relative_inputs
         super().__init__(m.state_dim, capacity)
 
     def _allocate(self, capacity: int) -> None:
@@ -147,7 +148,8 @@ class IncrementalTreeGNN(_Engine):
         tid = feats[:, 2 * d].astype(np.int64)
         parent = np.asarray(obs["parent"][i0:n]).astype(np.int64)
         self.states[i0:n], self.tree_id[i0:n] = x, tid
-        h = mlp(self.input, np.concatenate([feats / self.feature_scale, (x - self.center) / self.scale], -1))
+        h = mlp(self.input, feats / self.feature_scale if self.relative_inputs else
+                np.concatenate([feats / self.feature_scale, (x - self.center) / self.scale], -1))
         B = n - i0
         # causal k-NN: earlier nodes of the same tree, distances in step units, angles wrapped
         if self.k:
@@ -213,8 +215,9 @@ class IncrementalTreeGNN(_Engine):
         means = self.sums / np.maximum(self.counts, 1.0)[:, None]
         if not self.use_context:
             means = means * 0.0
-        parts = [(start - self.center) / self.scale, (goal - self.center) / self.scale, np.eye(self.trees)[active],
-                 means.reshape(-1), np.log1p(self.counts) / 5.0]
+        ends = ([wrap_periodic(goal - start, self.periodic) / self.scale] if self.relative_inputs
+                else [(start - self.center) / self.scale, (goal - self.center) / self.scale])
+        parts = [*ends, np.eye(self.trees)[active], means.reshape(-1), np.log1p(self.counts) / 5.0]
         return mlp(self.query, np.concatenate(parts))
 
     def mixture(self, q: np.ndarray, active: int, temperature: float) -> tuple[np.ndarray, np.ndarray]:

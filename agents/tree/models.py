@@ -134,17 +134,21 @@ class TreeGNN(nn.Module):
         periodic: indices of angle coordinates (wrapped to ``[-pi, pi)``).
         num_trees: 1 for RRT, 2 for BiRRT (offset heads per active tree).
         use_parent / use_knn / use_context: ablations (message sources, global tree context).
+        relative_inputs: read no absolute position: a node's inputs are the environment's features
+            (its offsets to start and goal) only, the context's start and goal their difference. The
+            model is then unchanged by moving a whole problem (issue #18: features that generalise).
     """
 
     def __init__(self, state_dim: int, hidden_channels: int = 64, num_layers: int = 2, knn: int = 6, *,
                  state_center: Sequence[float] | None = None, state_scale: Sequence[float] | None = None,
                  feature_scale: Sequence[float] | None = None, step_scale: Sequence[float] | None = None,
                  periodic: Sequence[int] = (), num_trees: int = 2, use_parent: bool = True,
-                 use_knn: bool = True, use_context: bool = True) -> None:
+                 use_knn: bool = True, use_context: bool = True, relative_inputs: bool = False) -> None:
         super().__init__()
         d = int(state_dim)
         self.state_dim, self.hidden_channels, self.num_layers, self.knn = d, int(hidden_channels), int(num_layers), int(knn)
         self.num_trees, self.use_parent, self.use_knn, self.use_context = int(num_trees), use_parent, use_knn, use_context
+        self.relative_inputs = bool(relative_inputs)
 
         self.register_buffer("state_center", fixed_vector(state_center, 0.0, d))
         self.register_buffer("state_scale", fixed_vector(state_scale, 1.0, d))
@@ -154,18 +158,20 @@ class TreeGNN(nn.Module):
         mask[list(periodic)] = True
         self.register_buffer("periodic", mask)
         H = self.hidden_channels
-        self.input = mlp(3 * d + 1, H, H)
+        self.input = mlp((2 if self.relative_inputs else 3) * d + 1, H, H)
         self.parent_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
         self.knn_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
         self.updates = nn.ModuleList(mlp(3 * H, H, H) for _ in range(num_layers))
         self.norms = nn.ModuleList(nn.LayerNorm(H) for _ in range(num_layers))
-        self.query = mlp(2 * d + num_trees + num_trees * H + num_trees, H, H)
+        self.query = mlp((1 if self.relative_inputs else 2) * d + num_trees + num_trees * H + num_trees, H, H)
         self.key = nn.Linear(H, H)
         self.node_head = nn.Linear(H, num_trees * 2 * d)     # per active tree: offset (d) + log sigma (d)
         self.query_shift = nn.Linear(H, num_trees * d)       # per active tree: shift of every component
 
     # ------------------------------------------------------------------ embeddings
     def node_inputs(self, nodes: Tensor, features: Tensor) -> Tensor:
+        if self.relative_inputs:
+            return features / self.feature_scale
         return torch.cat([features / self.feature_scale, (nodes - self.state_center) / self.state_scale], -1)
 
     def relative(self, sender: Tensor, receiver: Tensor) -> Tensor:
@@ -199,8 +205,10 @@ class TreeGNN(nn.Module):
         if not self.use_context:
             means = torch.zeros_like(means)
         scale = self.state_scale
-        parts = [(start - self.state_center) / scale, (goal - self.state_center) / scale,
-                 F.one_hot(active.long(), self.num_trees).float(), means.flatten(1), torch.log1p(counts) / 5]
+        ends = ([wrap_periodic(goal - start, self.periodic) / scale] if self.relative_inputs
+                else [(start - self.state_center) / scale, (goal - self.state_center) / scale])
+        parts = [*ends, F.one_hot(active.long(), self.num_trees).to(means.dtype), means.flatten(1),
+                 torch.log1p(counts) / 5]
         return self.query(torch.cat(parts, -1))
 
     def snapshot_context(self, h: Tensor, tree_id: Tensor, start: Tensor, goal: Tensor, sizes: Tensor,

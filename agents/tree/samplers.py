@@ -45,6 +45,8 @@ class _EngineSampler(ModelSampler):
 
     def act_stateless(self, obs: Mapping) -> np.ndarray:
         self.engine.clear()
+        if self.adaptive is not None:
+            self.adaptive.clear()
         return self.act(obs)
 
     @staticmethod
@@ -65,13 +67,13 @@ class TreeGNNSampler(_EngineSampler):
     read and the mixture computed once per ``proposals`` samples (the nodes added since are not
     candidates until the next refresh)."""
 
-    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals")
+    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals", "adaptive")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNN,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, temperature: float = 1.0,
-                 sigma_scale: float = 1.0, proposals: int = 1) -> None:
+                 sigma_scale: float = 1.0, proposals: int = 1, adaptive: bool | Mapping = False) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy(), proposals=proposals)
+                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model)
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
@@ -108,15 +110,15 @@ class TreeScorerSampler(_EngineSampler):
     :class:`TreeGNNScorer` (each candidate scored with its nearest node of the active tree under
     the planner's metric: the node the planner would extend)."""
 
-    settings = ("uniform_mix", "goal_bias", "candidates", "temperature")
+    settings = ("uniform_mix", "goal_bias", "candidates", "temperature", "adaptive")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNScorer,
                  uniform_mix: float = 0.2, goal_bias: float = 0.05, candidates: int = 16,
-                 temperature: float = 1.0) -> None:
+                 temperature: float = 1.0, adaptive: bool | Mapping = False) -> None:
         if int(candidates) < 1 or not temperature > 0:
             raise ValueError(f"candidates must be >= 1 and temperature > 0, got {candidates}, {temperature}")
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy())
+                         periodic=model.periodic.numpy(), adaptive=adaptive)
         self.model = model.eval()
         self.engine = IncrementalTreeScorer(model)
         self.candidates, self.temperature = int(candidates), float(temperature)
@@ -141,12 +143,13 @@ class TreeCVAESampler(ModelSampler):
     """Ichter et al.'s CVAE: decodes ``proposals`` states per forward pass for the problem
     (start, goal, obstacles) and spends them over the next steps; it does not read the tree."""
 
-    settings = ("uniform_mix", "goal_bias", "proposals")
+    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeCVAE,
-                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 32) -> None:
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 32,
+                 adaptive: bool | Mapping = False) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy(), proposals=proposals)
+                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive)
         self.model = model.eval()
 
     def refresh_key(self, obs: Mapping):
@@ -169,12 +172,13 @@ class TreeGNNCVAESampler(_EngineSampler):
     the decoder turns latent draws and that context into the next samples: ``proposals`` of
     them per forward, handed out one per step."""
 
-    settings = ("uniform_mix", "goal_bias", "proposals")
+    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNCVAE,
-                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 1) -> None:
+                 uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 1,
+                 adaptive: bool | Mapping = False) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.gnn.periodic.numpy(), proposals=proposals)
+                         periodic=model.gnn.periodic.numpy(), proposals=proposals, adaptive=adaptive)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model.gnn)
 

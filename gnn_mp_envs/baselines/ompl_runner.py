@@ -315,7 +315,7 @@ def pendulum_setup(problem: Any, planner: str) -> _Setup:
 
     * State space SO(2) x R (weights 1 and ``VELOCITY_WEIGHT``, as our distance), omega
       bounded by +-``MAX_SPEED``; SO(2) wraps theta to [-pi, pi) like ``wrap_angle``.
-    * Control space R^1, torque bounded by +-``MAX_TORQUE``.
+    * Control space R^1, torque bounded by +- the problem's ``max_torque``.
     * Propagation step ``EDGE_DURATION / INTEGRATION_STEPS`` (0.02 s) and control durations
       of exactly ``INTEGRATION_STEPS`` steps: every edge is one constant torque held for
       ``EDGE_DURATION`` (0.2 s), integrated with ``pendulum.rollout`` (RK4, the same 0.02 s
@@ -366,8 +366,8 @@ def pendulum_setup(problem: Any, planner: str) -> _Setup:
 
     cspace = oc.RealVectorControlSpace(space, 1)
     torque_bounds = ob.RealVectorBounds(1)
-    torque_bounds.setLow(-pend.MAX_TORQUE)
-    torque_bounds.setHigh(pend.MAX_TORQUE)
+    torque_bounds.setLow(-problem.max_torque)
+    torque_bounds.setHigh(problem.max_torque)
     cspace.setBounds(torque_bounds)
     ss = oc.SimpleSetup(cspace)
     si = ss.getSpaceInformation()

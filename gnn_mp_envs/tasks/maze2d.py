@@ -3,11 +3,13 @@
 This is the map family of the paper's critical-sample section; :mod:`gnn_mp_envs.critical`
 reuses :class:`MazeMap` and :func:`random_maze` for its Halton-graph problems.
 
-A map is data: axis-aligned wall rectangles plus optional circular blobs (the
-robustness variant). Each wall spans the square and has one or two gaps (the narrow
-passages). Start and goal lie on opposite sides of all walls, so every path threads at
-least one gap. Collision checks are exact: a point test or a segment test each counts
-as one check.
+A map is data: axis-aligned wall rectangles, optional circular blobs (the robustness
+variant) and optional oriented boxes (rectangles turned by an angle: rotated maps). Each
+wall of the generator here spans the square and has one or two gaps (the narrow passages).
+Start and goal lie on opposite sides of all walls, so every path threads at least one gap.
+Collision checks are exact: a point test or a segment test each counts as one check. Other
+map kinds (traps, corridors, spirals, forests, rotated maps) are the scene families of
+:mod:`gnn_mp_envs.tasks.maze2d_scenes`.
 """
 
 from __future__ import annotations
@@ -45,15 +47,21 @@ def _rows(name: str, value: Any, width: int) -> np.ndarray:
 
 @dataclass
 class MazeMap:
-    """Obstacles of the unit square: ``walls`` (M, 4) as ``[xmin, ymin, xmax, ymax]`` and
-    ``blobs`` (K, 3) as ``[cx, cy, r]``."""
+    """Obstacles of the unit square: ``walls`` (M, 4) as ``[xmin, ymin, xmax, ymax]``,
+    ``blobs`` (K, 3) as ``[cx, cy, r]`` and oriented ``boxes`` (B, 5) as ``[cx, cy, half_length,
+    half_width, angle]`` (the box's length axis turned ``angle`` radians from +x)."""
 
     walls: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     blobs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
 
     def __post_init__(self) -> None:
         self.walls = _rows("walls", self.walls, 4)
         self.blobs = _rows("blobs", self.blobs, 3)
+        self.boxes = _rows("boxes", self.boxes, 5)
+        bad = np.flatnonzero((self.boxes[:, 2] <= 0) | (self.boxes[:, 3] <= 0))
+        if bad.size:
+            raise InvalidProblemError(f"boxes[{bad[0]}] = {self.boxes[bad[0]].tolist()} has a half extent <= 0")
         self._wall_rows = [_wall_row(w) for w in self.walls]     # for the one-segment test
         bad = np.flatnonzero((self.walls[:, 0] > self.walls[:, 2]) | (self.walls[:, 1] > self.walls[:, 3]))
         if bad.size:
@@ -76,6 +84,9 @@ class MazeMap:
             b = self.blobs
             d2 = ((p[:, None, :] - b[None, :, :2]) ** 2).sum(-1)
             free &= ~(d2 <= b[None, :, 2] ** 2).any(axis=1)
+        if len(self.boxes):
+            u, v = _box_frame(p, self.boxes)
+            free &= ~((np.abs(u) <= self.boxes[None, :, 2]) & (np.abs(v) <= self.boxes[None, :, 3])).any(axis=1)
         return free
 
     def segments_free(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -94,19 +105,21 @@ class MazeMap:
             t = np.clip(((c - p[:, None, :]) * d[:, None, :]).sum(-1) / dd, 0.0, 1.0)
             closest = p[:, None, :] + t[..., None] * d[:, None, :]
             free &= ~(((closest - c) ** 2).sum(-1) <= self.blobs[None, :, 2] ** 2).any(axis=1)
+        if len(self.boxes):
+            free &= ~_segments_hit_oriented(p, d, self.boxes).any(axis=1)
         return free
 
     def segment_free(self, p: np.ndarray, q: np.ndarray) -> bool:
         """:meth:`segments_free` of one segment ``p -> q``, in plain floats: the same operations in
         the same order (so the same answer, bit for bit) at a tenth of the cost of numpy's
-        broadcasting for a single row. Maps with blobs take the vectorised test."""
-        if len(self.blobs):
+        broadcasting for a single row. Maps with blobs or oriented boxes take the vectorised test."""
+        if len(self.blobs) or len(self.boxes):
             return bool(self.segments_free(p[None], q[None])[0])
         return self.segment_free_xy(float(p[0]), float(p[1]), float(q[0]), float(q[1]))
 
     def segment_free_xy(self, px: float, py: float, qx: float, qy: float) -> bool:
         """:meth:`segment_free` of the segment ``(px, py) -> (qx, qy)`` given as floats."""
-        if self.blobs.size:
+        if self.blobs.size or self.boxes.size:
             return self.segment_free(np.array([px, py]), np.array([qx, qy]))
         if not (0.0 <= px <= 1.0 and 0.0 <= py <= 1.0 and 0.0 <= qx <= 1.0 and 0.0 <= qy <= 1.0):
             return False
@@ -163,6 +176,46 @@ def _wall_row(wall: np.ndarray) -> tuple[float, ...]:
     x0, y0, x1, y1 = map(float, wall)
     margin = _BOX_MARGIN * max(1.0, abs(x0), abs(y0), abs(x1), abs(y1))
     return x0, y0, x1, y1, x0 - margin, y0 - margin, x1 + margin, y1 + margin
+
+
+def _box_frame(p: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, B) coordinates of points ``p`` (N, 2) along each box's length and width axes, from its centre."""
+    c, s = np.cos(boxes[:, 4]), np.sin(boxes[:, 4])
+    dx = p[:, None, 0] - boxes[None, :, 0]
+    dy = p[:, None, 1] - boxes[None, :, 1]
+    return dx * c + dy * s, dy * c - dx * s
+
+
+def _segments_hit_oriented(p: np.ndarray, d: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """(N, B): does segment i touch oriented box j. The segment is turned into the box's frame,
+    where the box is axis-aligned, and the slab test of :func:`_segments_hit_boxes` runs there."""
+    u, v = _box_frame(p, boxes)
+    c, s = np.cos(boxes[:, 4]), np.sin(boxes[:, 4])
+    du = d[:, None, 0] * c + d[:, None, 1] * s
+    dv = d[:, None, 1] * c - d[:, None, 0] * s
+    hit = np.ones(u.shape, dtype=bool)
+    t_enter = np.full(u.shape, -np.inf)
+    t_exit = np.full(u.shape, np.inf)
+    for q, dq, half in ((u, du, boxes[None, :, 2]), (v, dv, boxes[None, :, 3])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (-half - q) / dq
+            t2 = (half - q) / dq
+        parallel = dq == 0.0
+        hit &= ~(parallel & (np.abs(q) > half))
+        t_enter = np.maximum(t_enter, np.where(parallel, -np.inf, np.minimum(t1, t2)))
+        t_exit = np.minimum(t_exit, np.where(parallel, np.inf, np.maximum(t1, t2)))
+    return hit & (t_enter <= t_exit) & (t_exit >= 0.0) & (t_enter <= 1.0)
+
+
+def box_corners(boxes: np.ndarray) -> np.ndarray:
+    """(B, 4, 2) corners of oriented boxes (counter-clockwise)."""
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 5)
+    c, s = np.cos(boxes[:, 4]), np.sin(boxes[:, 4])
+    signs = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
+    u = signs[None, :, 0] * boxes[:, None, 2]
+    v = signs[None, :, 1] * boxes[:, None, 3]
+    return np.stack([boxes[:, None, 0] + u * c[:, None] - v * s[:, None],
+                     boxes[:, None, 1] + u * s[:, None] + v * c[:, None]], axis=-1)
 
 
 def _slab(p: float, d: float, lo: float, hi: float) -> tuple[float, float]:
@@ -315,9 +368,11 @@ class Maze2DTask(Task):
     """Seeded Maze2D problems: 1-3 walls with narrow gaps, start and goal across them."""
 
     name = "maze2d"
-    #: ``[xmin, ymin, xmax, ymax, is_blob]``: walls as boxes, blobs as their bounding boxes.
-    obstacle_width = 5
-    max_obstacles = 16
+    #: ``[cx, cy, half_x, half_y, cos, sin, is_blob]``: the centre, the half extents along the
+    #: obstacle's own axes and its turn (walls: ``cos = 1, sin = 0``; blobs: ``half_x = half_y = r``).
+    obstacle_width = 7
+    #: Room for the densest scene family (forests); the observation pads to it.
+    max_obstacles = 64
 
     def __init__(self, num_walls: tuple[int, int] = (1, 3), num_blobs: int = 0,
                  step_size: float = STEP_SIZE) -> None:
@@ -332,38 +387,54 @@ class Maze2DTask(Task):
 
     def make_problem(self, spec: Any) -> Problem:
         if isinstance(spec, dict):
-            check_keys(spec, ("start", "goal", "walls", "blobs"), "a maze2d problem dict")
+            check_keys(spec, ("start", "goal", "walls", "blobs", "boxes"), "a maze2d problem dict")
             try:
-                maze = MazeMap(spec.get("walls", np.zeros((0, 4))), spec.get("blobs", np.zeros((0, 3))))
+                maze = MazeMap(spec.get("walls", np.zeros((0, 4))), spec.get("blobs", np.zeros((0, 3))),
+                               spec.get("boxes", np.zeros((0, 5))))
                 spec = Maze2DProblem(maze, spec["start"], spec["goal"], self.step_size)
             except KeyError as e:
                 raise InvalidProblemError(f"a maze2d problem dict needs 'start' and 'goal' (missing {e})") from None
         return super().make_problem(spec)
 
     def obstacle_rows(self, problem: Problem) -> np.ndarray:
-        maze = problem.maze
-        b = maze.blobs
-        rows = np.vstack([np.column_stack([maze.walls, np.zeros(len(maze.walls))]),
-                          np.column_stack([b[:, 0] - b[:, 2], b[:, 1] - b[:, 2], b[:, 0] + b[:, 2],
-                                           b[:, 1] + b[:, 2], np.ones(len(b))])])
-        if len(rows) > self.max_obstacles:
-            raise InvalidProblemError(f"a maze2d problem has at most {self.max_obstacles} walls and blobs, "
-                                      f"got {len(rows)}")
-        return rows
+        return maze_rows(problem.maze, self.max_obstacles)
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
         return render_maze2d(problem, tree, path)
 
 
+def maze_rows(maze: MazeMap, max_rows: int) -> np.ndarray:
+    """The map's obstacles as observation rows (see ``Maze2DTask.obstacle_width``): walls, blobs,
+    oriented boxes in that order; InvalidProblemError beyond ``max_rows``."""
+    w, b, o = maze.walls, maze.blobs, maze.boxes
+    n = len(w) + len(b) + len(o)
+    if n > max_rows:
+        raise InvalidProblemError(f"a maze2d problem has at most {max_rows} walls, blobs and boxes, got {n}")
+    rows = np.zeros((n, 7))
+    k = len(w)
+    rows[:k, :2] = (w[:, :2] + w[:, 2:]) / 2
+    rows[:k, 2:4] = (w[:, 2:] - w[:, :2]) / 2
+    rows[:k, 4] = 1.0
+    rows[k:k + len(b), :2] = b[:, :2]
+    rows[k:k + len(b), 2] = rows[k:k + len(b), 3] = b[:, 2]
+    rows[k:k + len(b), 4] = rows[k:k + len(b), 6] = 1.0
+    k += len(b)
+    rows[k:, :4] = o[:, :4]
+    rows[k:, 4], rows[k:, 5] = np.cos(o[:, 4]), np.sin(o[:, 4])
+    return rows
+
+
 def render_maze2d(problem: Maze2DProblem, tree: Any, path: np.ndarray | None) -> np.ndarray:
-    """Walls (grey), blobs, the tree(s), start (green), goal (red) and the path (magenta)."""
-    from matplotlib.patches import Circle, Rectangle
+    """Walls and boxes (grey), blobs, the tree(s), start (green), goal (red) and the path (magenta)."""
+    from matplotlib.patches import Circle, Polygon, Rectangle
     fig, ax = figure()
     maze = problem.maze
     for x0, y0, x1, y1 in maze.walls:
         ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.35"))
     for cx, cy, r in maze.blobs:
         ax.add_patch(Circle((cx, cy), r, color="0.5"))
+    for corners in box_corners(maze.boxes):
+        ax.add_patch(Polygon(corners, closed=True, color="0.35"))
     draw_tree(ax, tree)
     if path is not None:
         ax.plot(path[:, 0], path[:, 1], color="m", linewidth=2.0)

@@ -90,19 +90,23 @@ def _wrapped(theta: float) -> float:
 
 
 class PendulumProblem(Problem):
-    """Swing the pendulum from ``start`` to within tolerance of ``goal``."""
+    """Swing the pendulum from ``start`` to within tolerance of ``goal`` with torques of at most
+    ``max_torque`` (N m; default :data:`MAX_TORQUE`)."""
 
     task = "pendulum"
     geometric = False
     control_dim = 1
 
-    def __init__(self, start: np.ndarray, goal: np.ndarray) -> None:
+    def __init__(self, start: np.ndarray, goal: np.ndarray, max_torque: float = MAX_TORQUE) -> None:
         super().__init__(start, goal, low=np.array([-np.pi, -MAX_SPEED]),
                          high=np.array([np.pi, MAX_SPEED]), step_size=EDGE_DURATION,
                          resolution=EDGE_DURATION / INTEGRATION_STEPS)
+        if not (math.isfinite(float(max_torque)) and float(max_torque) > 0):
+            raise InvalidProblemError(f"max_torque must be a finite number > 0, got {max_torque!r}")
+        self.max_torque = float(max_torque)
         self.start = self.normalize(self.start)
         self.goal = self.normalize(self.goal)
-        self._controls = np.linspace(-MAX_TORQUE, MAX_TORQUE, NUM_CONTROLS)
+        self._controls = np.linspace(-self.max_torque, self.max_torque, NUM_CONTROLS)
         self._control_list = self._controls.tolist()
         self._goal_floats = self.goal.tolist()
         self._weights = np.array([1.0, VELOCITY_WEIGHT])
@@ -178,24 +182,67 @@ class PendulumProblem(Problem):
                 and abs(omega - self._goal_floats[1]) <= GOAL_SPEED_TOLERANCE)
 
 
+#: Scene families: parameter ranges of the problem generator (angles in rad, velocities in
+#: rad/s, torque in units of ``m g l``). ``angle_offset``: the goal angle is ``pi`` plus a draw
+#: from it, with a random sign; ``goal_angle``: the goal angle itself, with a random sign;
+#: ``start_angle`` / ``start_speed`` likewise (speed signs random). Roles as the maze2d scenes':
+#: ``upright`` is the default (every split), ``mixed`` the training domain randomisation,
+#: ``far-goal`` and ``lively`` validation kinds held out from training, the rest OOD test kinds.
+SCENE_FAMILIES: dict[str, dict[str, Any]] = {
+    "upright": {"role": "default"},
+    "mixed": {"role": "train", "angle_offset": (0.0, 0.8), "goal_speed": (0.0, 1.5), "start_angle": (0.0, 0.5),
+              "start_speed": (0.0, 1.0), "torque": (0.15, 0.3)},
+    "far-goal": {"role": "val", "angle_offset": (0.8, 1.05)},
+    "lively": {"role": "val", "start_angle": (0.5, 1.5), "start_speed": (1.0, 2.0), "torque": (0.3, 0.35)},
+    "side-goal": {"role": "ood", "goal_angle": (1.2, 2.2)},
+    "fast-goal": {"role": "ood", "goal_speed": (2.5, 4.5)},
+    "moving-start": {"role": "ood", "start_angle": (0.0, np.pi), "start_speed": (2.0, 5.0)},
+    "weak": {"role": "ood", "torque": (0.1, 0.13)},
+    "strong": {"role": "ood", "torque": (0.4, 0.6)},
+    "hang": {"role": "ood", "start_angle": (np.pi - 0.3, np.pi), "goal_angle": (0.0, 0.3), "goal_speed": (0.0, 0.5)},
+}
+
+
 class PendulumTask(Task):
     """Start hanging at rest; goal near upright with a small velocity, drawn per seed.
 
-    Goal angle ``pi + U(-0.5, 0.5)`` (wrapped), goal velocity ``U(-1, 1)`` rad/s.
+    Goal angle ``pi + U(-0.5, 0.5)`` (wrapped), goal velocity ``U(-1, 1)`` rad/s: the
+    ``upright`` scene (the default). Other scenes (:data:`SCENE_FAMILIES`) draw other goals,
+    moving starts and torque limits.
     """
 
     name = "pendulum"
     planners = ("rrt",)
 
+    def __init__(self, scene: str = "upright") -> None:
+        if scene not in SCENE_FAMILIES:
+            raise ValueError(f"unknown pendulum scene {scene!r}; known: {', '.join(SCENE_FAMILIES)}")
+        self.scene = scene
+
     def sample_problem(self, rng: np.random.Generator) -> PendulumProblem:
-        goal = np.array([np.pi + rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)])
-        return PendulumProblem(np.zeros(2), goal)
+        if self.scene == "upright":
+            goal = np.array([np.pi + rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)])
+            return PendulumProblem(np.zeros(2), goal)
+        f = SCENE_FAMILIES[self.scene]
+
+        def signed(r: tuple[float, float]) -> float:
+            return float(rng.uniform(*r)) * (1.0 if rng.random() < 0.5 else -1.0)
+
+        if "goal_angle" in f:
+            goal_angle = signed(f["goal_angle"])
+        else:
+            goal_angle = np.pi + signed(f.get("angle_offset", (0.0, 0.5)))
+        goal = np.array([goal_angle, signed(f.get("goal_speed", (0.0, 1.0)))])
+        start = np.array([signed(f.get("start_angle", (0.0, 0.0))), signed(f.get("start_speed", (0.0, 0.0)))])
+        torque = float(rng.uniform(*f.get("torque", (0.2, 0.2)))) * MASS * GRAVITY * LENGTH
+        return PendulumProblem(start, goal, torque)
 
     def make_problem(self, spec: Any) -> Problem:
         if isinstance(spec, dict):
-            check_keys(spec, ("start", "goal"), "a pendulum problem dict")
+            check_keys(spec, ("start", "goal", "max_torque"), "a pendulum problem dict")
             try:
-                spec = PendulumProblem(spec.get("start", np.zeros(2)), spec["goal"])
+                spec = PendulumProblem(spec.get("start", np.zeros(2)), spec["goal"],
+                                       spec.get("max_torque", MAX_TORQUE))
             except KeyError:
                 raise InvalidProblemError("a pendulum problem dict needs a 'goal'") from None
         return super().make_problem(spec)

@@ -43,8 +43,10 @@ def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any
     """One sampler per (name, task, checkpoint) and process; reseeded every episode. A new one runs
     once on ``env``'s first problem, so lazy imports and first-call costs stay out of the
     measured wall time (the benchmark reseeds it and resets the env before each problem)."""
+    import json
+
     from agents.registry import load_sampler
-    key = (name, task, checkpoint, settings)
+    key = (name, task, checkpoint, json.dumps(settings, sort_keys=True))   # values may be dicts (unhashable)
     if key not in _SAMPLERS:
         sampler = load_sampler(name, task=task, seed=0, checkpoint=checkpoint, **dict(settings))
         if env is not None:

@@ -1,7 +1,16 @@
-"""Named suites: several tasks benchmarked in one go (``--suite default`` is ``make benchmark``)."""
+"""Named suites: several tasks benchmarked in one go (``--suite default`` is ``make benchmark``).
+
+``--suite ood`` plans, per task, the in-distribution test problems (as ``default``) and each of
+the task's out-of-distribution scene families (``TaskSpec.ood_scenes``, 20 problems each) with
+every learned sampler and the classical ones, and writes ``ood.md``: per kind, each sampler's
+median headline figure (``TaskSpec.headline_metric``) as a ratio to uniform's, its success rate,
+the geometric mean over the OOD kinds, and the gap between in-distribution and OOD.
+``--suite ood-val`` does the same on the validation kinds (split ``val``): where decisions are taken.
+"""
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +33,8 @@ from train.benchmark.tables import format_table
 class SuiteOptions:
     """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
 
-    suite: str | None = arg(None, "run a named suite instead (default, smoke); writes "
-                            "<task>.json/.png/.txt and summary.md to --out")
+    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val); writes "
+                            "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
     out: Path = arg(Path("results"), "output directory of --suite")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
     render_images: bool = arg(True, "--suite: skip tree-growth images (else written to --render DIR, default "
@@ -42,6 +51,12 @@ class SuiteEntry:
     max_nodes: int | None = None
     scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
+    split: str = "test"
+
+    @property
+    def name(self) -> str:
+        """File stem of the entry's outputs: the task, and the scene when one is named."""
+        return self.task if self.scene is None else f"{self.task}-{self.scene}"
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores. The learned rows
 #: (``gnn``, ``cvae``, ``gnn-cvae``: Algorithm 1; ``rl-ppo``: the RL policy) use the shipped weights;
@@ -59,6 +74,31 @@ SUITES: dict[str, list[SuiteEntry]] = {
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
     ],
 }
+#: Problems per out-of-distribution (and validation) kind.
+OOD_PROBLEMS = 20
+#: Samplers of the OOD suites per task: the classical rows and every learned sampler the task ships.
+OOD_SAMPLERS = {"maze2d": ["uniform", "goal-bias", *LEARNED, "rl-ppo"],
+                "pendulum": ["uniform", "goal-bias", *LEARNED, "rl-ppo"],
+                "arm": ["uniform", "goal-bias", *LEARNED]}
+
+
+def _ood_entries(role: str) -> list[SuiteEntry]:
+    """Per task: the in-distribution problems (``role="ood"``: the default suite's test problems;
+    ``"val"``: as many of split ``val``), then every scene of the role, OOD_PROBLEMS problems each."""
+    from gnn_mp_envs.registration import task_spec
+    split = "test" if role == "ood" else "val"
+    entries = []
+    for default in SUITES["default"]:
+        spec = task_spec(default.task)
+        samplers = OOD_SAMPLERS[default.task]
+        entries.append(SuiteEntry(default.task, samplers, problems=default.problems, split=split))
+        scenes = spec.ood_scenes if role == "ood" else spec.validation_scenes
+        entries += [SuiteEntry(default.task, samplers, problems=OOD_PROBLEMS, scene=s, split=split) for s in scenes]
+    return entries
+
+
+SUITES["ood"] = _ood_entries("ood")
+SUITES["ood-val"] = _ood_entries("val")
 
 
 def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: bool = True,
@@ -86,8 +126,8 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
         if with_ompl:
             samplers += [OMPL_PREFIX + p for p in entry.ompl]
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
-                             max_nodes=entry.max_nodes, scene=entry.scene, workers=workers,
-                             json=out / f"{entry.task}.json", plot=out / f"{entry.task}.png",
+                             max_nodes=entry.max_nodes, scene=entry.scene, workers=workers, split=entry.split,
+                             json=out / f"{entry.name}.json", plot=out / f"{entry.name}.png",
                              render=render,
                              ompl_log=out / "ompl" if with_ompl else None,
                              progress=progress)
@@ -95,14 +135,76 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
         report = benchmark(args, pool)
         elapsed = time.perf_counter() - task_start
         table = format_table(report)
-        atomic_write_text(out / f"{entry.task}.txt", table + "\n")
+        atomic_write_text(out / f"{entry.name}.txt", table + "\n")
         tables.append(f"{table}\n({elapsed:.0f} s)")
-        reports[entry.task] = report
-        print(f"({entry.task}: {elapsed:.0f} s)\n")
+        reports[entry.name] = report
+        print(f"({entry.name}: {elapsed:.0f} s)\n")
     total = time.perf_counter() - suite_start
     command = f"gnn-mp benchmark --suite {name} --out {out} --seed {seed} --workers {workers}"
     summary = [f"# Benchmark suite `{name}`", "", f"Command: `{command}`  ",
                f"Total wall time: {total:.0f} s", "", "```", "\n\n".join(tables), "```", ""]
+    if name in ("ood", "ood-val"):
+        ratios = ood_markdown(reports, command)
+        atomic_write_text(out / "ood.md", ratios)
+        summary[5:5] = [ratios, ""]
+        print(ratios)
     atomic_write_text(out / "summary.md", "\n".join(summary))
     print(f"suite {name!r}: {total:.0f} s; results in {out}/ (summary.md, <task>.json/.png/.txt)")
     return reports
+
+
+# ---------------------------------------------------------------------------- the OOD summary
+def ratio_rows(reports: dict[str, dict[str, Any]], task: str) -> dict[str, Any]:
+    """One task's kinds of a suite run: ``{"metric", "kinds": [(kind, report)], "in": report}``
+    (the in-distribution entry is the one without a scene)."""
+    from gnn_mp_envs.registration import task_spec
+    kinds = [(r["scene"] or "in-distribution", r) for r in reports.values() if r["task"] == task]
+    default = next((r for k, r in kinds if r.get("scene") in (None, task_spec(task).benchmark_scene)), None)
+    return {"metric": task_spec(task).headline_metric, "in": default,
+            "kinds": [(k, r) for k, r in kinds if r is not default]}
+
+
+def ratio(report: dict[str, Any], sampler: str, metric: str) -> float | None:
+    """``sampler``'s median ``metric`` over uniform's in one report (None without both)."""
+    res = report["results"]
+    if sampler not in res or "uniform" not in res:
+        return None
+    a, b = res[sampler][metric]["median"], res["uniform"][metric]["median"]
+    return None if a is None or not b else a / b
+
+
+def geometric_mean(values: list[float | None]) -> float | None:
+    vals = [v for v in values if v is not None and v > 0]
+    return math.exp(sum(math.log(v) for v in vals) / len(vals)) if vals and len(vals) == len(values) else None
+
+
+def ood_markdown(reports: dict[str, dict[str, Any]], command: str) -> str:
+    """Per task: sampler rows, a column per kind with ``ratio (success)`` to uniform, the geometric
+    mean over the kinds and its gap to the in-distribution ratio."""
+    out = [f"Command: `{command}`", ""]
+    for task in dict.fromkeys(r["task"] for r in reports.values()):
+        rows = ratio_rows(reports, task)
+        metric, kinds, default = rows["metric"], rows["kinds"], rows["in"]
+        what = metric.replace("_", " ")
+        samplers = list(next(iter(kinds))[1]["results"]) if kinds else []
+        head = ["sampler", "in-distribution"] + [k for k, _ in kinds] + ["geo. mean", "gap"]
+        out += [f"**{task}**: median {what} / uniform's median (success rate); in-distribution: "
+                f"{default['problems'] if default else 0} {default['split'] if default else ''} problems, "
+                f"each kind {kinds[0][1]['problems'] if kinds else 0}; gap = geo. mean / in-distribution", "",
+                "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for s in samplers:
+            cells = [s]
+            r_in = ratio(default, s, metric) if default else None
+            cells.append("-" if r_in is None else f"{r_in:.2f} ({100 * default['results'][s]['success_rate']:.0f}%)")
+            vals = []
+            for _, rep in kinds:
+                r = ratio(rep, s, metric)
+                vals.append(r)
+                succ = rep["results"].get(s, {}).get("success_rate")
+                cells.append("-" if r is None else f"{r:.2f} ({100 * succ:.0f}%)")
+            g = geometric_mean(vals)
+            cells.append("-" if g is None else f"{g:.2f}")
+            cells.append("-" if g is None or not r_in else f"{g / r_in:.2f}x")
+            out.append("| " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)

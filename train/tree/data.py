@@ -35,8 +35,9 @@ from gnn_mp_envs.utils.npz import DatasetCacheError, read_npz, write_npz
 
 log = logging.getLogger(__name__)
 
-#: Bump when the stored arrays change meaning; loaders refuse other versions.
-FORMAT_VERSION = 1
+#: Bump when the stored arrays change meaning; loaders refuse other versions (2: maze2d obstacle rows
+#: became [cx, cy, half_x, half_y, cos, sin, is_blob], 64 of them).
+FORMAT_VERSION = 2
 VIEWS = ("prefix", "grown")
 
 

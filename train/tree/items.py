@@ -9,7 +9,8 @@ as classification queries.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Sequence
 
 import numpy as np
 import torch
@@ -127,3 +128,48 @@ def make_scorer_run(data: TreeDataset, p: int, model, negatives: int, rng: np.ra
                      goal=torch.as_tensor(data.goal[p]), near=torch.as_tensor(near),
                      sizes=torch.as_tensor(sizes[q]), samples=samples,
                      labels=torch.as_tensor(label[q].astype(np.float32)))
+
+
+# ---------------------------------------------------------------------------- symmetry augmentation
+@dataclass(frozen=True)
+class Symmetry:
+    """A linear map of ``x - centre`` (periodic coordinates wrapped after) under which a task's
+    problems are equally likely (``TaskSpec.symmetries``): a training example mapped by it is
+    another valid example. Distances are preserved, so causal k-NN edges and labels' roles stay."""
+
+    matrix: torch.Tensor      # (d, d), orthogonal
+    centre: torch.Tensor      # (d,)
+    periodic: torch.Tensor    # (d,) bool
+
+    def _wrap(self, x: torch.Tensor) -> torch.Tensor:
+        return wrap_periodic(x, self.periodic) if bool(self.periodic.any()) else x
+
+    def states(self, x: torch.Tensor) -> torch.Tensor:
+        return self._wrap((x - self.centre) @ self.matrix.T + self.centre)
+
+    def deltas(self, v: torch.Tensor) -> torch.Tensor:
+        return self._wrap(v @ self.matrix.T)
+
+    def features(self, f: torch.Tensor) -> torch.Tensor:
+        """The environment's node features ``[x_init - x_n, x_goal - x_n, tree_id]``."""
+        d = self.matrix.shape[0]
+        return torch.cat([self.deltas(f[:, :d]), self.deltas(f[:, d:2 * d]), f[:, 2 * d:]], -1)
+
+
+def symmetries_of(matrices: Sequence, low: np.ndarray, high: np.ndarray, periodic: torch.Tensor) -> list[Symmetry]:
+    """The task's symmetry matrices as :class:`Symmetry` maps about the state box's centre."""
+    centre = torch.as_tensor((np.asarray(low, np.float64) + np.asarray(high, np.float64)) / 2, dtype=torch.float32)
+    return [Symmetry(torch.as_tensor(np.asarray(m, np.float64), dtype=torch.float32), centre, periodic.bool())
+            for m in matrices]
+
+
+def transformed(item: Run | ScorerRun, sym: Symmetry) -> Run | ScorerRun:
+    """A training item mapped by ``sym`` (a new item; the original is untouched)."""
+    if isinstance(item, Run):
+        return replace(item, nodes=sym.states(item.nodes), features=sym.features(item.features),
+                       start=sym.states(item.start), goal=sym.states(item.goal), labels=sym.states(item.labels))
+    if isinstance(item, ScorerRun):
+        return replace(item, nodes=sym.states(item.nodes), features=sym.features(item.features),
+                       goal=sym.states(item.goal), samples=sym.states(item.samples))
+    return item
+

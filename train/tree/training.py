@@ -35,6 +35,7 @@ from train.args import arg, non_negative_int, positive_float, positive_int, seed
 from train.run import RunError, RunFlags, TrainingRun, finite_loss, plot_learning_curve
 from train.tree.adapters import MODELS, adapter_for, task_scales
 from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
+from train.tree.items import Symmetry, symmetries_of, transformed
 
 
 @dataclass
@@ -44,6 +45,13 @@ class TrainArgs(RunFlags):
     task: str = arg("pendulum", "task (any registered task; --import adds your own)")
     model: str = arg("gnn", "model", choices=MODELS)
     problems: int = arg(400, "training problems solved by the uniform sampler (split train)", parse=positive_int)
+    scene: str | None = arg(None, "scene family of the training problems (default: the task's training family; "
+                            "maze2d / pendulum: 'mixed' is the domain randomisation over kinds); OOD scenes "
+                            "are refused")
+    augment: bool = arg(False, "augment every training batch with the task's symmetries (TaskSpec.symmetries: "
+                        "maze2d's eight rotations/reflections, the pendulum's mirror)")
+    relative_inputs: bool = arg(False, "gnn (node mixture) and gnn-cvae: read no absolute position, only the "
+                                "nodes' offsets to start and goal")
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
                     "start + path prefix)", choices=VIEWS)
     minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)
@@ -72,10 +80,12 @@ class TrainError(Exception):
 def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, minutes: float, lr: float,
         batch_size: int, seed: int, writer, phase: str, progress: bool,
         resume: dict | None = None, resume_path: Path | None = None,
-        resume_config: dict[str, Any] | None = None) -> dict[str, Any]:
+        resume_config: dict[str, Any] | None = None, augment: list[Symmetry] | None = None) -> dict[str, Any]:
     """Adam on ``train_items`` for ``minutes``; returns the history and leaves the best
     validation epoch's weights in ``model``. ``resume_path``: the state after every epoch, with
-    ``resume_config`` (what a resumed run must match, :func:`check_resume`)."""
+    ``resume_config`` (what a resumed run must match, :func:`check_resume`). ``augment``: each
+    training item of a batch is mapped by one of these symmetries, drawn per item (validation
+    items never are)."""
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     history: list[dict[str, float]] = []
     best = (math.inf, None)
@@ -92,6 +102,7 @@ def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, min
     t0 = time.perf_counter() - elapsed
     while time.perf_counter() - t0 < budget:
         order = np.random.default_rng([seed, epoch]).permutation(len(train_items))
+        pick = np.random.default_rng([seed, epoch, 1])
         model.train()
         losses = []
         for k in range(0, len(order), batch_size):
@@ -100,7 +111,10 @@ def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, min
                 break
             for group in opt.param_groups:
                 group["lr"] = lr * 0.5 * (1 + math.cos(math.pi * min(frac, 1.0)))
-            loss, _, _ = adapter.loss(model, [train_items[i] for i in order[k:k + batch_size]], gen)
+            batch = [train_items[i] for i in order[k:k + batch_size]]
+            if augment:
+                batch = [transformed(item, augment[int(pick.integers(len(augment)))]) for item in batch]
+            loss, _, _ = adapter.loss(model, batch, gen)
             value = finite_loss(loss, f"{phase} epoch {epoch + 1}", lr)
             opt.zero_grad()
             loss.backward()
@@ -151,7 +165,8 @@ def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDatas
 
 #: The flags a resumed first phase must share with the run that wrote the resume state (with the
 #: model's kind and constructor arguments): its data, model, schedule and random streams.
-RESUME_KEYS = ("task", "model", "problems", "view", "minutes", "batch_size", "lr", "max_snapshots", "seed")
+RESUME_KEYS = ("task", "model", "problems", "scene", "augment", "view", "minutes", "batch_size", "lr", "max_snapshots",
+               "seed")
 
 
 def resume_config(args: TrainArgs, kind: str, ctor_args: dict[str, Any]) -> dict[str, Any]:
@@ -183,6 +198,21 @@ def train(args: TrainArgs) -> dict[str, Any]:
     try:
         import_modules(args.modules)
         spec = task_spec(args.task)
+    except ValueError as exc:
+        raise TrainError(str(exc)) from None
+    scene = args.scene if args.scene is not None else spec.training_scene()
+    if scene is not None and scene not in spec.scenes:
+        raise TrainError(f"unknown scene {scene!r} for task {args.task}; known: {', '.join(spec.scenes) or 'none'}")
+    if scene in spec.ood_scenes:
+        raise TrainError(f"scene {scene!r} is an out-of-distribution test scene of {args.task}: it is never "
+                         f"trained on (training scenes: "
+                         f"{', '.join(s for s in spec.scenes if s not in spec.ood_scenes + spec.validation_scenes)})")
+    if scene in spec.validation_scenes:
+        raise TrainError(f"scene {scene!r} is a validation scene of {args.task} (held out from training, for "
+                         "decisions)")
+    if args.augment and not spec.symmetries:
+        raise TrainError(f"--augment: task {args.task} declares no symmetries (TaskSpec.symmetries)")
+    try:
         run = TrainingRun.create("tree", f"{args.task}-{args.model}", args.seed, out=args.out, resume=args.resume,
                                  overwrite=args.overwrite)
     except (ValueError, RunError) as exc:
@@ -191,8 +221,10 @@ def train(args: TrainArgs) -> dict[str, Any]:
     torch.manual_seed(args.seed)
     adapter = adapter_for(args.model, args.task)
     scales = task_scales(args.task)
+    if args.relative_inputs and adapter.kind not in ("tree/gnn", "tree/gnn-cvae"):
+        raise TrainError(f"--relative-inputs applies to the node-mixture gnn and gnn-cvae, not {adapter.kind}")
     try:
-        model, ctor_args = adapter.build(scales)
+        model, ctor_args = adapter.build(scales, **({"relative_inputs": True} if args.relative_inputs else {}))
     except ValueError as exc:
         raise TrainError(f"--model {args.model} on task {args.task}: {exc}") from None
     started = time.perf_counter()
@@ -205,8 +237,7 @@ def train(args: TrainArgs) -> dict[str, Any]:
         check_resume(resume_path, resume.get("config"), config)
 
     # 1. data: uniform solutions of training problems
-    data_config = TreeDataConfig(task=args.task, split="train", scene=spec.training_scene(), problems=args.problems,
-                                 seed=args.seed)
+    data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
     data = load_or_generate(data_config, args.data_dir, progress=args.progress, workers=args.workers)
     rng = np.random.default_rng(args.seed)
     snapshots = args.max_snapshots
@@ -218,18 +249,24 @@ def train(args: TrainArgs) -> dict[str, Any]:
 
     summary: dict[str, Any] = {"config": asdict(args), "dataset": data_config.file_name(),
                                "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
+    augment = None
+    if args.augment:
+        low, high = spec.state_bounds()
+        augment = symmetries_of(spec.symmetries, low, high, torch.as_tensor(spec.periodic_mask(len(low))))
     # 2. the first phase
     phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed,
-                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path, resume_config=config)]
+                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path, resume_config=config,
+                  augment=augment)]
     # 3. DAgger
     settings = spec.sampler_defaults(args.model)
     for r in range(args.dagger_rounds):
-        own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r),
-                                            args.seed + r + 1)
+        own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r,
+                                                      scene=scene), args.seed + r + 1)
         train_items += adapter.items(model, own_train, "grown", rng, snapshots)
         val_items += adapter.items(model, own_val, "grown", rng, snapshots)
         phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
-                          args.batch_size, args.seed + r + 1, run.writer, f"dagger{r + 1}", args.progress))
+                          args.batch_size, args.seed + r + 1, run.writer, f"dagger{r + 1}", args.progress,
+                          augment=augment))
     summary["phases"] = phases
     # a resumed run counts the first phase's time spent before the interruption too
     summary["train_seconds"] = time.perf_counter() - started + (float(resume["elapsed"]) if resume else 0.0)
@@ -248,8 +285,14 @@ def train(args: TrainArgs) -> dict[str, Any]:
                                                 args.progress)
         for name, stats in summary["validation"].items():
             run.writer.add_scalar(f"validation/{name}_median_nodes", stats["median_nodes"], 0)
+        if spec.validation_scenes:
+            summary["validation_kinds"] = {
+                kind: evaluate_online(args.task, ckpt, args.model, min(args.eval_problems, KIND_EVAL_PROBLEMS),
+                                      args.seed, args.progress, scene=kind)
+                for kind in spec.validation_scenes}
         ckpt = run.save_checkpoint("model.pt", model, adapter.kind, ctor_args,
-                                   meta={**meta, "validation": summary["validation"]})
+                                   meta={**meta, "validation": summary["validation"],
+                                         "validation_kinds": summary.get("validation_kinds")})
     run.close()
     plot_phases(phases, run.path("learning_curve.png"), f"{args.task} {args.model}",
                 getattr(adapter, "loss_name", "NLL per snapshot"))
@@ -264,40 +307,47 @@ def train(args: TrainArgs) -> dict[str, Any]:
 def command_of(args: TrainArgs) -> str:
     """The command line that reproduces the run (what a shipped sidecar records)."""
     imports = "".join(f" --import {m}" for m in args.modules)
-    return (f"gnn-mp train sampler{imports} --task {args.task} --model {args.model} --problems {args.problems} "
+    extra = ((f" --scene {args.scene}" if args.scene is not None else "") + (" --augment" if args.augment else "")
+             + (" --relative-inputs" if args.relative_inputs else ""))
+    return (f"gnn-mp train sampler{imports} --task {args.task}{extra} --model {args.model} --problems {args.problems} "
             f"--view {args.view} --minutes {args.minutes} --dagger-rounds {args.dagger_rounds} --dagger-problems "
             f"{args.dagger_problems} --dagger-minutes {args.dagger_minutes} --eval-problems {args.eval_problems} "
             f"--seed {args.seed}")
 
 
-def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_index: int) -> TreeDataset:
-    """DAgger data: fresh training problems planned by the current sampler, labelled by the
-    paths it found itself."""
+def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_index: int,
+              scene: str | None = None) -> TreeDataset:
+    """DAgger data: fresh training problems (of ``scene``) planned by the current sampler, labelled
+    by the paths it found itself."""
     import tempfile
 
-    from gnn_mp_envs.registration import task_spec
     from train.tree.data import generate
     with tempfile.TemporaryDirectory() as tmp:
         ckpt = save_checkpoint(Path(tmp) / "current.pt", model, adapter.kind, ctor_args,
                                meta={"task": args.task, "sampler": settings})
-        config = TreeDataConfig(task=args.task, split="train", scene=task_spec(args.task).training_scene(),
+        config = TreeDataConfig(task=args.task, split="train", scene=scene,
                                 problems=args.dagger_problems, seed=args.seed + 1000 * (round_index + 1),
                                 first_problem=args.problems + round_index * args.dagger_problems, sampler=args.model)
         return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers)
 
 
+#: Validation problems per held-out kind (``TaskSpec.validation_scenes``) at the end of training.
+KIND_EVAL_PROBLEMS = 20
+
+
 def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed: int,
-                    progress: bool) -> dict[str, dict[str, float]]:
-    """Plan validation problems 0..N-1 with the trained sampler and with uniform (same seeds)."""
+                    progress: bool, scene: str | None = None) -> dict[str, dict[str, float]]:
+    """Plan validation problems 0..N-1 (of ``scene``: default the split's own) with the trained
+    sampler and with uniform (same seeds)."""
     from agents.registry import load_sampler
     from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
-    env = evaluation_env(task, "val")
+    env = evaluation_env(task, "val", scene=scene)
     try:
         out = {}
         for name, extra in (("uniform", {}), (model, {"checkpoint": checkpoint})):
             sampler = load_sampler(name, task=task, seed=0, **extra)
             out[name] = summarize(plan_problems(sampler, env, range(problems), seed, progress=progress,
-                                                desc=f"val {name}"))
+                                                desc=f"val {scene or ''} {name}"))
         return out
     finally:
         env.close()

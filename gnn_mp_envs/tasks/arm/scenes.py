@@ -9,7 +9,10 @@ family's ``layout`` names the generator in :data:`LAYOUTS` that turns the ranges
 (``z = 0``), facing ``+x``.
 
 ``train-a`` and ``train-b`` are the training families; ``test`` is held out: different
-obstacle types (cylinders, a thin wall, a closed cubby) and counts.
+obstacle types (cylinders, a thin wall, a closed cubby) and counts. Beyond them (issue #18):
+``pillars`` is a validation kind held out from training (for decisions), and ``tall-clutter``,
+``shelves`` and ``bins`` are out-of-distribution test kinds, layouts no generator above makes
+(never trained or tuned on).
 """
 
 from __future__ import annotations
@@ -149,6 +152,52 @@ SCENE_FAMILIES: dict[str, dict[str, Any]] = {
         "wall_height": (0.20, 0.30),
         "wall_offset": (0.95, 1.25),    # wall azimuth relative to the cubby (either side)
     },
+    # Validation kind: cylinders standing around a goal reached with the tool down to the table.
+    "pillars": {
+        "layout": "pillars",
+        "distance": (0.38, 0.5),
+        "azimuth": (-0.9, 0.9),
+        "goal_height": (0.06, 0.12),
+        "ring": (3, 4),                  # pillars around the goal
+        "ring_radius": (0.15, 0.19),     # their distance from the goal
+        "others": (2, 4),
+        "post_radius": (0.025, 0.04),
+        "post_height": (0.3, 0.5),
+    },
+    # OOD: tall boxes packed around the goal and over the table; the tool reaches down between them.
+    "tall-clutter": {
+        "layout": "tall-clutter",
+        "distance": (0.4, 0.5),
+        "azimuth": (-0.9, 0.9),
+        "goal_height": (0.08, 0.14),
+        "ring": (3, 5),
+        "ring_radius": (0.17, 0.21),
+        "others": (4, 6),
+        "half_size": (0.03, 0.05),
+        "height": (0.4, 0.6),
+    },
+    # OOD: a bookshelf of two or three levels; the goal reaches into a lower level.
+    "shelves": {
+        "layout": "shelves",
+        "distance": (0.52, 0.6),
+        "azimuth": (-0.9, 0.9),
+        "inner_width": (0.36, 0.44),
+        "depth": (0.22, 0.28),
+        "levels": (2, 3),
+        "level_height": (0.18, 0.24),
+        "thickness": 0.03,
+        "goal_inset": (0.05, 0.1),
+    },
+    # OOD: an open-top bin (four walls) on the table, the tool down into it; a second bin nearby.
+    "bins": {
+        "layout": "bins",
+        "distance": (0.42, 0.52),
+        "azimuth": (-0.9, 0.9),
+        "inner": (0.16, 0.22),           # inner width of the bin (square)
+        "wall_height": (0.16, 0.24),
+        "thickness": 0.02,
+        "goal_depth": (0.04, 0.08),      # flange height above the bin floor
+    },
 }
 
 #: Start targets, shared by every family: tool down, on the far side of the robot.
@@ -283,7 +332,105 @@ def cubby_layout(rng: np.random.Generator, spec: dict):
     return obstacles, goal, a, side, {"wall_azimuth": wa}
 
 
-LAYOUTS: dict[str, Callable] = {"crevice": crevice_layout, "shelf": shelf_layout, "cubby": cubby_layout}
+def _ring_layout(rng: np.random.Generator, spec: dict, make) -> tuple:
+    """A goal (tool down) at ``goal_height`` with ``ring`` obstacles around it and ``others``
+    elsewhere over the table; ``make(x, y)`` builds one obstacle standing at ``(x, y)`` and
+    returns it with its footprint radius."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    gx, gy, _ = _polar(r, a, 0.0)
+    obstacles: list[Obstacle] = []
+    avoid = []
+    n = int(rng.integers(spec["ring"][0], spec["ring"][1] + 1))
+    phase = _u(rng, (0.0, 2 * np.pi))
+    for k in range(n):
+        ang = phase + 2 * np.pi * k / n + _u(rng, (-0.3, 0.3))
+        rr = _u(rng, spec["ring_radius"])
+        ob, foot = make(gx + rr * np.cos(ang), gy + rr * np.sin(ang))
+        obstacles.append(ob)
+        avoid.append((ob.position[0], ob.position[1], foot))
+    avoid.append((gx, gy, 0.06))
+    for _ in range(int(rng.integers(spec["others"][0], spec["others"][1] + 1))):
+        for _ in range(50):
+            pr, pa = _u(rng, (0.3, 0.7)), _u(rng, (-np.pi, np.pi))
+            x, y, _ = _polar(pr, pa, 0.0)
+            ob, foot = make(x, y)
+            if all(np.hypot(x - ax, y - ay) > ar + foot + 0.04 for ax, ay, ar in avoid):
+                obstacles.append(ob)
+                avoid.append((x, y, foot))
+                break
+    goal = EndEffectorTarget((gx, gy, _u(rng, spec["goal_height"])), DOWN)
+    return obstacles, goal, a, 0.0, {}
+
+
+def pillars_layout(rng: np.random.Generator, spec: dict):
+    """Cylinders around a low goal (tool down) and elsewhere on the table (validation kind)."""
+    def make(x: float, y: float):
+        rad, h = _u(rng, spec["post_radius"]), _u(rng, spec["post_height"])
+        return Obstacle("cylinder", (rad, h), (x, y, h / 2)), rad
+    return _ring_layout(rng, spec, make)
+
+
+def tall_clutter_layout(rng: np.random.Generator, spec: dict):
+    """Tall boxes packed around a low goal (tool down) and over the table (OOD kind)."""
+    def make(x: float, y: float):
+        hx, hy, h = _u(rng, spec["half_size"]), _u(rng, spec["half_size"]), _u(rng, spec["height"])
+        return _box((hx, hy, h / 2), (x, y, h / 2), _u(rng, (0, np.pi))), float(np.hypot(hx, hy))
+    return _ring_layout(rng, spec, make)
+
+
+def shelves_layout(rng: np.random.Generator, spec: dict):
+    """A bookshelf (side panels, a board per level, a back wall) facing the robot; the tool reaches
+    horizontally into the lowest level or the one above it (OOD kind)."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    at = _frame(r, a)
+    t = spec["thickness"]
+    w, d = _u(rng, spec["inner_width"]), _u(rng, spec["depth"])
+    levels = int(rng.integers(spec["levels"][0], spec["levels"][1] + 1))
+    heights = [_u(rng, spec["level_height"]) for _ in range(levels)]
+    top = sum(heights) + levels * t
+    obstacles = [_box((d / 2, t / 2, top / 2), at(0.0, s * (w / 2 + t / 2), top / 2), a) for s in (-1.0, 1.0)]
+    obstacles.append(_box((t / 2, w / 2 + t, top / 2), at(d / 2 + t / 2, 0.0, top / 2), a))
+    z = 0.0
+    floors = []
+    for h in heights:
+        floors.append(z)
+        z += h
+        obstacles.append(_box((d / 2, w / 2, t / 2), at(0.0, 0.0, z + t / 2), a))
+        z += t
+    level = int(rng.integers(min(2, levels)))
+    goal_z = floors[level] + heights[level] * _u(rng, (0.4, 0.6))
+    goal = EndEffectorTarget(at(-d / 2 + _u(rng, spec["goal_inset"]), _u(rng, (-0.25, 0.25)) * w / 2, goal_z),
+                             (float(np.cos(a)), float(np.sin(a)), 0.0))
+    return obstacles, goal, a, 0.0, {"levels": levels}
+
+
+def bins_layout(rng: np.random.Generator, spec: dict):
+    """An open-top bin (four walls) on the table with the tool down into it, and a second bin
+    beside it (OOD kind)."""
+    r, a = _u(rng, spec["distance"]), _u(rng, spec["azimuth"])
+    t = spec["thickness"]
+    obstacles = []
+    side = float(rng.choice([-1.0, 1.0]))
+    centres = [(r, a), (r + _u(rng, (-0.05, 0.05)), a + side * _u(rng, (0.55, 0.7)))]
+    inner0 = 0.0
+    for k, (rr, aa) in enumerate(centres):
+        at = _frame(rr, aa)
+        inner, h = _u(rng, spec["inner"]), _u(rng, spec["wall_height"])
+        inner0 = inner if k == 0 else inner0
+        half = inner / 2 + t / 2
+        for s in (-1.0, 1.0):
+            obstacles.append(_box((t / 2, half + t / 2, h / 2), at(s * half, 0.0, h / 2), aa))
+            obstacles.append(_box((half - t / 2, t / 2, h / 2), at(0.0, s * half, h / 2), aa))
+    at = _frame(r, a)
+    spread = inner0 / 2 - 0.07
+    goal = EndEffectorTarget(at(_u(rng, (-spread, spread)), _u(rng, (-spread, spread)), _u(rng, spec["goal_depth"])),
+                             DOWN)
+    return obstacles, goal, a, 0.0, {"inner": inner0}
+
+
+LAYOUTS: dict[str, Callable] = {"crevice": crevice_layout, "shelf": shelf_layout, "cubby": cubby_layout,
+                                "pillars": pillars_layout, "tall-clutter": tall_clutter_layout,
+                                "shelves": shelves_layout, "bins": bins_layout}
 
 
 def sample_scene(family: str, rng: np.random.Generator) -> Scene:
