@@ -4,6 +4,7 @@ VAMP's YAML files, the robot model, the splits, validity of all 700 problems, an
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -106,3 +107,165 @@ def test_the_panda_model_matches_the_urdf_joint_names():
     assert model.low[3] == -3.1416 and model.high[3] == 0.0873     # MBM's URDF, not pybullet_data's 0.0
     assert dict(model.held_joints) == {9: 0.065, 10: 0.065}
     assert len(model.allowed_collisions) == 34 and ("panda_hand", "panda_link7") in model.allowed_collisions
+
+
+# ---------------------------------------------------------------------- the task
+
+@pytest.fixture(scope="module")
+def task():
+    from gnn_mp_envs.tasks.mbm import PandaMBMTask
+    t = PandaMBMTask("all")
+    yield t
+    t.close()
+
+
+def test_every_start_and_goal_is_valid_under_the_shipped_model(task):
+    """All 700 problems are kept (EXCLUDED is empty): start and goal inside the limits and free."""
+    from gnn_mp_envs.tasks.mbm import EXCLUDED
+    assert EXCLUDED == {}
+    count = 0
+    for split in ("train", "val", "test"):
+        for i in range(len(task.split_records(split))):
+            problem = task.problem(split, i)
+            assert problem.is_state_valid(np.stack([problem.start, problem.goal])).all(), (split, i)
+            count += 1
+    assert count == 700
+
+
+def test_splits_walk_the_scenes_round_robin(task):
+    from gnn_mp_envs.tasks.mbm import PandaMBMTask
+    assert [task.num_problems(s) for s in ("val", "test")] == [70, 210] and task.num_problems("train") is None
+    assert len(task.split_records("train")) == 420
+    firsts = [task.problem("test", i) for i in range(8)]
+    assert [p.family for p in firsts] == list(mbm_data.SCENES) + ["table_pick"]
+    assert [p.mbm_file for p in firsts] == [71] * 7 + [72]
+    assert task.problem("val", 69).mbm_file == 70 and task.problem("train", 419).mbm_file == 60
+    cage = PandaMBMTask("cage")
+    try:
+        assert [cage.problem("test", i).mbm_file for i in (0, 29)] == [71, 100]
+        with pytest.raises(ValueError, match="has 30 problems"):
+            cage.problem("test", 30)
+        held_out = PandaMBMTask("test")
+        assert {held_out.problem("test", i).family for i in range(60)} == {"bookshelf_thin", "cage"}
+        seen = PandaMBMTask("train")
+        assert {seen.problem("train", i).family for i in range(300)} == set(mbm_data.SCENES) - {"bookshelf_thin", "cage"}
+        held_out.close()
+        seen.close()
+    finally:
+        cage.close()
+
+
+def test_perturbed_training_problems_move_the_goal_with_the_scene(task):
+    """Training problems past MBM's own are rigidly moved copies: the goal's hand pose relative to the
+    scene's first object is the template's (re-solved by IK), start and goal are valid."""
+    from gnn_mp_envs.tasks.mbm.task import PERTURB_SHIFT, PERTURB_YAW
+    from scipy.spatial.transform import Rotation
+    records = task.split_records("train")
+    for index in (420, 421, 425):
+        problem = task.problem("train", index)
+        template = records[index % len(records)]
+        assert problem.family == template.scene and problem.mbm_file == 0
+        assert problem.is_state_valid(np.stack([problem.start, problem.goal])).all()
+
+        def hand_in_object(q, obstacle):
+            position, quat = task.world.flange_pose(q)
+            frame = Rotation.from_quat(obstacle.quaternion())
+            return frame.inv().apply(position - np.asarray(obstacle.position)), (frame.inv() * Rotation.from_quat(quat))
+
+        moved, moved_rot = hand_in_object(problem.goal, problem.obstacles[0])
+        kept, kept_rot = hand_in_object(np.asarray(template.goal), template.obstacles[0])
+        np.testing.assert_allclose(moved, kept, atol=2e-3)
+        assert (moved_rot.inv() * kept_rot).magnitude() < 2e-2
+        shift = np.asarray(problem.obstacles[0].position) - np.asarray(template.obstacles[0].position)
+        assert 0 < np.abs(shift).max() <= np.hypot(*template.obstacles[0].position[:2]) * PERTURB_YAW + max(PERTURB_SHIFT)
+
+
+def test_the_fine_path_check_catches_what_the_planners_resolution_skips(task):
+    """A hand-made edge that passes through a thin wall between its two checked ends: the planner's
+    check (one state per resolution step) and the path re-check at that resolution pass it, the
+    independent check at 10x finer resolution does not."""
+    from gnn_mp_envs.tasks.arm.scenes import Obstacle
+    from gnn_mp_envs.tasks.mbm import MBMProblem
+    middle = np.array([0, -0.785, 0, -2.356, 0, 1.571, 0.785])
+    a, b = middle.copy(), middle.copy()
+    a[0], b[0] = -0.8, 0.8                                             # the hand swings past x = 0.31 m
+    wall = Obstacle("box", (0.03, 0.003, 0.03), tuple(task.world.flange_pose(middle)[0]))   # 6 mm thick
+    problem = MBMProblem(task.world, (wall,), a, b, step_size=2.0, resolution=2.0)
+    assert problem.is_state_valid(np.stack([a, b])).all()
+    assert not problem.is_state_valid(middle[None]).all()
+    assert problem.check_motion(a, b)                                  # n = 1: only b is checked
+    assert problem.path_valid(np.stack([a, b]))
+    assert not problem.path_valid(np.stack([a, b]), refine=10)
+
+
+def test_the_padding_is_a_margin_of_the_planner_only(task):
+    """A state 0.5 mm from an obstacle collides for the planner (1 mm margin) but not for the exact
+    check; 2.5 mm away it is free for both."""
+    from gnn_mp_envs.tasks.arm.scenes import Obstacle
+    from gnn_mp_envs.tasks.mbm import MBMProblem
+    world = task.world
+    q = np.array([0, -0.785, 0, -2.356, 0, 1.571, 0.785])
+    hand = world.flange_pose(q)[0]
+
+    def slab(z: float) -> Obstacle:
+        return Obstacle("box", (0.15, 0.15, 0.01), (hand[0], hand[1], z))
+
+    def clearance(z: float) -> float:
+        """The robot's distance to the slab at height z (getClosestPoints, the oracle)."""
+        world.load((slab(z),))
+        world.set_config(q)
+        points = world.p.getClosestPoints(world.robot, world.obstacle_bodies[0], 0.05, physicsClientId=world.client)
+        return min((c[8] for c in points), default=0.05)
+
+    for target, planner_free in ((0.0005, False), (0.0025, True)):
+        low, high = hand[2] - 0.4, hand[2]                             # free below, touching above
+        for _ in range(40):
+            z = (low + high) / 2
+            low, high = (z, high) if clearance(z) > target else (low, z)
+        problem = MBMProblem(world, (slab(low),), q, q + 0.1)
+        assert abs(clearance(low) - target) < 1e-4
+        assert problem.is_state_valid(q[None]).all() == planner_free
+        assert problem.is_state_valid_exact(q[None]).all()
+
+
+# ---------------------------------------------------------------------- the environment
+
+def test_the_environment_follows_the_arm_envs_interface():
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    import gnn_mp_envs  # noqa: F401
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import plan_problem
+    env = gym.make("GNNMP/PandaMBM-v0", split="test", render_mode="rgb_array", disable_env_checker=True)
+    base = env.unwrapped
+    try:
+        with warnings.catch_warnings():      # the checker's generic advice on unbounded boxes and [-1, 1] actions
+            warnings.simplefilter("ignore", UserWarning)
+            check_env(base, skip_render_check=True)
+        model = mbm_data.panda_model()
+        np.testing.assert_allclose(env.action_space.low, np.float32(model.low))
+        np.testing.assert_allclose(env.action_space.high, np.float32(model.high))
+        assert env.observation_space["obstacles"].shape == (21, 1 + 13)     # presence flag + 13 features
+        for seed in range(5):                       # a reset without an index stays inside the 210 problems
+            obs, _ = env.reset(seed=seed)
+            assert base.problem.mbm_file in range(71, 101)
+        record = plan_problem(base, load_sampler("uniform", task="panda-mbm", seed=0), 0, seed=0)
+        assert record.success and base.problem.family == "table_pick" and base.problem.mbm_file == 71
+        obs = base._observation()
+        rows = obs["obstacles"][: len(base.problem.obstacles)]
+        assert (rows[:, 0] == 1).all() and not obs["obstacles"][len(rows):].any()
+        assert rows[:, 1:4].sum(axis=1).tolist() == [1.0] * len(rows)                    # one kind each
+        assert (rows[:, 13] >= 0).all()                                                  # w >= 0
+        image = env.render()
+        assert image.shape == (360, 480, 3) and image.std() > 10
+    finally:
+        env.close()
+
+
+def test_the_benchmark_refuses_more_problems_than_the_split_holds():
+    from train.benchmark.args import BenchmarkArgs, BenchmarkError
+    from train.benchmark.runs import run_benchmark
+    with pytest.raises(BenchmarkError, match="split 'test' of panda-mbm scene 'cage' has 30 problems"):
+        run_benchmark(BenchmarkArgs(task="panda-mbm", samplers=["uniform"], problems=31, scene="cage",
+                                    progress=False))

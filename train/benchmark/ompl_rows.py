@@ -37,10 +37,13 @@ def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]
         "nodes_expanded": as_int(result.get("nodes")),            # OMPL planner-data vertices
         "edges": as_int(result.get("edges_checked")),
         "collision_checks": as_int(result.get("collision_checks")),
-        "iterations": None,
+        "iterations": as_int(result.get("iterations")),            # geometric planners: samples drawn
         "path_length": _finite_or_none(result.get("path_length")) if success else None,
         "path_valid": bool(result.get("path_valid")) if success else None,   # re-checked by the runner
+        "path_valid_fine": (bool(result.get("path_valid_fine", result.get("path_valid")))   # finer (geometric)
+                            if success else None),
         "wall_time_s": _finite_or_none(result.get("time")),       # OMPL's solve() time
+        "family": result.get("family"),
         "ompl": {k: v for k, v in result.items() if isinstance(v, (int, float, str, bool))},
     }
 
@@ -90,7 +93,7 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
 def _as_ompl_run(record: dict[str, Any]) -> dict[str, Any]:
     """A benchmark record in the OMPL runner's keys (which the log writer maps to OMPL property names)."""
     run = dict(record.get("ompl", {}))   # OMPL rows: the runner's own fields (status, approximate, ...)
-    for key in ("task", "split", "index", "planner"):
+    for key in ("task", "split", "index", "planner", "family"):
         run.pop(key, None)
     run.update({
         "solved": record["success"], "time": record["wall_time_s"], "path_length": record["path_length"],

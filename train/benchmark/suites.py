@@ -17,14 +17,15 @@ from train.benchmark.args import (
 )
 from train.benchmark.outputs import benchmark
 from train.benchmark.runs import WorkerPool
-from train.benchmark.tables import format_table
+from train.benchmark.plots import plot_success_vs_time
+from train.benchmark.tables import format_family_table, format_field_table, format_table
 
 
 @dataclass
 class SuiteOptions:
     """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
 
-    suite: str | None = arg(None, "run a named suite instead (default, smoke); writes "
+    suite: str | None = arg(None, "run a named suite instead (default, smoke, mbm); writes "
                             "<task>.json/.png/.txt and summary.md to --out")
     out: Path = arg(Path("results"), "output directory of --suite")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
@@ -42,6 +43,9 @@ class SuiteEntry:
     max_nodes: int | None = None
     scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
+    #: also report as the field does: <task>_field.txt (success within the budgets, median / p95 time,
+    #: iterations, checks, initial path length; per scene) and <task>_success_vs_time.png
+    field: bool = False
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores. The learned rows
 #: (``gnn``, ``cvae``, ``gnn-cvae``: Algorithm 1; ``rl-ppo``: the RL policy) use the shipped weights;
@@ -57,6 +61,11 @@ SUITES: dict[str, list[SuiteEntry]] = {
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
+    ],
+    # MotionBenchMaker's Panda problems (docs/mbm.md): the whole test split, 30 problems of each of
+    # the seven scenes, reported as the field reports (Planner Arena log in OUT/ompl/).
+    "mbm": [
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias"], problems=210, ompl=("rrtconnect",), field=True),
     ],
 }
 
@@ -96,6 +105,11 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
         elapsed = time.perf_counter() - task_start
         table = format_table(report)
         atomic_write_text(out / f"{entry.task}.txt", table + "\n")
+        if entry.field:
+            table = "\n\n".join([format_field_table(report), format_family_table(report)])
+            print(table)
+            atomic_write_text(out / f"{entry.task}_field.txt", table + "\n")
+            plot_success_vs_time(report, out / f"{entry.task}_success_vs_time.png")
         tables.append(f"{table}\n({elapsed:.0f} s)")
         reports[entry.task] = report
         print(f"({entry.task}: {elapsed:.0f} s)\n")

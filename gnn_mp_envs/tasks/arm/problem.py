@@ -1,5 +1,5 @@
-"""Joint-space planning problems of the xArm6: bounds, straight-line steering and counted,
-sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
+"""Joint-space planning problems of an arm (the xArm6, the Panda): bounds, straight-line steering
+and counted, sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
 
 Each configuration checked counts one collision check; edges are interpolated every
 :data:`RESOLUTION` rad (joint-space L2) and stop at the first invalid configuration.
@@ -13,7 +13,7 @@ import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, Problem
 from gnn_mp_envs.tasks.arm.scenes import Obstacle, Scene
-from gnn_mp_envs.tasks.arm.world import JOINT_HIGH, JOINT_LOW, ArmWorld
+from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld
 
 #: RRT/BiRRT extension length in joint space (rad, L2 over the six joints).
 STEP_SIZE = 0.4
@@ -22,14 +22,15 @@ RESOLUTION = 0.05
 
 
 class ArmProblem(Problem):
-    """Joint-space planning for the xArm6 in one scene of an :class:`ArmWorld`."""
+    """Joint-space planning for the world's robot (bounds: its joint limits) in one scene of an
+    :class:`ArmWorld`."""
 
     task = "arm"
     geometric = True
 
     def __init__(self, world: ArmWorld, scene: Scene | tuple[Obstacle, ...], start: np.ndarray,
                  goal: np.ndarray, step_size: float = STEP_SIZE, resolution: float = RESOLUTION) -> None:
-        super().__init__(start, goal, low=JOINT_LOW, high=JOINT_HIGH, step_size=step_size,
+        super().__init__(start, goal, low=world.low, high=world.high, step_size=step_size,
                          resolution=resolution)
         self.world = world
         self.scene = scene
@@ -38,6 +39,12 @@ class ArmProblem(Problem):
         self._high = self.high + 1e-12
         self._low_tol = self._low.tolist()
         self._high_tol = self._high.tolist()
+
+    @property
+    def family(self) -> str | None:
+        """The scene family the problem was drawn from (None: a problem given by hand); the
+        benchmark reports results per family."""
+        return self.scene.family if isinstance(self.scene, Scene) else None
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
@@ -51,6 +58,17 @@ class ArmProblem(Problem):
         rows = s.tolist()
         for i in np.flatnonzero(ok).tolist():
             if collides(rows[i]):
+                ok[i] = False
+        return ok
+
+    def is_state_valid_exact(self, states: np.ndarray) -> np.ndarray:
+        """:meth:`is_state_valid` without the robot's padding: any penetration, and only that, is a collision."""
+        s = np.asarray(states, dtype=np.float64).reshape(-1, self.state_dim)
+        ok = self._in_bounds(s)
+        self.world.load(self.scene)
+        rows = s.tolist()
+        for i in np.flatnonzero(ok).tolist():
+            if self.world.collides(rows[i], CONTACT_DISTANCE):
                 ok[i] = False
         return ok
 
