@@ -315,33 +315,33 @@ class ArmWorld:
         return np.array(s[4]), np.array(s[5])
 
     def pose_ik(self, position: np.ndarray, orientation: np.ndarray, seed: np.ndarray, pos_tol: float = 1e-3,
-                angle_tol: float = 1e-2, iterations: int = 200) -> np.ndarray | None:
+                angle_tol: float = 1e-2, rounds: int = 4, iterations: int = 100) -> np.ndarray | None:
         """Planned joints putting the flange at ``position`` with ``orientation`` (quaternion x, y, z, w),
-        by pybullet's IK started at ``seed`` (and pulled toward it); None when the answer leaves the
-        joint limits or misses the pose by more than ``pos_tol`` (m) / ``angle_tol`` (rad).
-        Collisions are not checked. Held joints keep their positions."""
+        by pybullet's IK started at ``seed`` (pulled toward it, restarted from its own answer up to
+        ``rounds`` times); None when the answer leaves the joint limits or misses the pose by more
+        than ``pos_tol`` (m) / ``angle_tol`` (rad). Collisions are not checked; held joints stay."""
         p, cid, model = self.p, self.client, self.robot_model
         movable = [j for j in range(p.getNumJoints(self.robot, physicsClientId=cid))
                    if p.getJointInfo(self.robot, j, physicsClientId=cid)[2] != p.JOINT_FIXED]
-        seed = np.asarray(seed, dtype=np.float64)
         held = dict(model.held_joints)
         planned = {j: k for k, j in enumerate(model.joints)}
         lo = [self.low[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
         hi = [self.high[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
-        rest = [seed[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
-        self.set_config(seed)
-        solution = p.calculateInverseKinematics(
-            self.robot, model.ee_link, list(map(float, position)), list(map(float, orientation)),
-            lowerLimits=lo, upperLimits=hi, jointRanges=[max(h - l, 1e-6) for l, h in zip(lo, hi)],
-            restPoses=rest, maxNumIterations=iterations, residualThreshold=1e-6, physicsClientId=cid)
-        q = np.array([solution[movable.index(j)] for j in model.joints])
-        if np.any(q < self.low) or np.any(q > self.high):
-            return None
-        x, quat = self.flange_pose(q)
-        angle = 2.0 * np.arccos(min(1.0, abs(float(np.dot(quat, np.asarray(orientation) / np.linalg.norm(orientation))))))
-        if np.linalg.norm(x - np.asarray(position)) > pos_tol or angle > angle_tol:
-            return None
-        return q
+        target = np.asarray(orientation, dtype=np.float64) / np.linalg.norm(orientation)
+        q = np.asarray(seed, dtype=np.float64)
+        for _ in range(rounds):
+            rest = [q[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
+            self.set_config(q)
+            solution = p.calculateInverseKinematics(
+                self.robot, model.ee_link, list(map(float, position)), list(map(float, orientation)),
+                lowerLimits=lo, upperLimits=hi, jointRanges=[max(h - l, 1e-6) for l, h in zip(lo, hi)],
+                restPoses=rest, maxNumIterations=iterations, residualThreshold=1e-7, physicsClientId=cid)
+            q = np.array([solution[movable.index(j)] for j in model.joints])
+            x, quat = self.flange_pose(q)
+            angle = 2.0 * np.arccos(min(1.0, abs(float(np.dot(quat, target)))))
+            if np.linalg.norm(x - np.asarray(position)) <= pos_tol and angle <= angle_tol:
+                return None if np.any(q < self.low) or np.any(q > self.high) else q
+        return None
 
     def flange_positions(self, qs: np.ndarray) -> np.ndarray:
         """Flange positions (N, 3) of configurations ``qs`` (N, dof)."""

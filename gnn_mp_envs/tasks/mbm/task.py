@@ -143,23 +143,29 @@ class PandaMBMTask(Task):
     def perturbed(self, record: MBMRecord, rng: np.random.Generator) -> MBMProblem:
         """``record``'s scene rotated about the robot's base axis by up to :data:`PERTURB_YAW` and
         shifted by up to :data:`PERTURB_SHIFT`, with the goal (and, where MBM's starts are poses in
-        the scene rather than the fixed ready pose, the start) moved along: same flange pose relative
-        to the scene, re-solved by IK from the old configuration. Redrawn until start and goal are
-        valid; the unperturbed problem after :data:`PERTURB_TRIES` failures."""
+        the scene rather than the fixed ready pose, the start) moved along: the same hand pose
+        relative to the scene, re-solved by IK from the old configuration turned by the yaw. Where IK
+        does not converge (poses near the joint limits), later draws rotate only, which joint 1
+        follows exactly. Redrawn until start and goal are valid; the unperturbed problem after
+        :data:`PERTURB_TRIES` failures."""
         world = self.world
         fixed_start = len({r.start for r in scene_records(record.scene)}) == 1
-        for _ in range(PERTURB_TRIES):
+        for attempt in range(PERTURB_TRIES):
             yaw = float(rng.uniform(-PERTURB_YAW, PERTURB_YAW))
             shift = rng.uniform(-1.0, 1.0, 3) * np.asarray(PERTURB_SHIFT)
+            if attempt >= PERTURB_TRIES // 2:
+                shift[:] = 0.0
             c, s = math.cos(yaw), math.sin(yaw)
             rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
             turn = _yaw_quaternion(yaw)
 
             def moved(q: tuple[float, ...]) -> np.ndarray | None:
+                turned = np.array(q, dtype=np.float64)
+                turned[0] += yaw
+                if not shift.any():
+                    return turned if world.low[0] <= turned[0] <= world.high[0] else None
                 position, orientation = world.flange_pose(np.asarray(q))
-                seed = np.array(q, dtype=np.float64)
-                seed[0] += yaw
-                return world.pose_ik(rot @ position + shift, _quat_mul(turn, orientation), seed)
+                return world.pose_ik(rot @ position + shift, _quat_mul(turn, orientation), turned)
 
             goal = moved(record.goal)
             start = np.array(record.start) if fixed_start else moved(record.start)
