@@ -295,3 +295,28 @@ def test_field_tables_count_success_within_both_budgets(tmp_path):
                                                         ("box", "uniform", "1/2", "40"), ("box", "gnn", "2/2", "25")]
     plot_success_vs_time(report, tmp_path / "svt.png")
     assert (tmp_path / "svt.png").stat().st_size > 1000
+
+
+def test_edges_are_checked_in_bisection_order_with_the_same_verdict(task):
+    """MBM edges are checked as OMPL's DiscreteMotionValidator does (far end, then bisection): the
+    verdict equals the state-by-state check of every interpolated state, and the count is the
+    number of states visited in that order up to the first invalid one (brute force)."""
+    from gnn_mp_envs.tasks.arm.problem import bisection_order
+    for n in range(1, 40):
+        order = bisection_order(n)
+        assert order[0] == n and sorted(order) == list(range(1, n + 1))
+    problem = task.problem("test", 6)                                  # cage
+    rng = np.random.default_rng(0)
+    low, high = task.state_bounds()
+    blocked = 0
+    for _ in range(30):
+        a = problem.start if rng.random() < 0.5 else problem.goal
+        b = np.clip(a + rng.normal(0.0, 0.5, 7), low, high)
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / problem.resolution)))
+        valid = problem.is_state_valid(problem.interpolate(a, b, np.arange(1, n + 1) / n))
+        visited = next((i + 1 for i, k in enumerate(bisection_order(n)) if not valid[k - 1]), n)
+        before = problem.collision_checks
+        assert problem.check_motion(a, b) == bool(valid.all())
+        assert problem.collision_checks - before == visited
+        blocked += not valid.all()
+    assert 5 <= blocked <= 25

@@ -19,7 +19,7 @@ from gnn_mp_envs.tasks.mbm.data import SCENES, MBMRecord, panda_model, scene_rec
 #: BiRRT extension length (rad, joint-space L2 over the seven joints).
 STEP_SIZE = 1.0
 #: Collision-checking resolution along edges (rad, joint-space L2).
-RESOLUTION = 0.02
+RESOLUTION = 0.01
 #: The held-out-scenes variant: train on the other five, test on these two.
 HELD_OUT_SCENES = ("bookshelf_thin", "cage")
 TRAIN_SCENES = tuple(s for s in SCENES if s not in HELD_OUT_SCENES)
@@ -47,6 +47,7 @@ class MBMProblem(ArmProblem):
     the problem's file number in MBM, 0 for perturbed copies and problems given by hand)."""
 
     task = "panda-mbm"
+    bisection = True
 
     def __init__(self, world: ArmWorld, obstacles: tuple[Obstacle, ...], start: Any, goal: Any,
                  step_size: float = STEP_SIZE, resolution: float = RESOLUTION, family: str | None = None,
