@@ -61,10 +61,6 @@ class RobotModel:
     table: bool = True
     base_links: tuple[int, ...] = (-1, 0)
 
-    @property
-    def dof(self) -> int:
-        return len(self.joints)
-
 
 #: The arm task's xArm6 on the table.
 XARM6 = RobotModel(URDF, JOINTS, tuple(JOINT_LOW.tolist()), tuple(JOINT_HIGH.tolist()), EE_LINK)
