@@ -1,6 +1,6 @@
 """A PyG encoder of the tree observation: padded observation -> node and graph embeddings.
 
-:class:`TreeEncoder` reads the observation through :func:`agents.graph.to_pyg` (so any
+:class:`TreeEncoder` reads the observation through :func:`agents.graph.tree_graph` (so any
 leading batch shape works), runs ``num_layers`` message-passing layers of a PyG convolution
 chosen by name over the tree edges (and optionally k-nearest-neighbour edges between
 states), and pools the node embeddings (mean and max) together with an embedding of
@@ -23,7 +23,7 @@ from gymnasium import spaces
 from torch import nn
 from torch_geometric.nn import GATv2Conv, GCNConv, GraphConv, SAGEConv, global_max_pool, global_mean_pool
 
-from agents.graph import knn_edge_index, to_pyg
+from agents.graph import knn_edge_index, tree_graph
 
 #: Convolution name -> factory(in_channels, out_channels, heads) (``conv=`` of TreeEncoder).
 CONVS: dict[str, Callable[[int, int, int], nn.Module]] = {
@@ -120,21 +120,18 @@ class TreeEncoder(nn.Module):
         return f"conv={self.conv!r}, knn={self.knn}"
 
     def forward(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        graph = to_pyg(obs, self.features)
-        batch_shape = torch.Size(obs[self.features].shape[:-2])
-        B = int(np.prod(batch_shape)) if len(batch_shape) else 1
-        if len(batch_shape):
-            batch = graph.batch
-        else:
-            batch = torch.zeros(graph.x.shape[0], dtype=torch.long, device=graph.x.device)
+        graph = tree_graph(obs, self.features)
+        batch_shape = graph.batch_shape
+        B = graph.counts.numel()
+        batch = graph.batch
         h = self.act(self.input(graph.x / self.feature_scale))
-        edges = graph.edge_index
+        tree_edges = MeanEdges(graph.edge_index, h)
         if self.knn:
-            near = knn_edge_index((graph.pos - self.state_center) / self.state_half_span, batch, self.knn)
+            near = MeanEdges(knn_edge_index((graph.pos - self.state_center) / self.state_half_span, batch, self.knn), h)
         for i, conv in enumerate(self.tree_convs):
-            msg = conv(h, edges)
+            msg = tree_edges.conv(conv, h)
             if self.knn:
-                msg = msg + self.knn_convs[i](h, near)
+                msg = msg + near.conv(self.knn_convs[i], h)
             h = h + self.act(msg)
         start = (graph.start - self.state_center) / self.state_half_span
         goal = (graph.goal - self.state_center) / self.state_half_span
@@ -142,6 +139,43 @@ class TreeEncoder(nn.Module):
         pooled = torch.cat([global_mean_pool(h, batch, size=B), global_max_pool(h, batch, size=B), ctx], -1)
         embed = self.readout(pooled).reshape(*batch_shape, self.out_channels)
         return h, embed, batch
+
+
+class MeanEdges:
+    """An edge set and what a PyG ``SAGEConv`` (mean aggregation) computes from it at every layer.
+
+    ``SAGEConv(h, edge_index)`` is ``lin_l(mean_{j -> i} h_j) + lin_r(h_i)``; PyG evaluates the mean
+    through its ``propagate`` machinery (argument inspection, hooks, the aggregation module), which
+    costs several times the arithmetic on the small trees of an RL view. :meth:`conv` runs the same
+    tensor operations in the same order (``index_select`` of the senders, ``scatter_add_`` into the
+    receivers, division by the clamped in-degree computed once per edge set), so its output equals
+    the layer's bit for bit (``tests/test_policy_interface.py``); other convolutions, or a SAGEConv
+    configured otherwise, are called as they are.
+    """
+
+    def __init__(self, edge_index: torch.Tensor, like: torch.Tensor) -> None:
+        self.edge_index = edge_index
+        self.src, self.dst = edge_index[0], edge_index[1]
+        n = like.shape[0]
+        count = like.new_zeros(n).scatter_add_(0, self.dst, like.new_ones(self.dst.numel()))
+        self.count = count.clamp(min=1).view(-1, 1)
+        self._scatter_index: torch.Tensor | None = None
+
+    def conv(self, conv: nn.Module, h: torch.Tensor) -> torch.Tensor:
+        if not _plain_mean_sage(conv):
+            return conv(h, self.edge_index)
+        x_j = h.index_select(0, self.src)
+        if self._scatter_index is None or self._scatter_index.shape != x_j.shape:
+            self._scatter_index = self.dst.view(-1, 1).expand_as(x_j)
+        mean = h.new_zeros(h.shape).scatter_add_(0, self._scatter_index, x_j) / self.count.expand(h.shape)
+        return conv.lin_l(mean) + conv.lin_r(h)
+
+
+def _plain_mean_sage(conv: nn.Module) -> bool:
+    """A ``SAGEConv`` as :data:`CONVS` builds it: mean aggregation, no projection, no
+    normalisation, root weight on."""
+    return (type(conv) is SAGEConv and isinstance(conv.aggr, str) and conv.aggr == "mean" and not conv.project
+            and not conv.normalize and conv.root_weight and not conv._forward_hooks and not conv._forward_pre_hooks)
 
 
 __all__ = ["ACTIVATIONS", "CONVS", "TreeEncoder"]

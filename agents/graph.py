@@ -13,7 +13,7 @@ tests and ``python -m tools.bench_sampler``).
 
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Mapping, NamedTuple
 
 import numpy as np
 import torch
@@ -64,22 +64,31 @@ def real_node_counts(obs: Mapping) -> torch.Tensor:
     return n
 
 
-def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
-    """Padded observation (any leading batch shape) -> PyG ``Batch`` (unbatched: ``Data``).
+class TreeGraph(NamedTuple):
+    """The tensors of :func:`to_pyg`'s graph, without PyG's container (what encoders compute on).
 
-    ``obs`` is a numpy dict, a dict of tensors or a ``TensorDict`` with the keys of
-    :data:`gnn_mp_envs.envs.observation.OBSERVATION_KEYS`, each with the same leading batch
-    shape ``S`` (possibly empty, possibly more than one dimension; the ``B = prod(S)`` graphs
-    are numbered in row-major order). Integer entries (``parent``, ``num_nodes``, ``mask``,
-    ``active_tree``) may be floats.
-
-    The result holds ``x`` (the ``features`` rows of the real nodes, float32), ``pos`` (their
-    states), ``edge_index`` (tree edges, both directions, as :func:`tree_edge_index` orders
-    them per graph), ``batch`` and ``ptr``, and per graph ``start`` and ``goal`` ``(B, d)``
-    and ``active_tree`` ``(B,)``; it equals ``Batch.from_data_list`` of the per-graph
-    ``Data`` (``get_example``/``to_data_list`` work). An unbatched observation returns one
-    ``Data`` whose ``start``/``goal`` are ``(1, d)`` and ``active_tree`` ``(1,)``.
+    ``x``, ``pos``, ``edge_index``, ``batch`` and ``ptr`` as in the ``Batch``; per graph ``start``,
+    ``goal`` ``(B, d)``, ``active_tree`` ``(B,)`` and ``counts`` (real nodes); ``edge_ptr`` the
+    slice of each graph's edges; ``batch_shape`` the observation's leading shape (``()``: one
+    graph, whose ``batch`` is all zeros and ``ptr`` ``[0, n]``).
     """
+
+    x: torch.Tensor
+    pos: torch.Tensor
+    edge_index: torch.Tensor
+    batch: torch.Tensor
+    ptr: torch.Tensor
+    counts: torch.Tensor
+    start: torch.Tensor
+    goal: torch.Tensor
+    active_tree: torch.Tensor
+    edge_ptr: torch.Tensor
+    batch_shape: torch.Size
+
+
+def tree_graph(obs: Mapping, features: str = "node_features") -> TreeGraph:
+    """The padded observation (any leading batch shape) as graph tensors: the conversion of
+    :func:`to_pyg`, which wraps this result in a PyG ``Batch`` / ``Data``."""
     feats = _as_tensor(obs[features], torch.float32)
     batch_shape = feats.shape[:-2]
     if len(batch_shape) == 0:      # one graph: plain slicing has less fixed overhead (4x at 1,000 nodes)
@@ -130,18 +139,41 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
     pairs[1, :, 1] = src
     edge_index = pairs.view(2, 2 * m)
     edge_ptr = 2 * torch.searchsorted(child, ptr)
+    return TreeGraph(x, pos, edge_index, batch, ptr, counts, start, goal, active_tree, edge_ptr, batch_shape)
 
-    out = Batch(_base_cls=Data, x=x, edge_index=edge_index, pos=pos, start=start, goal=goal,
-                active_tree=active_tree, num_nodes=total, batch=batch, ptr=ptr)
+
+def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
+    """Padded observation (any leading batch shape) -> PyG ``Batch`` (unbatched: ``Data``).
+
+    ``obs`` is a numpy dict, a dict of tensors or a ``TensorDict`` with the keys of
+    :data:`gnn_mp_envs.envs.observation.OBSERVATION_KEYS`, each with the same leading batch
+    shape ``S`` (possibly empty, possibly more than one dimension; the ``B = prod(S)`` graphs
+    are numbered in row-major order). Integer entries (``parent``, ``num_nodes``, ``mask``,
+    ``active_tree``) may be floats.
+
+    The result holds ``x`` (the ``features`` rows of the real nodes, float32), ``pos`` (their
+    states), ``edge_index`` (tree edges, both directions, as :func:`tree_edge_index` orders
+    them per graph), ``batch`` and ``ptr``, and per graph ``start`` and ``goal`` ``(B, d)``
+    and ``active_tree`` ``(B,)``; it equals ``Batch.from_data_list`` of the per-graph
+    ``Data`` (``get_example``/``to_data_list`` work). An unbatched observation returns one
+    ``Data`` whose ``start``/``goal`` are ``(1, d)`` and ``active_tree`` ``(1,)``.
+    """
+    g = tree_graph(obs, features)
+    if len(g.batch_shape) == 0:
+        return Data(x=g.x, pos=g.pos, edge_index=g.edge_index, start=g.start, goal=g.goal,
+                    active_tree=g.active_tree, num_nodes=int(g.counts[0]))
+    B, total, dev = g.counts.numel(), int(g.ptr[-1]), g.x.device
+    out = Batch(_base_cls=Data, x=g.x, edge_index=g.edge_index, pos=g.pos, start=g.start, goal=g.goal,
+                active_tree=g.active_tree, num_nodes=total, batch=g.batch, ptr=g.ptr)
     # Bookkeeping that Batch.from_data_list writes, so get_example / to_data_list work.
     graph_ptr = torch.arange(B + 1, device=dev)
     zeros = torch.zeros(B, dtype=torch.long, device=dev)
-    out._slice_dict = {"x": ptr, "edge_index": edge_ptr, "pos": ptr,
+    out._slice_dict = {"x": g.ptr, "edge_index": g.edge_ptr, "pos": g.ptr,
                        "start": graph_ptr, "goal": graph_ptr, "active_tree": graph_ptr}
-    out._inc_dict = {"x": zeros, "edge_index": ptr[:-1], "pos": zeros,
+    out._inc_dict = {"x": zeros, "edge_index": g.ptr[:-1], "pos": zeros,
                      "start": zeros, "goal": zeros, "active_tree": zeros}
     out._num_graphs = B
-    out._store._num_nodes = counts.tolist()
+    out._store._num_nodes = g.counts.tolist()
     return out
 
 
@@ -154,27 +186,31 @@ def to_pyg_per_graph(obs: Mapping, features: str = "node_features") -> Data | Ba
     feats = _as_tensor(obs[features], torch.float32)
     batch_shape = feats.shape[:-2]
     if len(batch_shape) == 0:
-        return _one_graph({k: obs[k] for k in obs.keys()}, feats)
+        return to_pyg(obs, features)
     B = int(np.prod(batch_shape))
     flat = {k: _as_tensor(obs[k]).reshape(B, *_as_tensor(obs[k]).shape[len(batch_shape):])
             for k in obs.keys()}
-    return Batch.from_data_list([_one_graph({k: v[b] for k, v in flat.items()},
-                                            feats.reshape(B, *feats.shape[-2:])[b]) for b in range(B)])
+    return Batch.from_data_list([to_pyg({k: v[b] for k, v in flat.items()}, features) for b in range(B)])
 
 
-def _one_graph(obs: Mapping, feats: torch.Tensor) -> Data:
+def _one_graph(obs: Mapping, feats: torch.Tensor) -> TreeGraph:
     n = int(_as_index(obs["num_nodes"]).reshape(-1)[0])
     if n <= 0:  # a batched TorchRL reset may hand over zero-padded rows; fall back to the mask
         n = int(_as_tensor(obs["mask"]).sum())
     n = min(n, feats.shape[0])
-    return Data(
+    edge_index = tree_edge_index(obs["parent"], n)
+    return TreeGraph(
         x=feats[:n],
         pos=_as_tensor(obs["nodes"], torch.float32)[:n],
-        edge_index=tree_edge_index(obs["parent"], n),
+        edge_index=edge_index,
+        batch=torch.zeros(n, dtype=torch.long, device=feats.device),
+        ptr=torch.tensor([0, n], device=feats.device),
+        counts=torch.tensor([n], device=feats.device),
         start=_as_tensor(obs["start"], torch.float32).reshape(1, -1),
         goal=_as_tensor(obs["goal"], torch.float32).reshape(1, -1),
         active_tree=_as_index(obs["active_tree"]).reshape(1),
-        num_nodes=n,
+        edge_ptr=torch.tensor([0, edge_index.shape[1]], device=feats.device),
+        batch_shape=torch.Size(),
     )
 
 

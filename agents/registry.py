@@ -57,7 +57,7 @@ def descriptions() -> dict[str, str]:
 
 
 def _bounds_for(name: str, task: str | None, bounds: tuple[Any, Any] | None) -> tuple[np.ndarray, np.ndarray]:
-    from gnn_mp_envs.registration import task_spec
+    from gnn_mp_envs.registration import same_bounds, task_spec
     if task is None:
         if bounds is None:
             raise ValueError(f"sampler {name!r} needs task=NAME (bounds from its TaskSpec) or bounds=(low, high)")
@@ -66,8 +66,7 @@ def _bounds_for(name: str, task: str | None, bounds: tuple[Any, Any] | None) -> 
     spec_low, spec_high = task_spec(task).state_bounds()
     if bounds is not None:
         low, high = (np.asarray(b, dtype=np.float64) for b in bounds)
-        if low.shape != spec_low.shape or not (np.allclose(low, spec_low, atol=1e-5)
-                                               and np.allclose(high, spec_high, atol=1e-5)):
+        if not same_bounds((low, high), (spec_low, spec_high)):
             raise ValueError(f"bounds {low.tolist()}..{high.tolist()} are not task {task!r}'s "
                              f"({spec_low.tolist()}..{spec_high.tolist()})")
     return spec_low, spec_high

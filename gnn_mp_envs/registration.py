@@ -189,6 +189,16 @@ def task_spec(name: str) -> TaskSpec:
         raise ValueError(f"unknown task {name!r}; known: {', '.join(sorted(TASK_SPECS))}") from None
 
 
+def same_bounds(first: tuple[Any, Any], second: tuple[Any, Any]) -> bool:
+    """Whether two ``(low, high)`` pairs are the same state box: equal shapes and values within
+    float32 rounding (``atol=1e-5``; checkpoints and spaces store bounds as float32). The one
+    comparison behind every "same state bounds" check (a sampler's ``bounds=``, a policy
+    checkpoint's, a task borrowing another's weights)."""
+    (low_a, high_a), (low_b, high_b) = ([np.asarray(v, np.float64) for v in pair] for pair in (first, second))
+    return (low_a.shape == low_b.shape == high_a.shape == high_b.shape
+            and bool(np.allclose(low_a, low_b, atol=1e-5)) and bool(np.allclose(high_a, high_b, atol=1e-5)))
+
+
 def make_task(name: str, **kwargs: Any):
     """Instantiate a registered task family by name."""
     return task_spec(name).task_class()(**kwargs)

@@ -22,3 +22,9 @@ def run_uniform(env: Any, seed: int | None = None, rng_seed: int = 0, max_steps:
     obs, info = env.reset(seed=seed, options=options)
     result = run_steps(env, uniform_policy(env, rng_seed), obs, max_steps=max_steps, info=info)
     return result.observation, result.info, result.terminated
+
+
+def report_sigint_ignored(queue: Any) -> None:
+    """A worker process's target: put whether it ignores Ctrl-C (SIGINT disposition SIG_IGN)."""
+    import signal
+    queue.put(signal.getsignal(signal.SIGINT) == signal.SIG_IGN)

@@ -27,6 +27,14 @@ def test_halton_points_match_radical_inverse():
     assert np.allclose(pts, [[0.5, 1 / 3], [0.25, 2 / 3], [0.75, 1 / 9], [0.125, 4 / 9]])
 
 
+@pytest.mark.parametrize("n, d, digest", [(2000, 2, "f542b44dcdc551d7"), (200, 2, "79b69112c2e8e823"),
+                                          (50, 7, "1c3d732c413f015c")])
+def test_halton_points_are_the_hand_written_sequences_bit_for_bit(n, d, digest):
+    """scipy's qmc.Halton replaced a hand-written radical inverse; the digests are of the old
+    function's output, so every graph, dataset cache and shipped critical model still fits."""
+    assert hashlib.sha256(halton_points(n, d).tobytes()).hexdigest()[:16] == digest
+
+
 def test_too_small_radius_is_refused():
     with pytest.raises(ValueError):
         halton_graph(200, radius=0.01)
@@ -132,7 +140,33 @@ def _break_crc(path):
     path.write_bytes(bytes(data))
 
 
-@pytest.mark.parametrize("corrupt", [_truncate, _empty, _break_crc], ids=["truncated", "empty", "crc"])
+def _rewritten(path, **changes):
+    """A valid zip of the format whose contents do not fit (issue #21, item 22: an IndexError later)."""
+    from dataclasses import replace
+
+    from gnn_mp_envs.critical.dataset import save_problems
+    save_problems(replace(load_problems(path), **changes), path)
+
+
+def _label_outside_graph(path):
+    problems = load_problems(path)
+    _rewritten(path, label_nodes=problems.label_nodes + problems.config.graph_nodes)
+
+
+def _offsets_past_labels(path):
+    problems = load_problems(path)
+    _rewritten(path, label_ptr=problems.label_ptr * 3)
+
+
+def _another_graphs_edges(path):
+    problems = load_problems(path)
+    _rewritten(path, edge_free=problems.edge_free[:, :-7])
+
+
+@pytest.mark.parametrize("corrupt", [_truncate, _empty, _break_crc, _label_outside_graph, _offsets_past_labels,
+                                     _another_graphs_edges],
+                         ids=["truncated", "empty", "crc", "label-outside-graph", "offsets-past-labels",
+                              "another-graphs-edges"])
 def test_damaged_cache_is_regenerated_with_a_one_line_warning(tmp_path, corrupt, caplog):
     """Issue #11 item 8: no BadZipFile / EOFError / TypeError traceback; byte-identical regeneration."""
     from gnn_mp_envs.critical.dataset import DatasetCacheError, load_or_generate

@@ -42,7 +42,13 @@ def test_default_output_is_a_run_directory_not_the_package(data_dir, tmp_path):
     run = ckpt.parent
     assert run.parent == tmp_path / "runs" and run.name.startswith("gnn-seed0-")
     assert sorted(p.name for p in run.iterdir()) == ["critical_gnn.json", "critical_gnn.pt",
-                                                     "critical_gnn.resume.pt"]
+                                                     "critical_gnn.resume.pt", "tb"]
+    # TensorBoard events (issue #21, item 9): the loss per step, the validation scores per epoch
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    events = EventAccumulator(str(run / "tb" / "critical_gnn")).Reload()
+    steps = json.loads((run / "critical_gnn.json").read_text())["history"][0]["steps"]
+    assert [e.step for e in events.Scalars("train/loss")] == list(range(1, steps + 1))
+    assert [e.step for e in events.Scalars("val/val_score")] == [steps]
     config = json.loads((run / "critical_gnn.json").read_text())   # the config beside the weights
     assert config["args"]["hidden"] == 8 and config["hparams"]["model"]["hidden_channels"] == 8
     assert config["dataset"]["seed"] == TINY.seed and len(config["history"]) == 1
@@ -137,3 +143,14 @@ def test_node_level_training_max_steps_and_selection(data_dir, tmp_path):
     model, _, record = load_model(res["checkpoint"], "cnn")
     assert model.readout == "heatmap" and record["meta"]["hparams"]["node_target"] == "any"
     assert record["meta"]["hparams"]["max_steps"] == 3
+
+
+def test_every_sub_command_takes_the_dataset_size_flags():
+    """generate-data's --num-maps / --pairs-per-map / --eval-problems made a cache that train and
+    evaluate did not use (they regenerated the full 4,800-problem set); the flags are now every
+    sub-command's, and the same flags name the same dataset."""
+    from train.critical.config import EvaluateArgs, GenerateArgs
+    flags = {"data_seed": TINY.seed, "num_maps": TINY.num_maps, "pairs_per_map": TINY.pairs_per_map,
+             "eval_problems": TINY.eval_problems}
+    assert GenerateArgs(**flags).dataset() == TrainArgs(model="gnn", **flags).dataset() == \
+        EvaluateArgs(**flags).dataset() == TINY

@@ -1,15 +1,28 @@
-"""Every python block of every docs page (and the README) runs as written: the blocks of a page in
-order, in one fresh interpreter started in an empty directory (so nothing depends on the repository
-being the working directory). docs/samplers.md and docs/rl.md have tests of their own that also
-check what their blocks print (tests/test_samplers.py, tests/test_rl.py)."""
+"""Every fenced block of every docs page (and the README) runs as written.
+
+* Every fence names its language: ``python``, ``bash`` (commands) or ``text`` (output, layouts),
+  so no command can hide in an unlabelled block.
+* The python blocks of a page run in order, in one fresh interpreter started in an empty
+  directory (nothing depends on the repository being the working directory). docs/samplers.md
+  and docs/rl.md have tests of their own that also check what their blocks print
+  (tests/test_samplers.py, tests/test_rl.py).
+* The bash blocks of a page run in order, each with ``bash -e -o pipefail``, in a fresh copy of
+  the repository (what a new user has after ``git clone``), with ``.venv/bin`` there pointing at
+  the test's interpreter. A python block whose first line is ``# file: PATH`` is that file of the
+  user's own (``my_pkg/disks.py``); it is written there first. The commands run with the budget
+  flags of tests/docs_shim.py appended (docs/index.md, "How the docs are tested"), in processes
+  forked from one preloaded interpreter (tests/docs_server.py).
+"""
 
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -17,21 +30,69 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").glob("*.md")])
 TESTED_ELSEWHERE = {"samplers.md", "rl.md"}
+LANGUAGES = {"python", "bash", "text"}
+FENCE = re.compile(r"^( *)```([^\n`]*)\n(.*?)^\1```", re.M | re.S)
+FILE_LINE = re.compile(r"# file: (\S+)")
+
+
+def blocks(path: Path) -> list[tuple[str, str]]:
+    """``(language, code)`` of every fenced block, in order (indented blocks dedented)."""
+    return [(m.group(2).strip(), textwrap.dedent(m.group(3))) for m in FENCE.finditer(path.read_text())]
 
 
 def python_blocks(path: Path) -> list[str]:
-    return [textwrap.dedent(m.group(2)) for m in re.finditer(r"^( *)```python\n(.*?)^\1```", path.read_text(),
-                                                            re.M | re.S)]
+    return [code for lang, code in blocks(path) if lang == "python"]
+
+
+def shell_blocks(path: Path) -> list[str]:
+    return [code for lang, code in blocks(path) if lang == "bash"]
+
+
+def file_blocks(path: Path) -> dict[str, str]:
+    """The user's own files a page shows: python blocks starting ``# file: PATH`` (concatenated)."""
+    files: dict[str, str] = {}
+    for code in python_blocks(path):
+        match = FILE_LINE.match(code)
+        if match:
+            files[match.group(1)] = files.get(match.group(1), "") + code + "\n"
+    return files
 
 
 WITH_BLOCKS = [p for p in PAGES if python_blocks(p) and p.name not in TESTED_ELSEWHERE]
+WITH_COMMANDS = [p for p in PAGES if shell_blocks(p)]
+
+
+def test_every_fence_names_its_language():
+    unnamed = [(p.name, code.splitlines()[0] if code.strip() else "") for p in PAGES for lang, code in blocks(p)
+               if lang not in LANGUAGES]
+    assert not unnamed, f"fences without python / bash / text: {unnamed}"
 
 
 def test_the_pages_with_blocks_are_the_expected_ones():
-    """An oracle for the block reader: pages known to hold python blocks are found (a reader that
-    found none would make the test below vacuous)."""
+    """An oracle for the block reader: pages known to hold python and bash blocks are found (a
+    reader that found none would make the tests below vacuous)."""
     names = {p.name for p in PAGES if python_blocks(p)}
     assert {"README.md", "environments.md", "samplers.md", "rl.md", "adding_a_task.md"} <= names
+    assert {"README.md", "quickstart.md", "rl.md", "critical.md", "adding_a_task.md", "learned_samplers.md",
+            "results.md", "samplers.md"} <= {p.name for p in WITH_COMMANDS}
+    assert set(file_blocks(ROOT / "docs" / "adding_a_task.md")) == {"my_pkg/disks.py"}
+    assert sum(len(shell_blocks(p)) for p in PAGES) >= 15
+
+
+def test_the_budget_table_of_the_docs_is_the_one_applied():
+    """docs/index.md prints tests/docs_shim.py's BUDGET: the reader sees what the test changes."""
+    from docs_shim import BUDGET
+    rows = dict(re.findall(r"^\| `([^`]+)` \| `([^`]+)` \|$", (ROOT / "docs" / "index.md").read_text(), re.M))
+    assert rows == {command: " ".join(flags) for command, flags in BUDGET.items()}
+
+
+def test_the_budget_is_appended_to_the_commands_it_names():
+    from docs_shim import budget
+    assert budget(["gnn-mp", "benchmark", "--task", "arm", "--problems", "20"])[:2] == ["--problems", "2"]
+    assert budget(["gnn-mp", "benchmark", "--workers", "2", "--suite", "default"]) == ["--suite", "smoke", "--workers", "1"]
+    assert budget(["gnn-mp", "critical", "train", "--model", "gnn"])[-2:] == ["--batch-size", "2"]
+    assert budget(["gnn-mp", "train", "rl", "--help"]) == [] and budget(["gnn-mp", "samplers"]) == []
+    assert budget(["python", "-m", "pytest", "-q"]) == ["tests/test_architecture.py"]
 
 
 @pytest.mark.parametrize("page", WITH_BLOCKS, ids=lambda p: p.name)
@@ -42,3 +103,130 @@ def test_page_blocks_run(page, tmp_path):
     result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
                             timeout=900)
     assert result.returncode == 0, result.stderr[-3000:]
+
+
+# ---------------------------------------------------------------------------- the bash blocks
+#: Not part of a fresh clone (when git cannot list the files, e.g. in an unpacked archive).
+NOT_CLONED = {".git", ".venv", "runs", "results", "data", "__pycache__", ".pytest_cache", ".hypothesis"}
+
+
+def fresh_clone(target: Path) -> Path:
+    """The repository's files as ``git clone`` gives them (tracked and new, not ignored ones)."""
+    try:
+        listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
+                                capture_output=True, check=True).stdout.decode().split("\0")
+    except (OSError, subprocess.CalledProcessError):
+        listed = [str(p.relative_to(ROOT)) for p in ROOT.rglob("*")
+                  if not NOT_CLONED & set(p.relative_to(ROOT).parts)]
+    for name in filter(None, listed):
+        source = ROOT / name
+        if source.is_file():
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, target / name)
+    return target
+
+
+class DocsRunner:
+    """The preloaded server, the package copy it imports (``--ship`` writes there), the shims."""
+
+    def __init__(self, base: Path) -> None:
+        self.package = fresh_clone(base / "package")
+        self.bin = base / "bin"
+        self.bin.mkdir()
+        import tempfile
+        self.socket = Path(tempfile.mkdtemp(prefix="gnnmp-docs-")) / "sock"   # short: AF_UNIX paths hold ~100 bytes
+        shim = Path(__file__).with_name("docs_shim.py")
+        for kind in ("gnn-mp", "python"):
+            wrapper = self.bin / kind
+            wrapper.write_text(f'#!/bin/sh\nexec "{sys.executable}" -S "{shim}" "{self.socket}" "{sys.executable}" '
+                               f'{kind} "$@"\n')
+            wrapper.chmod(0o755)
+        self.log = open(base / "server.log", "w+")
+        self.server = subprocess.Popen([sys.executable, str(Path(__file__).with_name("docs_server.py")),
+                                        str(self.socket)], cwd=self.package, env=self.env(), stdout=subprocess.PIPE,
+                                       stderr=self.log, text=True, start_new_session=True)
+        if self.server.stdout.readline().strip() != "ready":
+            self.log.seek(0)
+            raise RuntimeError(f"the docs server did not start: {self.log.read()[-3000:]}")
+
+    def env(self) -> dict[str, str]:
+        return dict(os.environ, PYTHONPATH=str(self.package), PATH=f"{self.bin}{os.pathsep}{os.environ['PATH']}",
+                    MPLBACKEND="Agg")
+
+    def clone_for(self, page: Path, target: Path) -> Path:
+        """A fresh clone with ``.venv/bin`` pointing at the shims (installed: ``make`` skips the
+        install) and the page's own files written."""
+        clone = fresh_clone(target)
+        venv_bin = clone / ".venv" / "bin"
+        venv_bin.mkdir(parents=True)
+        for kind in ("gnn-mp", "python"):
+            (venv_bin / kind).symlink_to(self.bin / kind)
+        stamp = clone / ".venv" / ".installed"
+        stamp.touch()
+        os.utime(stamp, (time.time() + 60, time.time() + 60))      # newer than pyproject.toml
+        for name, code in file_blocks(page).items():
+            (clone / name).parent.mkdir(parents=True, exist_ok=True)
+            (clone / name).write_text(code)
+        return clone
+
+    def restore_shipped(self) -> None:
+        """Undo a page's ``--ship`` in the package copy the server imports (atomically per file: the
+        other page running meanwhile may be loading one)."""
+        shipped = self.package / "agents" / "checkpoints"
+        for path in shipped.iterdir():
+            if path.is_file() and not (ROOT / "agents" / "checkpoints" / path.name).is_file():
+                path.unlink()
+        for path in (ROOT / "agents" / "checkpoints").iterdir():
+            if path.is_file() and path.read_bytes() != (shipped / path.name).read_bytes():
+                shutil.copy2(path, shipped / (path.name + ".restoring"))
+                os.replace(shipped / (path.name + ".restoring"), shipped / path.name)
+
+    def run_page(self, page: Path, target: Path) -> str | None:
+        """The page's bash blocks in order in a fresh clone; None, or what failed."""
+        clone = self.clone_for(page, target)
+        try:
+            for code in shell_blocks(page):
+                result = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", code], cwd=clone, env=self.env(),
+                                        capture_output=True, text=True, timeout=1200)
+                if result.returncode != 0:
+                    return (f"{page.name}: this block failed (rc {result.returncode}):\n{code}\n"
+                            f"--- stderr\n{result.stderr[-4000:]}\n--- stdout\n{result.stdout[-2000:]}")
+            return None
+        finally:
+            self.restore_shipped()
+
+    def start(self, pages: list[Path], base: Path, concurrent: int = 2) -> None:
+        """Run the pages two at a time (the commands mostly use one core each)."""
+        from concurrent.futures import ThreadPoolExecutor
+        self.pool = ThreadPoolExecutor(concurrent)
+        self.results = {page: self.pool.submit(self.run_page, page, base / page.stem) for page in pages}
+
+    def close(self) -> None:
+        if hasattr(self, "pool"):
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        try:
+            os.killpg(self.server.pid, 9)
+        except ProcessLookupError:
+            pass
+        self.server.wait()
+        self.log.close()
+        shutil.rmtree(self.socket.parent, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def docs_runner(tmp_path_factory, request):
+    """The server, running every selected page's commands (two pages at a time) from the start."""
+    base = tmp_path_factory.mktemp("docs")
+    runner = DocsRunner(base)
+    selected = [item.callspec.params["page"] for item in request.session.items
+                if getattr(item, "originalname", None) == "test_page_commands_run"]
+    runner.start(selected, base)
+    yield runner
+    runner.close()
+
+
+@pytest.mark.parametrize("page", WITH_COMMANDS, ids=lambda p: p.name)
+def test_page_commands_run(page, docs_runner):
+    """The page's bash blocks, in order, in a fresh clone, with the budget flags appended."""
+    failure = docs_runner.results[page].result()
+    assert failure is None, failure

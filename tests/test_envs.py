@@ -30,6 +30,47 @@ def test_sb3_checker(env_id):
     check_env(gym.make(env_id, max_nodes=300).unwrapped, warn=False)
 
 
+def checker_warnings(check, env) -> set[str]:
+    """The kinds of warning a checker gives (see docs/environments.md, "What the checkers say")."""
+    import warnings
+    kinds = {"infinity": "infinite bounds", "normalized": "action box not [-1, 1]",
+             "unconventional shape": "2-D observation entries"}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check(env)
+    found = set()
+    for w in caught:
+        text = str(w.message)
+        matched = [kind for key, kind in kinds.items() if key in text]
+        assert matched or "is a wrapper" in text, f"an undocumented checker warning: {text[:200]}"
+        found.update(matched)
+    return found
+
+
+@pytest.mark.parametrize("task, env_id, normalized", [("maze2d", "GNNMP/Maze2DRRT-v0", True),
+                                                      ("pendulum", "GNNMP/PendulumRRT-v0", False),
+                                                      ("arm", "GNNMP/ArmBiRRT-v0", False)])
+def test_the_checkers_warn_about_exactly_what_the_docs_explain(task, env_id, normalized):
+    """Issue #21, item 10: the warnings of Gymnasium's and SB3's checkers are the three documented,
+    by-design ones; the only unbounded key is ``obstacles``; make_rl_env's envs have the [-1, 1]
+    action box RL libraries want."""
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    from gnn_mp_envs.envs.wrappers import make_rl_env
+    env = gym.make(env_id, max_nodes=300, disable_env_checker=True)
+    unbounded = [k for k, space in env.observation_space.spaces.items()
+                 if hasattr(space, "low") and not (np.isfinite(space.low).all() and np.isfinite(space.high).all())]
+    assert unbounded == ["obstacles"]
+    gym_kinds = {"infinite bounds"} | (set() if normalized else {"action box not [-1, 1]"})
+    assert checker_warnings(lambda e: gym_check_env(e, skip_render_check=True), env.unwrapped) == gym_kinds
+    assert checker_warnings(lambda e: sb3_check_env(e, skip_render_check=True), env.unwrapped) == {
+        "action box not [-1, 1]", "2-D observation entries"}
+    env.close()
+    rl_env = make_rl_env(task)
+    assert checker_warnings(lambda e: sb3_check_env(e, skip_render_check=True), rl_env) == {"2-D observation entries"}
+    rl_env.close()
+
+
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_torchrl_specs(env_id):
     from torchrl.envs import GymEnv

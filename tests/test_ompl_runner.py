@@ -66,6 +66,35 @@ def test_a_runner_past_its_timeout_is_killed_and_reported(tmp_path):
     assert time.monotonic() - started < 30
 
 
+@pytest.mark.parametrize("payload", ['{"results": {"0": {}}}', '{"results": [{"solved": true}]}',
+                                     '{"results": [{"solved": "yes"}, {"solved": false}]}',
+                                     '{"results": [{"solved": true, "nodes": "many"}, {"solved": false}]}',
+                                     '[1, 2]', '{"results": [', '"ok"'])
+def test_a_runner_answer_of_the_wrong_shape_is_one_line(tmp_path, payload):
+    """Another runner (python=...) writing JSON of another shape, or none at all: a RuntimeError of one
+    line saying what came back, not a traceback deep in the benchmark (issue #21, item 22)."""
+    wrapper = tmp_path / "python_with_another_runner"
+    wrapper.write_text("#!/bin/sh\nwhile [ $# -gt 0 ]; do if [ \"$1\" = --json ]; then out=$2; fi; shift; done\n"
+                       f"printf '%s' '{payload}' > \"$out\"\n")
+    wrapper.chmod(0o755)
+    with pytest.raises(RuntimeError) as info:
+        run_ompl("maze2d", [0, 1], python=str(wrapper))
+    assert "\n" not in str(info.value) and "OMPL runner" in str(info.value), info.value
+
+
+@needs_ompl
+@pytest.mark.parametrize("modules", [["tests.tiny_task"], []], ids=["--import", "entry-point-module"])
+def test_a_task_registered_outside_the_package_gets_ompl_rows(modules):
+    """The runner process registers the task too: from the benchmark's --import modules, else from
+    the module of the task's entry point (it used to build built-in tasks only: 'unknown task')."""
+    from tests import tiny_task  # noqa: F401  (registers "tiny" here)
+    from train import benchmark as bm
+    report = bm.run_benchmark(bm.BenchmarkArgs(task="tiny", samplers=["uniform", "ompl-rrtconnect"], problems=2,
+                                               modules=modules, progress=False))
+    runs = report["runs"]["ompl-rrtconnect"]
+    assert [r["problem"] for r in runs] == [0, 1] and all(r["success"] and r["path_valid"] for r in runs)
+
+
 def test_unknown_planner_is_refused():
     with pytest.raises(ValueError, match="rrtconnect"):
         run_ompl("maze2d", [0], planner="prm")

@@ -214,6 +214,28 @@ def test_encoder_is_equivariant_to_permuting_the_batch(conv, knn):
     assert not torch.allclose(embed[0], embed[1])       # and graphs are not all mapped to one point
 
 
+@pytest.mark.parametrize("knn", [0, 4])
+def test_encoder_sage_fast_path_is_pygs_sageconv_bit_for_bit(knn, monkeypatch):
+    """MeanEdges.conv computes what PyG's SAGEConv (mean) computes, bit for bit, forward and backward:
+    the oracle is the same encoder calling the PyG layers themselves."""
+    import agents.encoders as encoders
+    torch.manual_seed(0)
+    enc = TreeEncoder.from_space(ARM_SPACE, hidden_channels=16, num_layers=3, out_channels=8, knn=knn)
+    batched = as_tensors(random_tree_obs(ARM_SPACE, [5, 60, 12, None, 1, 30], np.random.default_rng(4)))
+    inputs = [batched, {k: v[1] for k, v in batched.items()}]
+    fast = [enc(o) for o in inputs]
+    grads_fast = torch.autograd.grad(fast[0][1].square().sum(), list(enc.parameters()))
+    with monkeypatch.context() as m:
+        m.setattr(encoders, "_plain_mean_sage", lambda conv: False)       # every layer through PyG
+        slow = [enc(o) for o in inputs]
+        grads_slow = torch.autograd.grad(slow[0][1].square().sum(), list(enc.parameters()))
+    for got, want in zip(fast, slow):
+        for a, b in zip(got, want):
+            assert torch.equal(a, b)
+    assert all(torch.equal(a, b) for a, b in zip(grads_fast, grads_slow))
+    assert encoders._plain_mean_sage(enc.tree_convs[0])                 # the fast path was taken
+
+
 def test_encoder_trains_end_to_end_and_rejects_unknown_names():
     enc = TreeEncoder.from_space(MAZE_SPACE, hidden_channels=8, num_layers=2, out_channels=4, knn=3)
     obs = as_tensors(random_tree_obs(MAZE_SPACE, [5, 40, None], np.random.default_rng(3)))
@@ -357,6 +379,22 @@ def test_bench_sampler_reports_both_measurements(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--samplers", "nope"])
     assert exc.value.code == 2 and "unknown sampler" in capsys.readouterr().err
+
+
+def test_bench_sampler_takes_repeatable_flags_like_the_benchmark(capsys, tmp_path):
+    """--checkpoint NAME=PATH and --import MODULE repeat, as in `gnn-mp benchmark` (they were comma lists)."""
+    from agents.checkpoints import shipped_checkpoint
+    from tools.bench_sampler import Args, main
+    from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+    parser = OneLineParser()
+    add_dataclass_arguments(parser, Args)
+    gnn, cvae = shipped_checkpoint("gnn", "maze2d"), shipped_checkpoint("cvae", "maze2d")
+    args = from_namespace(Args, parser.parse_args(["--checkpoint", f"gnn={gnn}", "--checkpoint", f"cvae={cvae}",
+                                                   "--import", "tests.tiny_task", "--import", "json"]))
+    assert args.checkpoints == {"gnn": gnn, "cvae": cvae} and args.modules == ["tests.tiny_task", "json"]
+    with pytest.raises(SystemExit) as exc:
+        main(["--checkpoint", f"gnn={tmp_path / 'missing.pt'}"])
+    assert exc.value.code == 2 and "does not exist" in capsys.readouterr().err
 
 
 def test_bench_sampler_skips_a_task_whose_planner_solves_before_the_tree_size(capsys):

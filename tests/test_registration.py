@@ -167,3 +167,16 @@ def test_a_task_in_a_shipped_state_space_borrows_its_weights_with_weights_from()
             TASK_SPECS.pop(spec.name, None)
             for env_id in spec.envs:
                 gym.registry.pop(env_id, None)
+
+
+def test_same_bounds_is_the_one_comparison_of_state_boxes():
+    """Hand-made cases: float32 rounding passes; another value, another dimension or a swapped pair fail."""
+    from gnn_mp_envs.registration import same_bounds
+    box = (np.zeros(2), np.ones(2))
+    assert same_bounds(box, (np.zeros(2, np.float32), np.ones(2, np.float32)))
+    assert same_bounds((np.array([-np.pi, -8.0]), np.array([np.pi, 8.0])),
+                       (np.array([-np.pi, -8.0], np.float32), np.array([np.pi, 8.0], np.float32)))
+    assert not same_bounds(box, (np.zeros(2), np.array([1.0, 1.01])))
+    assert not same_bounds(box, (np.zeros(3), np.ones(3)))
+    assert not same_bounds(box, (np.ones(2), np.zeros(2)))
+    assert not same_bounds(box, (np.zeros(2), np.ones(3)))

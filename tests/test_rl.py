@@ -411,6 +411,7 @@ def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     (["--init-from", "{dir}"], "no such file"),
     (["--init-from", "{truncated}"], "truncated.pt"),
     (["--init-from", "{crafted}"], "crafted.pt"),
+    (["--init-from", "gnm"], "shipped: cvae, gnn, gnn-cvae, rl-ppo"),
 ])
 def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment, tmp_path, capsys):
     """Values that cannot train (issue #21, item 14) end in one line and rc 2 before any env is built."""
@@ -427,6 +428,16 @@ def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
     assert not (tmp_path / "run").exists()
+
+
+def test_train_rl_init_from_takes_a_shipped_sampler_name(tmp_path, monkeypatch):
+    """`--init-from gnn` is the task's shipped gnn weights from any directory (docs/rl.md used a path
+    into the checkout, which failed elsewhere; issue #21, item 6)."""
+    from agents.checkpoints import shipped_checkpoint
+    from train.rl.cli import parse
+    monkeypatch.chdir(tmp_path)
+    args = parse(["--encoder", "tree-gnn", "--init-from", "gnn", "--task", "pendulum"])
+    assert args.init_from == shipped_checkpoint("gnn", "pendulum") and args.init_from.is_file()
 
 
 def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys):
@@ -458,3 +469,62 @@ def test_a_complex_action_is_refused():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="real"):
         env.step(np.array([0.5 + 1j, 0.5]))
+
+
+def test_reward_scale_is_gymnasiums_transform_reward_with_the_same_rewards():
+    """Gymnasium's TransformReward replaced a hand-written ScaleReward: every reward of an episode is
+    exactly the unscaled env's reward times the scale (same seed, same actions), and the env pickles."""
+    import pickle
+
+    from gymnasium.wrappers import TransformReward
+    scaled = make_rl_env("maze2d", reward_scale=0.01, view_nodes=8)
+    plain = make_rl_env("maze2d", reward_scale=1.0, view_nodes=8)
+    layer = scaled
+    while not isinstance(layer, TransformReward):
+        layer = layer.env
+    pickle.loads(pickle.dumps(layer))      # the TransformReward layer and the env it wraps
+    scaled.reset(seed=3)
+    plain.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        action = rng.uniform(-1, 1, 2).astype(np.float32)
+        _, r_scaled, term, trunc, _ = scaled.step(action)
+        _, r_plain, *_ = plain.step(action)
+        assert type(r_scaled) is float and r_scaled == float(r_plain) * 0.01
+        if term or trunc:
+            break
+
+
+def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_during_their_start():
+    """Ctrl-C on `train rl --lib torchrl --parallel` (issue #21, item 16): the env's worker processes
+    start with SIGINT ignored (no traceback per worker), while this process gets the KeyboardInterrupt
+    (exit 130, one line) even while the workers are still starting; its handler is restored after."""
+    import multiprocessing
+    import os
+    import signal
+    import threading
+
+    from helpers import report_sigint_ignored
+    from train.rl.torchrl import start_workers_deaf_to_ctrl_c
+    ctx = multiprocessing.get_context("spawn")
+    answers, release = ctx.Queue(), threading.Event()
+
+    class SlowStartingEnv:       # a ParallelEnv's start: spawn the workers, then wait for them
+        def start(self):
+            self.workers = [ctx.Process(target=report_sigint_ignored, args=(answers,)) for _ in range(2)]
+            for w in self.workers:
+                w.start()
+            threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()   # Ctrl-C meanwhile
+            release.wait(60)     # an ignored Ctrl-C: start returns, and no KeyboardInterrupt is raised
+
+    env = SlowStartingEnv()
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            start_workers_deaf_to_ctrl_c(env, 2)
+    finally:
+        release.set()
+    assert signal.getsignal(signal.SIGINT) is handler
+    assert [answers.get(timeout=60), answers.get(timeout=60)] == [True, True]
+    for w in env.workers:
+        w.join(10)

@@ -106,3 +106,46 @@ def test_worker_processes_make_the_same_dataset_file(tmp_path):
     one = save(generate(config, progress=False, workers=1), tmp_path / "one.npz")
     two = save(generate(config, progress=False, workers=2), tmp_path / "two.npz")
     assert one.read_bytes() == two.read_bytes()
+
+
+def _crafted(data: TreeDataset, case: str) -> TreeDataset:
+    """A readable file whose contents do not fit together (issue #21, item 22)."""
+    from dataclasses import replace
+    if case == "offsets past the arrays":
+        return replace(data, node_ptr=data.node_ptr + np.arange(len(data.node_ptr)) * 50)
+    if case == "path node outside its tree":
+        return replace(data, path_nodes=data.path_nodes + 10_000)
+    if case == "parent after its child":
+        parent = data.parent.copy()
+        parent[1] = 5
+        return replace(data, parent=parent)
+    if case == "iteration creates a node past the tree":
+        return replace(data, iter_created=data.iter_created + 10_000)
+    if case == "third tree":
+        return replace(data, tree_id=np.full_like(data.tree_id, 2))
+    raise AssertionError(case)
+
+
+CRAFTED = ["offsets past the arrays", "path node outside its tree", "parent after its child",
+           "iteration creates a node past the tree", "third tree"]
+
+
+@pytest.mark.parametrize("case", CRAFTED)
+def test_a_cache_with_out_of_range_contents_is_named_and_regenerated(tmp_path, case, caplog):
+    """Valid zips with contents that do not fit (offsets past the arrays, indices outside a tree)
+    were accepted and ended in an IndexError (or silently wrong snapshots) later; now loading names
+    the file and load_or_generate regenerates it with a one-line note."""
+    from train.tree.data import check_contents
+    data = hand_made()
+    check_contents(data)                                     # the oracle: the hand-made tree is fine
+    config = data.config
+    cached = save(_crafted(data, case), tmp_path / config.file_name())
+    with pytest.raises(DatasetCacheError, match=config.file_name()):
+        load(cached)
+    config = TreeDataConfig(task="maze2d", problems=2, max_nodes=600)
+    cached = save(_crafted(generate(config, progress=False), case), tmp_path / config.file_name())
+    with caplog.at_level("WARNING"):
+        regenerated = load_or_generate(config, tmp_path, progress=False)
+    assert [r.getMessage().count("\n") for r in caplog.records] == [0] and "regenerating" in caplog.text
+    check_contents(regenerated)
+    assert load(cached).node_ptr.tolist() == regenerated.node_ptr.tolist()

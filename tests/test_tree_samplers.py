@@ -127,6 +127,24 @@ def test_training_resumes_from_its_state(tmp_path):
     assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]
 
 
+def test_resume_refuses_the_state_of_another_run_in_one_line(tmp_path, capsys):
+    """`train sampler --resume` (issue #21, item 22): another model's state was a traceback, another
+    --lr / --batch-size / --seed resumed silently; each is refused in one line naming the flag (rc 2),
+    and the same flags resume."""
+    from train.tree.cli import main
+    base = ["--task", "maze2d", "--model", "gnn", "--problems", "4", "--minutes", "0.005", "--dagger-rounds", "0",
+            "--eval-problems", "0", "--out", str(tmp_path / "run"), "--data-dir", str(tmp_path / "data"),
+            "--no-progress"]
+    assert main(base) == 0 and (tmp_path / "run" / "resume.pt").exists()
+    capsys.readouterr()
+    for change, named in [(["--model", "cvae"], "model"), (["--lr", "0.001"], "lr"), (["--batch-size", "4"],
+                          "batch_size"), (["--seed", "1"], "seed"), (["--task", "pendulum"], "task")]:
+        assert main(base + change + ["--resume"]) == 2, change
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "another run" in err[0] and f"({named} " in err[0], err
+    assert main(base + ["--resume"]) == 0
+
+
 @pytest.mark.parametrize("name, proposals", [("gnn", 1), ("gnn", 8), ("gnn-cvae", 1), ("gnn-cvae", 4)])
 def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(name, proposals):
     """Two envs plan the same problem with different actions, one sampler serves both in turn

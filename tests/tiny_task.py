@@ -35,4 +35,4 @@ class TinyTask(Task):
 
 SPEC = register_task(TaskSpec("tiny", TinyTask, envs={"Tiny/TinyRRT-v0": {"planner": "rrt"},
                                                       "Tiny/TinyBiRRT-v0": {"planner": "birrt"}},
-                              max_nodes=400))
+                              max_nodes=400, ompl_planners=("rrtconnect", "rrt")))

@@ -13,12 +13,12 @@ Run: ``.venv/bin/python -m tools.bench_sampler`` from the repository root.
    each call, as in a planning loop (learned samplers cache per node, so they pay for every
    new node); the best of ``--rounds`` rounds is reported in microseconds per call. Learned
    samplers load their shipped weights, or ``--checkpoint NAME=PATH``; plugin samplers come
-   from ``--sampler-module MODULE``; a sampler that cannot serve a task prints ``n/a``.
+   from ``--import MODULE`` (both repeatable, as in ``gnn-mp benchmark``; ``--samplers`` and
+   ``--tasks`` are comma-separated lists, as there); a sampler that cannot serve a task prints ``n/a``.
 """
 
 from __future__ import annotations
 
-import importlib
 import sys
 import time
 from dataclasses import dataclass
@@ -36,8 +36,10 @@ from train.args import (
     add_dataclass_arguments,
     arg,
     from_namespace,
+    import_modules,
     positive_int,
 )
+from train.benchmark.args import checkpoint_pair
 
 SPLIT = "val"   # problems the trees are grown on (timing only; never the held-out split)
 
@@ -57,8 +59,10 @@ class Args:
     reference: bool = arg(True, "skip timing the per-graph reference converter")
     skip_to_pyg: bool = arg(False, "skip the to_pyg measurement")
     skip_act: bool = arg(False, "skip the act() measurement")
-    checkpoint: list[str] = arg([], "comma-separated NAME=PATH: checkpoint passed to sampler NAME's factory")
-    sampler_module: list[str] = arg([], "comma-separated modules to import first (they call register_sampler)")
+    checkpoints: dict[str, Path] = arg({}, "checkpoint passed to sampler NAME's factory (repeatable)",
+                                       flag="--checkpoint", metavar="NAME=PATH", parse=checkpoint_pair, append=True)
+    modules: list[str] = arg([], "import MODULE first: it registers samplers or tasks (repeatable)",
+                             flag=("--import", "--sampler-module"), metavar="MODULE", append=True)
     seed: int = arg(0, "seed of the problems, tree-growing actions and samplers")
     threads: int = arg(1, "torch threads", parse=positive_int)
     clock: str = arg("wall", "wall: elapsed time; cpu: this process's CPU time (steadier on a shared machine)",
@@ -144,7 +148,7 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
     """Seconds per ``act()`` call for each (sampler, task); None where a sampler rejects the task."""
     from agents.samplers import load_sampler
 
-    checkpoints = dict(_checkpoint_pair(text) for text in args.checkpoint)
+    checkpoints = args.checkpoints
     out: dict[tuple[str, str], float | None] = {}
     for task in args.tasks:
         try:
@@ -163,15 +167,6 @@ def measure_act(args: Args, samplers: list[str]) -> dict[tuple[str, str], float 
                 continue
             out[name, task] = time_act(sampler, obs, args)
     return out
-
-
-def _checkpoint_pair(text: str) -> tuple[str, Path]:
-    name, sep, path = text.partition("=")
-    if not sep or not name or not path:
-        raise ValueError(f"expected NAME=PATH, got {text!r}")
-    if not Path(path).exists():
-        raise FileNotFoundError(f"checkpoint of {name}: {path} does not exist")
-    return name.strip(), Path(path)
 
 
 # ---------------------------------------------------------------------------- report
@@ -221,22 +216,19 @@ def main(argv: list[str] | None = None) -> int:
     args = from_namespace(Args, parser.parse_args(argv))
     from agents.samplers import available_samplers
 
-    for module in args.sampler_module:
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            parser.error(f"--sampler-module {module}: {exc}")
+    try:
+        import_modules(args.modules)
+    except ValueError as exc:
+        parser.error(str(exc))
     unknown = [t for t in args.tasks if t not in TASK_SPECS]
     if unknown:
         parser.error(f"unknown task(s) {unknown}; known: {sorted(TASK_SPECS)}")
     unknown = [s for s in args.samplers if s not in available_samplers()]
     if unknown:
         parser.error(f"unknown sampler(s) {unknown}; known: {', '.join(available_samplers())}")
-    try:
-        for text in args.checkpoint:
-            _checkpoint_pair(text)
-    except (ValueError, FileNotFoundError) as exc:
-        parser.error(str(exc))
+    for name, path in args.checkpoints.items():
+        if not Path(path).exists():
+            parser.error(f"checkpoint of {name}: {path} does not exist")
     run(args)
     return 0
 

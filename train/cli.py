@@ -47,10 +47,15 @@ class CLIError(Exception):
 
 
 def exit_now(code: int) -> None:
-    """Leave at once after Ctrl-C: outputs are already written (atomically) and workers
-    killed, and tearing down torch and friends can take seconds on a busy machine."""
+    """Leave at once after Ctrl-C: outputs are already written (atomically), and tearing down
+    torch and friends can take seconds on a busy machine. Worker processes still running
+    (a TorchRL ParallelEnv's, an SB3 SubprocVecEnv's) are killed first: they ignore Ctrl-C
+    (see ``train.rl.torchrl``), so nothing else would stop them."""
     import gc
+    import multiprocessing
     from multiprocessing import util
+    for child in multiprocessing.active_children():
+        child.kill()
     gc.collect()                # drop the killed pool's queues ...
     util._run_finalizers()      # ... and release their semaphores (else the resource tracker warns)
     sys.stdout.flush()

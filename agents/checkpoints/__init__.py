@@ -101,10 +101,9 @@ def check_trained_for(path: str | Path, trained_for: str | None, task: str | Non
     if _weights_source(task) != trained_for:
         raise ValueError(f"{path}: weights trained for task {trained_for!r}, not {task!r} (a task in the same "
                          f"state space can use them with TaskSpec(weights_from={trained_for!r}))")
-    import numpy as np
-    from gnn_mp_envs.registration import task_spec
+    from gnn_mp_envs.registration import same_bounds, task_spec
     mine, theirs = task_spec(task).state_bounds(), task_spec(trained_for).state_bounds()
-    if mine[0].shape != theirs[0].shape or not (np.allclose(mine[0], theirs[0]) and np.allclose(mine[1], theirs[1])):
+    if not same_bounds(mine, theirs):
         raise ValueError(f"{path}: task {task!r} takes weights from {trained_for!r}, but their state bounds differ "
                          f"({mine[0].tolist()}..{mine[1].tolist()} vs {theirs[0].tolist()}..{theirs[1].tolist()})")
 

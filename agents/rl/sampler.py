@@ -39,6 +39,7 @@ from agents.rl.policies import POLICY_KINDS, RLPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
+from gnn_mp_envs.registration import same_bounds
 
 #: sampler name -> checkpoint kind
 RL_SAMPLERS: dict[str, str] = {"rl-ppo": "rl/sb3-ppo", "rl-sac": "rl/sb3-sac", "rl-ppo-torchrl": "rl/torchrl-ppo"}
@@ -138,8 +139,7 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
     policy, record = load_checkpoint(path, expected_kind=kind or list(POLICY_KINDS))
     meta, spec = record["meta"], record["obs_spec"] or {}
     check_trained_for(path, meta.get("task"), task)
-    if "low" in spec and (len(spec["low"]) != len(low) or not np.allclose(spec["low"], low, atol=1e-5)
-                          or not np.allclose(spec["high"], high, atol=1e-5)):
+    if "low" in spec and not same_bounds((spec["low"], spec["high"]), (low, high)):
         raise ValueError(f"{path}: trained for bounds {spec['low']}..{spec['high']}, "
                          f"not {np.asarray(low).tolist()}..{np.asarray(high).tolist()}")
     stored = meta.get("sampler", {})

@@ -111,13 +111,11 @@ class Sampler:
         if low64.shape != high64.shape or low64.ndim != 1 or not np.all(high64 > low64):
             raise ValueError(f"sampler bounds must be 1-D with high > low, got {low64} and {high64}")
         self.low, self.high = low64, high64
+        #: ``d``, the state dimension (an attribute: samplers read it every step)
+        self.state_dim = int(low64.shape[0])
         self.low32, self.high32 = low64.astype(np.float32), high64.astype(np.float32)
         self.span32 = self.high32 - self.low32
         self.reset(seed)
-
-    @property
-    def state_dim(self) -> int:
-        return int(self.low.shape[0])
 
     def make_stream(self, seed: int | None) -> np.random.Generator:
         """The random stream ``reset(seed)`` starts (None: fresh entropy from the OS)."""

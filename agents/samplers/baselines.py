@@ -25,6 +25,7 @@ class _TorchCompatible(Sampler):
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
         super().__init__(low, high, seed)
         self._scale32 = self.span32 * _UNIT24
+        self._one = (self.state_dim,)       # the shape of one observation's states
 
     def uniform(self, batch_shape: tuple = ()) -> np.ndarray:
         """``(*batch_shape, d)`` float32 uniform states in the bounds."""
@@ -44,9 +45,12 @@ class UniformSampler(_TorchCompatible):
     reads = ("start",)
 
     def act(self, obs: Mapping) -> np.ndarray:
-        if np.shape(obs["start"]) == (self.state_dim,):     # one observation: uniform(()) without the reshapes
+        if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without the reshapes
             # (m * 2**-24) * span == m * (span * 2**-24) in float32: scaling by a power of two is exact
-            return self.low32 + (self.rng.bits.random_raw(self.state_dim) & _MASK24).astype(np.float32) * self._scale32
+            x = (self.rng.bits.random_raw(self.state_dim) & _MASK24).astype(np.float32)
+            x *= self._scale32
+            x += self.low32
+            return x
         return self.uniform(self.batch_shape(obs))
 
     def propose(self, obs: Mapping) -> np.ndarray:

@@ -77,10 +77,23 @@ class TreeGNNSampler(_EngineSampler):
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
 
     def mixture(self, obs: Mapping) -> tuple:
-        """The forward: ``(active tree, cumulative node probabilities, component shift)``."""
-        q, active = self.tree_context(obs)
-        p, shift = self.engine.mixture(q, active, self.temperature)
-        return active, np.cumsum(p), shift
+        """The forward: ``(active tree, cumulative node probabilities, component shift)``.
+
+        It draws nothing, so while the tree is the one of the last forward (the extensions since were
+        blocked: about half of them on maze2d) its result is that forward's, returned as it is.
+        """
+        self.engine.ingest(obs)
+        active = self.active(obs)
+        tree = (self.engine.generation, self.engine.n, active)
+        if tree != self._mixture_of:
+            q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
+            p, shift = self.engine.mixture(q, active, self.temperature)
+            self._mixture, self._mixture_of = (active, np.cumsum(p), shift), tree
+        return self._mixture
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self._mixture_of: tuple | None = None
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         active, cumulative, shift = self.refreshed(obs, self.mixture)

@@ -15,7 +15,12 @@ cleanly), and a crash must not take the caller down. :func:`run_ompl` therefore 
     python -m gnn_mp_envs.baselines.ompl_runner --task arm --split test --indices 0-9 \\
         --time-limit 10 --json OUT
 
-which writes its results to ``OUT``, flushes, and leaves with ``os._exit(0)``.
+which writes its results to ``OUT``, flushes, and leaves with ``os._exit(0)``. Tasks registered
+outside the package plan too: the runner imports ``--import MODULE`` first (the benchmark passes
+its ``--import`` modules) and, if the task is still unknown, the module of the task's entry point
+(``--task-module``, :func:`task_module`), so the task's ``register_task`` call runs in the
+subprocess as well. What the runner returns is checked (:func:`checked_results`) before anyone
+reads it.
 
 Kinodynamic tasks use OMPL's control planners (``oc.RRT`` as ``"rrt"``, ``oc.KPIECE1`` as
 ``"kpiece"``) through :data:`SETUP_BUILDERS` (keyed by ``problem.geometric``) and a per-task
@@ -40,7 +45,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -93,15 +98,54 @@ def parse_indices(spec: str | int | list[int] | tuple[int, ...] | range) -> list
 
 
 # ---------------------------------------------------------------------- library side
+def task_module(task: str) -> str | None:
+    """The module of ``task``'s entry point when it lies outside this package: importing it in the
+    runner most likely registers the task there too (tried when ``--import`` did not)."""
+    from gnn_mp_envs.registration import TASK_SPECS
+    spec = TASK_SPECS.get(task)
+    if spec is None:
+        return None
+    entry = spec.entry_point
+    module = entry.split(":")[0] if isinstance(entry, str) else getattr(entry, "__module__", None)
+    if not module or module == "__main__" or module.split(".")[0] == "gnn_mp_envs":
+        return None
+    return module
+
+
+#: Result fields that must be numbers (or None) in what the runner returns.
+RESULT_NUMBERS = ("nodes", "edges_checked", "collision_checks", "path_length", "time")
+
+
+def checked_results(data: Any, count: int) -> list[dict[str, Any]]:
+    """The runner's ``results``, if they are ``count`` dicts with a boolean ``solved`` and numbers
+    (or None) in :data:`RESULT_NUMBERS`; else a one-line ``RuntimeError`` saying what came back
+    (another runner, ``python=``, or a damaged file: never a traceback deep in the benchmark)."""
+    results = data.get("results") if isinstance(data, dict) else None
+    if not isinstance(results, list) or len(results) != count:
+        got = (f"{len(results)} results" if isinstance(results, list) else
+               f"'results' of type {type(results).__name__}" if isinstance(data, dict) else type(data).__name__)
+        raise RuntimeError(f"the OMPL runner returned {got}, expected a list of {count} results")
+    for i, r in enumerate(results):
+        bad = (not isinstance(r, dict) or not isinstance(r.get("solved"), bool)
+               or any(r.get(k) is not None and (isinstance(r[k], bool) or not isinstance(r[k], (int, float)))
+                      for k in RESULT_NUMBERS))
+        if bad:
+            raise RuntimeError(f"the OMPL runner returned a malformed result {i} ({str(r)[:120]}): expected a dict "
+                               f"with a boolean 'solved' and numbers in {', '.join(RESULT_NUMBERS)}")
+    return results
+
+
 def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str, Any] | None = None,
              planner: str = "rrtconnect", time_limit: float = 10.0, seed: int = 0,
              timeout: float | None = None, python: str | None = None,
-             keep_paths: bool = False, on_problem: Callable[[int], None] | None = None) -> list[dict[str, Any]]:
+             keep_paths: bool = False, on_problem: Callable[[int], None] | None = None,
+             modules: Sequence[str] = ()) -> list[dict[str, Any]]:
     """Solve ``make_task(task, **task_kwargs).problem(split, i)`` for each index with OMPL,
     in a subprocess; one result dict per problem (see :func:`solve_problem`). Solution
     paths (``path``; for control planners also ``controls`` and ``durations``) are kept
     only with ``keep_paths``. ``on_problem(index)`` is called as each problem finishes (a
-    progress bar: the runner reports on its standard error).
+    progress bar: the runner reports on its standard error). ``modules`` are imported by
+    the runner first (they register the task; else the runner tries :func:`task_module`).
 
     Raises :class:`OMPLUnavailableError` when OMPL is not installed, ``ValueError`` for an
     unknown planner, a planner that does not fit the task (geometric vs. kinodynamic) or a
@@ -122,19 +166,27 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
                "--planner", planner, "--seed", str(int(seed)), "--json", str(out)]
         if task_kwargs:
             cmd += ["--task-kwargs", json.dumps(task_kwargs)]
+        for module in modules:
+            cmd += ["--import", module]
+        if task_module(task) is not None:
+            cmd += ["--task-module", task_module(task)]
         if keep_paths:
             cmd.append("--keep-paths")
         proc = _run_reporting(cmd, timeout, on_problem)
-        data = json.loads(out.read_text()) if out.exists() else None
-        if proc.returncode == EXIT_NO_OMPL or (data or {}).get("error") == "ompl_unavailable":
-            msg = (data or {}).get("message", proc.stderr.strip()[-500:])
+        try:
+            data = json.loads(out.read_text()) if out.exists() else None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise RuntimeError(f"the OMPL runner wrote unreadable JSON ({exc})") from None
+        if proc.returncode == EXIT_NO_OMPL or (isinstance(data, dict) and data.get("error") == "ompl_unavailable"):
+            stderr = proc.stderr.strip()[-500:]
+            msg = data.get("message", stderr) if isinstance(data, dict) else stderr
             raise OMPLUnavailableError(f"cannot import ompl ({msg}). {INSTALL_HINT}")
-        if (data or {}).get("error") == "ValueError":
-            raise ValueError(data["message"])
-        if data is None or "results" not in data:
-            detail = (data or {}).get("message") or proc.stderr.strip()[-2000:]
+        if isinstance(data, dict) and data.get("error") == "ValueError":
+            raise ValueError(str(data.get("message")))
+        if not isinstance(data, dict) or "results" not in data:
+            detail = (data.get("message") if isinstance(data, dict) else None) or proc.stderr.strip()[-2000:]
             raise RuntimeError(f"OMPL runner failed (exit code {proc.returncode}): {detail}")
-        return data["results"]
+        return checked_results(data, len(idx))
 
 
 #: The line prefix of the runner's per-problem report on its standard error.
@@ -523,6 +575,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--planner", default="rrtconnect", choices=PLANNERS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--task-kwargs", default="{}", help="JSON dict of task constructor arguments")
+    ap.add_argument("--import", dest="modules", action="append", default=[], metavar="MODULE",
+                    help="import MODULE first (it registers the task; repeatable)")
+    ap.add_argument("--task-module", default=None, metavar="MODULE",
+                    help="import MODULE if the task is still unknown (the module of its entry point)")
     ap.add_argument("--json", required=True, help="output file")
     ap.add_argument("--keep-paths", action="store_true",
                     help="keep solution paths (and controls, durations) in the output")
@@ -535,8 +591,17 @@ def main(argv: list[str] | None = None) -> None:
         os._exit(EXIT_NO_OMPL)
     code = 0
     try:
-        from gnn_mp_envs.registration import make_task
+        from gnn_mp_envs.registration import TASK_SPECS, make_task
 
+        for module in args.modules:
+            importlib.import_module(module)
+        if args.task not in TASK_SPECS and args.task_module:
+            try:
+                importlib.import_module(args.task_module)
+            except ImportError as exc:
+                raise ValueError(f"task {args.task!r} is not registered in the OMPL runner's process and its module "
+                                 f"{args.task_module!r} cannot be imported there ({exc}); pass the module that "
+                                 "registers it with --import") from None
         ou.setLogLevel(ou.LOG_WARN)
         ou.RNG.setSeed(int(args.seed) + 1)  # OMPL seeds must be positive
         task = make_task(args.task, **json.loads(args.task_kwargs))

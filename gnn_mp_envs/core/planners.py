@@ -64,7 +64,7 @@ class TreePlanner:
         if self.tree.full:
             return None
         if near is None:
-            near = self._nearest(target, tree)
+            near = self.tree.nearest(target, tree, self.problem)
         edge = self.problem.steer(self.tree.states[near], target)
         if edge is None:
             return None
@@ -94,7 +94,7 @@ class RRT(TreePlanner):
     def step(self, sample: np.ndarray) -> StepResult:
         self.iterations += 1
         result = StepResult()
-        if self.solved:
+        if self.solution is not None:
             return result
         i = self._extend(0, sample, result.added)
         if i is None:
@@ -146,7 +146,7 @@ class BiRRT(TreePlanner):
     def step(self, sample: np.ndarray) -> StepResult:
         self.iterations += 1
         result = StepResult()
-        if self.solved:
+        if self.solution is not None:
             return result
         a = self.active_tree
         b = 1 - a

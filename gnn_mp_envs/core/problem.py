@@ -12,8 +12,7 @@ this interface: adding a task means writing one subclass, not a new planner or e
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,13 +26,13 @@ NO_CONTROL = np.zeros(0)
 NO_CONTROL.setflags(write=False)
 
 
-@dataclass(frozen=True)
-class Edge:
-    """The outcome of one successful extension: the new state and how it was reached."""
+class Edge(NamedTuple):
+    """The outcome of one successful extension: the new state and how it was reached (a named
+    tuple: one is made per planner iteration, and a frozen dataclass costs several times more)."""
 
     state: np.ndarray
     cost: float
-    control: np.ndarray = field(default_factory=lambda: NO_CONTROL)
+    control: np.ndarray = NO_CONTROL
 
 
 class InvalidProblemError(ValueError):

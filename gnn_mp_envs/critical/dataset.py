@@ -23,7 +23,8 @@ time (``agents/critical_data.py``), keeping this module numpy-only.
 Caches are written to a unique temporary file beside the target and renamed into place
 (:func:`gnn_mp_envs.utils.io.atomic_path`), so concurrent generators never share a file and
 readers never see half a file. A cache that cannot be read (empty, truncated, CRC errors,
-not an npz, missing arrays, another format version) raises :class:`DatasetCacheError` from
+not an npz, missing arrays, another format version, contents that do not fit together:
+out-of-range labels, offsets past the arrays) raises :class:`DatasetCacheError` from
 :func:`load_problems`; :func:`load_or_generate` and :func:`generate_all` then log a one-line
 warning naming the file and regenerate it.
 """
@@ -33,6 +34,7 @@ from __future__ import annotations
 import json
 import logging
 from dataclasses import asdict, dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -210,12 +212,47 @@ def save_problems(problems: CriticalProblems, path: str | Path) -> None:
     })
 
 
+@lru_cache(maxsize=4)
+def _graph_edges(num_nodes: int) -> int:
+    return len(halton_graph(num_nodes).edges)
+
+
+def check_problems(problems: CriticalProblems) -> None:
+    """``ValueError`` naming the first array whose contents do not fit: another number of
+    problems than the others, node or edge validity of another graph than ``config.graph_nodes``'s,
+    label offsets past the labels, label nodes outside the graph, unknown split codes,
+    non-finite or out-of-square endpoints. A file that passes cannot make training or
+    evaluation index outside the graph."""
+    P, n = len(problems.start), problems.config.graph_nodes
+    per_problem = {"goal": problems.goal.shape[:1], "node_free": problems.node_free.shape[:1],
+                   "edge_free": problems.edge_free.shape[:1], "path_cost": problems.path_cost.shape,
+                   "map_index": problems.map_index.shape, "split": problems.split.shape,
+                   "walls": (len(problems.walls),), "blobs": (len(problems.blobs),)}
+    for name, shape in per_problem.items():
+        if shape != (P,):
+            raise ValueError(f"{name} holds {shape[0] if shape else 0} problems, start {P}")
+    if problems.start.shape != (P, 2) or problems.goal.shape != (P, 2):
+        raise ValueError("start and goal are not (problems, 2)")
+    ends = np.concatenate([problems.start, problems.goal])
+    if not (np.isfinite(ends).all() and (ends >= 0).all() and (ends <= 1).all()):
+        raise ValueError("start or goal outside the unit square")
+    if problems.node_free.shape[1] != n or problems.edge_free.shape[1] != _graph_edges(n):
+        raise ValueError(f"node/edge validity of another graph than the {n}-node Halton graph")
+    ptr, labels = problems.label_ptr, problems.label_nodes
+    if ptr.shape != (P + 1,) or ptr[0] != 0 or np.any(np.diff(ptr) < 0) or ptr[-1] != len(labels):
+        raise ValueError(f"label_ptr are not offsets of {P} problems into {len(labels)} labels")
+    if np.any(labels < 0) or np.any(labels >= n):
+        raise ValueError(f"label nodes outside the {n}-node graph")
+    if not np.isin(problems.split, list(SPLIT_CODES.values())).all():
+        raise ValueError(f"split codes other than {sorted(SPLIT_CODES.values())}")
+
+
 def load_problems(path: str | Path) -> CriticalProblems:
     """Read an npz written by :func:`save_problems`.
 
-    Raises :class:`DatasetCacheError` (one line naming the file) for other format versions
-    and for damaged files (empty, truncated, CRC errors, not an npz, missing arrays), and
-    ``FileNotFoundError`` for a missing one.
+    Raises :class:`DatasetCacheError` (one line naming the file) for other format versions,
+    damaged files (empty, truncated, CRC errors, not an npz, missing arrays) and readable files
+    whose contents do not fit (:func:`check_problems`), and ``FileNotFoundError`` for a missing one.
     """
     path = Path(path)
     z = read_npz(path, FORMAT_VERSION)
@@ -226,11 +263,13 @@ def load_problems(path: str | Path) -> CriticalProblems:
         walls = [w[~np.isnan(w[:, 0])] for w in z["walls"]]
         blobs = [b[~np.isnan(b[:, 0])] for b in z["blobs"]]
         n, e = int(z["num_nodes"]), int(z["num_edges"])
-        return CriticalProblems(
+        problems = CriticalProblems(
             walls, blobs, z["start"], z["goal"],
             np.unpackbits(z["node_free_bits"], axis=1, count=n).astype(bool),
             np.unpackbits(z["edge_free_bits"], axis=1, count=e).astype(bool),
             z["label_ptr"], z["label_nodes"], z["path_cost"], z["map_index"], z["split"], cfg)
+        check_problems(problems)
+        return problems
     except DAMAGED as exc:
         raise DatasetCacheError(f"{path}: unreadable dataset file ({type(exc).__name__}: {exc})") from None
 

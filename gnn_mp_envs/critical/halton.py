@@ -20,9 +20,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
+from scipy.stats import qmc
 
-#: The first primes: one Halton base per dimension.
-_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37)
 #: Radius multiplier of the connectivity rate (see module docstring).
 RADIUS_FACTOR = 0.8
 #: Default size of the dense critical-sample graph (the paper's 2,000 nodes).
@@ -32,20 +31,12 @@ SPARSE_NODES = 200
 
 
 def halton_points(n: int, d: int = 2, skip: int = 1) -> np.ndarray:
-    """The Halton sequence (n, d) in the unit hypercube; ``skip`` drops the origin point."""
-    if d > len(_PRIMES):
-        raise ValueError(f"at most {len(_PRIMES)} dimensions are supported, got {d}")
-    idx = np.arange(skip, skip + n, dtype=np.int64)
-    out = np.zeros((n, d))
-    for j in range(d):
-        base = _PRIMES[j]
-        i = idx.copy()
-        f = 1.0
-        while np.any(i > 0):
-            f /= base
-            out[:, j] += f * (i % base)
-            i //= base
-    return out
+    """The unscrambled Halton sequence (n, d) in the unit hypercube (scipy's ``qmc.Halton``: bases
+    2, 3, 5, ... per dimension); ``skip`` drops the first points (the default, 1, the origin)."""
+    sequence = qmc.Halton(d=d, scramble=False)
+    if skip:
+        sequence.fast_forward(skip)
+    return sequence.random(n)
 
 
 def default_radius(n: int, d: int = 2, factor: float = RADIUS_FACTOR) -> float:

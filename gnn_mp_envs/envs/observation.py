@@ -115,10 +115,22 @@ class GraphObservation:
         self.active_tree = np.zeros(1, dtype=np.int64)
         self.obstacles = np.zeros(obstacles, dtype=np.float32)
         self._problem: Problem | None = None
+        #: The feature columns ``[x_init - x_n, x_goal - x_n]`` as a (N, 2, d) view: both differences
+        #: of a new node are computed and written in one operation each.
+        self._differences = self.node_features[:, :2 * state_dim].reshape(max_nodes, 2, state_dim)
+        self._tree_column = 2 * state_dim
         #: The arrays themselves, in observation order (what ``as_dict(copy=False)`` hands out).
         self._views = {"nodes": self.nodes, "node_features": self.node_features, "parent": self.parent,
                        "mask": self.mask, "num_nodes": self.num_nodes, "start": self.start, "goal": self.goal,
                        "active_tree": self.active_tree, "obstacles": self.obstacles}
+
+    def __getstate__(self) -> dict:
+        # the difference view is rebuilt on the copy's own arrays (a copied view would be detached)
+        return {k: v for k, v in self.__dict__.items() if k != "_differences"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._differences = self.node_features[:, :2 * self.state_dim].reshape(self.max_nodes, 2, self.state_dim)
 
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
@@ -141,18 +153,16 @@ class GraphObservation:
             self.obstacles[:k, 0] = 1.0
             self.obstacles[:k, 1:] = obstacle_rows
         self._problem = problem
+        self._endpoints = np.stack([problem.start, problem.goal])
         for i in range(len(tree)):
             self.add(tree, i)
 
     def add(self, tree: TreeStore, i: int) -> None:
         """Write node ``i`` of ``tree`` (nodes arrive in index order)."""
-        p = self._problem
         x = tree.states[i]
-        d = self.state_dim
         self.nodes[i] = x
-        self.node_features[i, :d] = p.difference(p.start, x)
-        self.node_features[i, d:2 * d] = p.difference(p.goal, x)
-        self.node_features[i, 2 * d] = tree.tree_id[i]
+        self._differences[i] = self._problem.difference(self._endpoints, x)    # [x_init - x, x_goal - x]
+        self.node_features[i, self._tree_column] = tree.tree_id[i]
         self.parent[i] = tree.parent[i]
         self.mask[i] = 1
         self.num_nodes[0] = i + 1

@@ -16,6 +16,8 @@ from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, obst
 from gnn_mp_envs.registration import make_task, task_spec
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
 
+_add_reduce, _maximum, _minimum, _isfinite = np.add.reduce, np.maximum, np.minimum, math.isfinite
+
 #: Keys ``reset(options=...)`` understands (anything else is a typo and is refused).
 RESET_OPTIONS = frozenset({"problem", "index"})
 #: Largest node budget accepted: the padded observation and tree arrays of 2 million 6-D
@@ -146,6 +148,7 @@ class TreePlanningEnv(gym.Env):
         self._low = np.asarray(low, dtype=np.float32)
         self._high = np.asarray(high, dtype=np.float32)
         self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
+        self._action_shape = (self.state_dim,)
         obstacles = obstacle_shape(self.task.max_obstacles, self.task.obstacle_width)
         self.observation_space = observation_space(self._low, self._high, self.max_nodes, obstacles)
         self._obs = GraphObservation(self.state_dim, self.max_nodes, obstacles)
@@ -178,20 +181,24 @@ class TreePlanningEnv(gym.Env):
         return self._observation(), self._info()
 
     def step(self, action):
-        if self.planner is None:
+        planner = self.planner
+        if planner is None:
             raise RuntimeError("call reset() before step()")
         sample = self._check_action(action)
-        checks_before = self.problem.collision_checks
-        result = self.planner.step(sample)
-        for i in result.added:
-            self._obs.add(self.planner.tree, i)
-        self._obs.active_tree[0] = self.planner.active_tree
+        problem, obs = self.problem, self._obs
+        checks_before = problem.collision_checks
+        result = planner.step(sample)
+        if result.added:
+            tree = planner.tree
+            for i in result.added:
+                obs.add(tree, i)
+        obs.active_tree[0] = planner.active_tree
         reward = (-self.step_penalty
-                  - self.collision_check_cost * (self.problem.collision_checks - checks_before)
+                  - self.collision_check_cost * (problem.collision_checks - checks_before)
                   + (self.success_reward if result.solved else 0.0))
-        terminated = self.planner.solved
-        truncated = (not terminated) and (self.planner.tree.full or self.planner.iterations >= self.max_steps)
-        return self._observation(), reward, terminated, truncated, self._info()
+        terminated = planner.solution is not None
+        truncated = (not terminated) and (planner.tree.full or planner.iterations >= self.max_steps)
+        return obs.as_dict(copy=self.copy_observations), reward, terminated, truncated, self._info()
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -209,32 +216,39 @@ class TreePlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
-        if np.iscomplexobj(action):
-            raise ValueError(f"action must be real (shape ({self.state_dim},)); got a complex {type(action).__name__}")
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (self.state_dim,):
+        if type(action) is np.ndarray and action.dtype.kind == "f":     # a sampler's float array: the common case
+            a = action.astype(np.float64, copy=False)
+        else:
+            if np.iscomplexobj(action):
+                raise ValueError(f"action must be real (shape ({self.state_dim},)); got a complex "
+                                 f"{type(action).__name__}")
+            a = np.asarray(action, dtype=np.float64)
+        if a.shape != self._action_shape:
             raise ValueError(f"action must have shape ({self.state_dim},) within bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}; got shape {a.shape}")
-        if not (a.min() > -math.inf and a.max() < math.inf):     # np.isfinite(a).all() (NaN fails both), cheaper
+        # A finite sum means finite entries (NaN and inf propagate); an overflowing sum of finite
+        # entries takes the exact test. One reduction instead of two.
+        if not _isfinite(_add_reduce(a)) and not (a.min() > -math.inf and a.max() < math.inf):
             raise ValueError(f"action must be finite (shape ({self.state_dim},), bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}); got {a.tolist()}")
-        return np.minimum(np.maximum(a, self.problem.low), self.problem.high)   # np.clip, without its overhead
+        return _minimum(_maximum(a, self.problem.low), self.problem.high)   # np.clip, without its overhead
 
     def _observation(self) -> dict:
         return self._obs.as_dict(copy=self.copy_observations)
 
     def _info(self) -> dict[str, Any]:
         p, pl = self.problem, self.planner
+        sol = pl.solution
         info: dict[str, Any] = {
-            "is_success": pl.solved,
-            "nodes_expanded": len(pl.tree),
+            "is_success": sol is not None,
+            "nodes_expanded": pl.tree.size,
             "edges": p.edges_checked,
             "collision_checks": p.collision_checks,
             "iterations": pl.iterations,
-            "path_length": pl.solution.length if pl.solved else float("inf"),
+            "path_length": float("inf") if sol is None else sol.length,
         }
-        if pl.solved:
-            info["path"] = pl.solution.states.copy()
-            info["path_controls"] = pl.solution.controls.copy()
-            info["path_nodes"] = pl.solution.nodes.copy()
+        if sol is not None:
+            info["path"] = sol.states.copy()
+            info["path_controls"] = sol.controls.copy()
+            info["path_nodes"] = sol.nodes.copy()
         return info

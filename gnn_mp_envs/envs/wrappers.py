@@ -27,12 +27,13 @@ gives it. Everything here is numpy; no torch.
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import Any, Mapping
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.wrappers import RescaleAction
+from gymnasium.wrappers import RescaleAction, TransformReward
 
 #: Default number of rows of the view (roots + most recent nodes).
 DEFAULT_VIEW_NODES = 64
@@ -184,17 +185,11 @@ class ProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, reward, terminated, truncated, info
 
 
-class ScaleReward(gym.RewardWrapper, gym.utils.RecordConstructorArgs):
-    """Multiply every reward by ``scale`` (returns of order 1 keep the value loss from swamping
-    the policy's share of a clipped gradient)."""
-
-    def __init__(self, env: gym.Env, scale: float) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, scale=scale)
-        gym.RewardWrapper.__init__(self, env)
-        self.scale = float(scale)
-
-    def reward(self, reward):
-        return float(reward) * self.scale
+def _scaled_reward(scale: float, reward: Any) -> float:
+    """``reward * scale`` as a float: the reward ``make_rl_env(reward_scale=...)`` hands to the agent
+    (returns of order 1 keep the value loss from swamping the policy's share of a clipped gradient);
+    a module-level function, so the wrapped env pickles (``partial`` of it, not a lambda)."""
+    return float(reward) * scale
 
 
 class UniformMixAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
@@ -296,7 +291,7 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     :class:`UniformMixAction` (that fraction of the samples replaced by uniform states, as
     the sampler will do); with ``progress_reward > 0``,
     :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``); rewards are
-    multiplied by ``reward_scale`` (:class:`ScaleReward`).
+    multiplied by ``reward_scale`` (Gymnasium's ``TransformReward``).
     ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
     ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
     ``scene``, ``task_kwargs``. Observations are not copied by the env
@@ -324,7 +319,7 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     if progress_reward > 0.0:
         env = ProgressReward(env, progress_reward, gamma)
     if reward_scale != 1.0:
-        env = ScaleReward(env, reward_scale)
+        env = TransformReward(env, partial(_scaled_reward, float(reward_scale)))
     if view_nodes is not None:
         env = TreeViewWrapper(env, view_nodes)
     if scale_actions:
@@ -336,6 +331,6 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     return env
 
 
-__all__ = ["ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward", "ScaleReward",
+__all__ = ["ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward",
            "TargetRelativeAction", "TreeViewWrapper", "UniformMixAction", "make_rl_env", "policy_action_to_state",
            "scale_action", "tree_view", "view_rows", "view_space"]

@@ -54,7 +54,7 @@ class MazeMap:
     def __post_init__(self) -> None:
         self.walls = _rows("walls", self.walls, 4)
         self.blobs = _rows("blobs", self.blobs, 3)
-        self._wall_rows = [tuple(map(float, w)) for w in self.walls]     # for the one-segment test
+        self._wall_rows = [_wall_row(w) for w in self.walls]     # for the one-segment test
         bad = np.flatnonzero((self.walls[:, 0] > self.walls[:, 2]) | (self.walls[:, 1] > self.walls[:, 3]))
         if bad.size:
             raise InvalidProblemError(f"walls[{bad[0]}] = {self.walls[bad[0]].tolist()} is inverted: "
@@ -102,12 +102,22 @@ class MazeMap:
         broadcasting for a single row. Maps with blobs take the vectorised test."""
         if len(self.blobs):
             return bool(self.segments_free(p[None], q[None])[0])
-        px, py = float(p[0]), float(p[1])
-        qx, qy = float(q[0]), float(q[1])
+        return self.segment_free_xy(float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+
+    def segment_free_xy(self, px: float, py: float, qx: float, qy: float) -> bool:
+        """:meth:`segment_free` of the segment ``(px, py) -> (qx, qy)`` given as floats."""
+        if self.blobs.size:
+            return self.segment_free(np.array([px, py]), np.array([qx, qy]))
         if not (0.0 <= px <= 1.0 and 0.0 <= py <= 1.0 and 0.0 <= qx <= 1.0 and 0.0 <= qy <= 1.0):
             return False
         dx, dy = qx - px, qy - py
-        for x0, y0, x1, y1 in self._wall_rows:
+        lox, hix = (px, qx) if px <= qx else (qx, px)
+        loy, hiy = (py, qy) if py <= qy else (qy, py)
+        for x0, y0, x1, y1, left, below, right, above in self._wall_rows:
+            # A wall clear of the segment's bounding box by more than rounding can reach is not
+            # hit (the slab test would say so too: see _wall_row); most walls end here.
+            if hix < left or lox > right or hiy < below or loy > above:
+                continue
             if _slab_hit(px, dx, x0, x1, py, dy, y0, y1):
                 return False
         return True
@@ -135,6 +145,24 @@ def _segments_hit_boxes(p: np.ndarray, d: np.ndarray, boxes: np.ndarray) -> np.n
     t_enter = tmin.max(axis=2)
     t_exit = tmax.min(axis=2)
     return (t_enter <= t_exit) & (t_exit >= 0.0) & (t_enter <= 1.0)
+
+
+#: Relative margin of the bounding-box rejection in :meth:`MazeMap.segment_free`.
+_BOX_MARGIN = 1e-9
+
+
+def _wall_row(wall: np.ndarray) -> tuple[float, ...]:
+    """A wall for the one-segment test: ``(x0, y0, x1, y1)`` and the same box grown by a margin.
+
+    A segment whose bounding box lies beyond the grown box cannot be hit by the slab test either:
+    with the segment inside the unit square, the slab parameters then miss ``[0, 1]`` by at least
+    ``margin / |d|`` (about 1e-9), while each is computed with a relative error of a few 1e-16. So
+    the rejection skips work, never changes an answer (``tests/test_core.py`` grazes walls at
+    1e-12 to 1e-8).
+    """
+    x0, y0, x1, y1 = map(float, wall)
+    margin = _BOX_MARGIN * max(1.0, abs(x0), abs(y0), abs(x1), abs(y1))
+    return x0, y0, x1, y1, x0 - margin, y0 - margin, x1 + margin, y1 + margin
 
 
 def _slab(p: float, d: float, lo: float, hi: float) -> tuple[float, float]:
@@ -232,16 +260,22 @@ class Maze2DProblem(Problem):
 
     def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Exact segment test; counts as one collision check."""
+        return self.check_segment(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
+
+    def check_segment(self, ax: float, ay: float, bx: float, by: float) -> bool:
+        """:meth:`check_motion` of ``(ax, ay) -> (bx, by)`` given as floats (counted the same)."""
         self.edges_checked += 1
         self.collision_checks += 1
-        return self.maze.segment_free(a, b)
+        return self.maze.segment_free_xy(ax, ay, bx, by)
 
-    # The planner's per-iteration pair distances in plain floats: ``sqrt(dx*dx + dy*dy)`` is
-    # bit for bit what the base class's ``einsum`` gives for two coordinates, at a fraction of
-    # its call overhead (tests/test_core.py compares the two).
+    # The planner's distances without numpy's wrappers: rows as ``sqrt(dx*dx + dy*dy)`` in three
+    # ufuncs, a pair in plain floats; both are bit for bit what the base class's ``einsum`` gives
+    # for two coordinates (tests/test_core.py compares them).
     def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
         d = states - x     # the base class's difference, without its call
-        return np.sqrt(np.einsum("...i,...i->...", d, d))
+        d *= d             # the einsum's two products and their sum, without its wrapper
+        s = d[..., 0] + d[..., 1]
+        return np.sqrt(s)
 
     @staticmethod
     def pair_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -250,15 +284,20 @@ class Maze2DProblem(Problem):
 
     def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
         """:meth:`Problem.steer` in plain floats (the same states and costs)."""
-        d = self.pair_distance(x_to, x_from)
+        fx, fy = x_from.tolist()
+        tx, ty = x_to.tolist()
+        dx, dy = tx - fx, ty - fy
+        d = math.sqrt(dx * dx + dy * dy)        # pair_distance(x_to, x_from)
         if d < 1e-12:
             return None
         if d <= self.step_size:
+            nx, ny = tx, ty
             x_new = np.asarray(x_to, dtype=np.float64)
         else:
             t = self.step_size / d
-            x_new = np.array([x_from[0] + t * (x_to[0] - x_from[0]), x_from[1] + t * (x_to[1] - x_from[1])])
-        if not self.check_motion(x_from, x_new):
+            nx, ny = fx + t * dx, fy + t * dy
+            x_new = np.array([nx, ny])
+        if not self.check_segment(fx, fy, nx, ny):
             return None
         return Edge(x_new, min(d, self.step_size))
 

@@ -61,7 +61,7 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
                   file=sys.stderr) as bar:
             results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
                                            planner=planner, time_limit=args.ompl_time_limit, seed=args.seed,
-                                           on_problem=lambda _: bar.update(1))
+                                           on_problem=lambda _: bar.update(1), modules=args.modules)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
     except subprocess.TimeoutExpired as exc:

@@ -113,28 +113,27 @@ def model_list(text: str) -> list[str]:
 
 @dataclass
 class DataArgs:
-    """Flags of every sub-command: the dataset (cache directory, seed) and torch threads."""
+    """Flags of every sub-command: the dataset (cache directory, seed, size) and torch threads. The
+    size flags belong to every sub-command, so that ``train`` and ``evaluate`` use the dataset
+    ``generate-data`` made with the same flags (a cache of another size is regenerated)."""
 
     data: Path = arg(DEFAULT_DATA_DIR, "dataset cache directory")
     data_seed: int = arg(0, "seed of the generated dataset", parse=seed_int)
+    num_maps: int = arg(DatasetConfig.num_maps, "maps of the labelled set", parse=positive_int)
+    pairs_per_map: int = arg(DatasetConfig.pairs_per_map, "start/goal pairs per map", parse=positive_int)
+    eval_problems: int = arg(DatasetConfig.eval_problems, "problems of each evaluation set", parse=positive_int)
     threads: int = arg(2, "torch threads", parse=positive_int)
 
     def dataset(self) -> DatasetConfig:
-        return DatasetConfig(seed=self.data_seed)
+        return DatasetConfig(seed=self.data_seed, num_maps=self.num_maps, pairs_per_map=self.pairs_per_map,
+                             eval_problems=self.eval_problems)
 
 
 @dataclass
 class GenerateArgs(DataArgs):
     """Generate and cache the three dataset files (labelled, eval_test, eval_blob)."""
 
-    num_maps: int = arg(DatasetConfig.num_maps, "maps of the labelled set", parse=positive_int)
-    pairs_per_map: int = arg(DatasetConfig.pairs_per_map, "start/goal pairs per map", parse=positive_int)
-    eval_problems: int = arg(DatasetConfig.eval_problems, "problems of each evaluation set", parse=positive_int)
     overwrite: bool = arg(False, "regenerate even if the cached files match")
-
-    def dataset(self) -> DatasetConfig:
-        return DatasetConfig(seed=self.data_seed, num_maps=self.num_maps, pairs_per_map=self.pairs_per_map,
-                             eval_problems=self.eval_problems)
 
 
 @dataclass

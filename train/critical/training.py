@@ -4,9 +4,11 @@ Where a run writes (:func:`run_paths`):
 
 * default: a fresh run directory ``runs/critical/<model>-seed<S>-<YYYYmmdd-HHMMSS>/`` with
   ``critical_<model>.pt`` (best-validation weights), ``critical_<model>.json`` (the flags,
-  hyper-parameters, dataset config, per-epoch history; written before the first epoch) and
-  ``critical_<model>.resume.pt`` (optimizer, epoch, history; after every epoch);
-* ``--out FILE``: the same three files named after ``FILE``;
+  hyper-parameters, dataset config, per-epoch history; written before the first epoch),
+  ``critical_<model>.resume.pt`` (optimizer, epoch, history; after every epoch) and
+  TensorBoard events in ``tb/critical_<model>/`` (``train/loss`` and ``train/lr`` per step, the
+  validation scores per epoch: ``tensorboard --logdir runs/critical``);
+* ``--out FILE``: the same files named after ``FILE`` (events in ``tb/<stem>/`` beside it);
 * ``--resume``: continues the run of ``--out``, or the latest run of the model and seed;
 * ``--ship``: when done, the checkpoint and its ``.json`` are also copied into
   ``agents/checkpoints/`` (the shipped weights). Nothing else writes into the package.
@@ -63,12 +65,13 @@ class RunPaths:
     checkpoint: Path   # best-validation weights (agents.checkpoints format)
     meta: Path         # .json: flags, hyper-parameters, dataset, history
     resume: Path       # resume state after the last finished epoch
+    tb: Path           # TensorBoard events: tb/<checkpoint stem>/ beside the checkpoint
 
 
 def paths_for(checkpoint: Path) -> RunPaths:
     checkpoint = Path(checkpoint)
     return RunPaths(checkpoint, checkpoint.with_suffix(".json"),
-                    checkpoint.with_name(checkpoint.stem + ".resume.pt"))
+                    checkpoint.with_name(checkpoint.stem + ".resume.pt"), checkpoint.parent / "tb" / checkpoint.stem)
 
 
 def run_paths(args: TrainArgs, runs_dir: Path = RUNS_DIR, now: float | None = None) -> RunPaths:
@@ -149,6 +152,8 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
     val_set = val_set.subset(np.arange(min(VAL_PROBLEMS, len(val_set))))
     inputs = inputs_for(model, name, train_set, graph)
 
+    from torch.utils.tensorboard import SummaryWriter
+    writer = SummaryWriter(str(paths.tb), purge_step=done_steps if args.resume else None)   # resumed: drop later events
     gen = torch.Generator().manual_seed(args.seed)
     budget_s = None if args.time_budget is None else 60.0 * args.time_budget
     t_start, c_start = time.perf_counter() - wall, time.process_time() - cpu
@@ -180,6 +185,8 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
             opt.step()
             losses.append(value)
             done_steps += 1
+            writer.add_scalar("train/loss", value, done_steps)
+            writer.add_scalar("train/lr", opt.param_groups[0]["lr"], done_steps)
             bar.set_postfix(loss=f"{np.mean(losses[-20:]):.4f}")
             if budget_s is not None and time.perf_counter() - t_start > budget_s:
                 out_of_time = True
@@ -192,6 +199,10 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
         history.append({"epoch": epoch + 1, "train_loss": float(np.mean(losses)), **val,
                         "steps": len(losses), "wall_seconds": wall, "cpu_seconds": cpu,
                         "train_cpu_seconds": train_cpu})
+        writer.add_scalar("epoch/train_loss", history[-1]["train_loss"], done_steps)
+        for key, score in val.items():
+            writer.add_scalar(f"val/{key}", score, done_steps)
+        writer.flush()
         print(f"[{name}] epoch {epoch + 1}: loss {np.mean(losses):.4f}  val accuracy {val['val_accuracy']:.4f}  "
               + "  ".join(f"{k[4:]} {v:.3f}" for k, v in val.items() if k.startswith("val_hit"))
               + f"  ({wall / 60:.1f} min, {cpu / 60:.1f} CPU min)", flush=True)
@@ -210,6 +221,7 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
         if out_of_time:
             print(f"[{name}] time budget reached", flush=True)
             break
+    writer.close()
     result = {"checkpoint": str(paths.checkpoint), "best": best, "history": history}
     if args.ship:
         result["shipped"] = str(ship(paths, name))

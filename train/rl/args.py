@@ -76,7 +76,8 @@ class RLArgs(RunFlags):
                        "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))
     init_from: Path | None = arg(None, "warm start: copy the backbone weights of this checkpoint (any kind holding "
-                                 "one of the same size, e.g. agents/checkpoints/gnn_maze2d.pt with --encoder tree-gnn)")
+                                 "one of the same size), or of the shipped weights of a sampler NAME for --task (e.g. "
+                                 "gnn with --encoder tree-gnn)", metavar="PATH|NAME")
     # --- optimisation
     lr: float = arg(3e-4, "Adam learning rate", parse=positive_float)
     gamma: float = arg(0.99, "discount", parse=positive_float)
@@ -172,10 +173,23 @@ def check_args(args: RLArgs) -> None:
                              f"{args.buffer_size * per_transition / 2**30:.1f} GiB, more than half this machine's memory")
     if args.init_from is not None:
         from agents.checkpoints import read_checkpoint
-        path = Path(args.init_from)
-        if not path.is_file():
-            raise ValueError(f"--init-from {path}: no such file")
-        read_checkpoint(path)        # a CheckpointError (a ValueError) names the file and what is wrong
+        args.init_from = init_from_path(args.init_from, args.task)
+        read_checkpoint(args.init_from)        # a CheckpointError (a ValueError) names the file and what is wrong
+
+
+def init_from_path(value: str | Path, task: str) -> Path:
+    """``--init-from``: a checkpoint file, or the name of a sampler whose shipped weights for ``task``
+    exist (``gnn`` -> ``agents/checkpoints/gnn_<task>.pt``: works from any directory, unlike a path
+    into the checkout)."""
+    from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
+    path = Path(value)
+    if path.is_file():
+        return path
+    if "/" not in str(value) and shipped_checkpoint(str(value), task).is_file():
+        return shipped_checkpoint(str(value), task)
+    names = sorted(p.stem[:-len(task) - 1] for p in SHIPPED_DIR.glob(f"*_{task}.pt"))
+    raise ValueError(f"--init-from {value}: no such file, nor shipped weights of that name for task {task!r} "
+                     f"(shipped: {', '.join(names) or 'none'})")
 
 
 def memory_bytes() -> int:

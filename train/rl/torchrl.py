@@ -13,6 +13,9 @@ split ``val`` with checkpoints (the policy exported to the sampler ``rl-ppo-torc
 from __future__ import annotations
 
 import math
+import multiprocessing
+import signal
+import threading
 import time
 from functools import partial
 
@@ -47,10 +50,47 @@ def make_env(args: RLArgs, seed: int) -> GymWrapper:
     return env
 
 
+def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
+    """``env.start()`` with Ctrl-C ignored only while its ``workers`` processes are spawned.
+
+    SIGINT's ``SIG_IGN`` survives a worker's exec (a Python handler or a blocked mask does not),
+    so the workers never see Ctrl-C; this process alone does, exits 130 with one line and kills
+    them (``train.cli.exit_now``), instead of every worker printing a traceback (and one, now and
+    then, hanging the exit). The start runs on a helper thread: as soon as the workers exist
+    (``multiprocessing.active_children``), Ctrl-C works here again, also while they import and
+    build their envs (seconds)."""
+    before = len(multiprocessing.active_children())
+    failure: list[BaseException] = []
+
+    def start() -> None:
+        try:
+            env.start()
+        except BaseException as exc:        # re-raised on the calling thread
+            failure.append(exc)
+
+    starter = threading.Thread(target=start, name="env workers start", daemon=True)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        starter.start()
+        while starter.is_alive() and len(multiprocessing.active_children()) < before + workers:
+            time.sleep(0.005)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    while starter.is_alive():
+        starter.join(0.1)                   # interruptible: Ctrl-C raises KeyboardInterrupt here
+    if failure:
+        raise failure[0]
+
+
 def make_batched_env(args: RLArgs):
-    """``n_envs`` training envs stepped together; env ``i`` draws problems from seed ``seed + i``."""
+    """``n_envs`` training envs stepped together; env ``i`` draws problems from seed ``seed + i``.
+    ``--parallel``: the workers start here, deaf to Ctrl-C (:func:`start_workers_deaf_to_ctrl_c`)."""
     fns = [partial(make_env, args, args.seed + i) for i in range(args.n_envs)]
-    return (ParallelEnv if args.parallel else SerialEnv)(args.n_envs, fns)
+    if not args.parallel:
+        return SerialEnv(args.n_envs, fns)
+    env = ParallelEnv(args.n_envs, fns)
+    start_workers_deaf_to_ctrl_c(env, args.n_envs)
+    return env
 
 
 def train(args: RLArgs) -> RunResult:
@@ -83,7 +123,8 @@ def train(args: RLArgs) -> RunResult:
 
     # 3. collector, advantage, loss, optimiser, logger
     frames_per_batch = args.n_steps * args.n_envs
-    collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=args.total_steps,
+    total_frames = math.ceil(args.total_steps / frames_per_batch) * frames_per_batch   # whole batches, as collected
+    collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
                           auto_register_policy_transforms=False)
     # deactivate_vmap: the graph conversion has data-dependent shapes, which vmap cannot batch
     advantage = GAE(gamma=args.gamma, lmbda=args.gae_lambda, value_network=value, average_gae=True,

@@ -267,13 +267,53 @@ def save(dataset: TreeDataset, path: str | Path) -> Path:
     return write_npz(path, arrays)
 
 
+def _check_offsets(name: str, ptr: np.ndarray, problems: int, length: int) -> None:
+    if ptr.shape != (problems + 1,) or ptr[0] != 0 or np.any(np.diff(ptr) < 0) or ptr[-1] != length:
+        raise ValueError(f"{name} are not offsets of {problems} problems into {length} rows")
+
+
+def check_contents(data: TreeDataset) -> None:
+    """``ValueError`` naming the first array whose contents do not fit the others: offsets that run
+    past their arrays, node, parent or path indices outside their problem's tree, tree ids or
+    iteration records out of range, non-finite states. A file that passes cannot make the
+    snapshot cutter index outside a tree."""
+    P, (N, d) = len(data.start), data.states.shape
+    if data.goal.shape != (P, d) or data.start.shape != (P, d) or len(data.obstacles) != P \
+            or data.problem_index.shape != (P,):
+        raise ValueError("start, goal, obstacles and problem_index disagree on the number of problems")
+    _check_offsets("node_ptr", data.node_ptr, P, N)
+    if data.node_features.shape != (N, 2 * d + 1) or data.parent.shape != (N,) or data.tree_id.shape != (N,):
+        raise ValueError("node_features, parent and tree_id do not match the states")
+    if not np.isfinite(data.states).all():
+        raise ValueError("states are not finite")
+    sizes = np.diff(data.node_ptr)
+    local = np.arange(N) - np.repeat(data.node_ptr[:-1], sizes)         # each node's index in its tree
+    if np.any(data.parent < -1) or np.any(data.parent >= local) or np.any((data.tree_id < 0) | (data.tree_id > 1)):
+        raise ValueError("parent or tree_id indices out of range (a parent must be an earlier node of its tree)")
+    _check_offsets("path_ptr", data.path_ptr, P, len(data.path_nodes))
+    path_size = np.repeat(sizes, np.diff(data.path_ptr))
+    if np.any(data.path_nodes < 0) or np.any(data.path_nodes >= path_size):
+        raise ValueError("path_nodes outside their problem's tree")
+    I = len(data.iter_nodes)
+    _check_offsets("iter_ptr", data.iter_ptr, P, I)
+    if data.iter_active.shape != (I,) or data.iter_sample.shape != (I, d) or data.iter_created.shape != (I,):
+        raise ValueError("iter_active, iter_sample and iter_created do not match iter_nodes")
+    iter_size = np.repeat(sizes, np.diff(data.iter_ptr))
+    if (np.any(data.iter_nodes < 0) or np.any(data.iter_nodes > iter_size) or np.any(data.iter_created < -1)
+            or np.any(data.iter_created >= iter_size) or np.any((data.iter_active < 0) | (data.iter_active > 1))):
+        raise ValueError("iteration records outside their problem's tree")
+
+
 def load(path: str | Path) -> TreeDataset:
-    """Read a file written by :func:`save`; :class:`DatasetCacheError` names a damaged file."""
+    """Read a file written by :func:`save`; :class:`DatasetCacheError` names a damaged file, also
+    one whose arrays are readable but do not fit together (:func:`check_contents`)."""
     z = read_npz(path, FORMAT_VERSION)
     try:
         config = TreeDataConfig(**json.loads(str(z["config_json"])))
-        return TreeDataset(config=config, **{name: z[name] for name in FIELDS})
-    except (KeyError, TypeError, ValueError) as exc:
+        dataset = TreeDataset(config=config, **{name: z[name] for name in FIELDS})
+        check_contents(dataset)
+        return dataset
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DatasetCacheError(f"{path}: unreadable dataset file ({type(exc).__name__}: {exc})") from None
 
 

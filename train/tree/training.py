@@ -71,9 +71,11 @@ class TrainError(Exception):
 # ---------------------------------------------------------------------------- one phase
 def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, minutes: float, lr: float,
         batch_size: int, seed: int, writer, phase: str, progress: bool,
-        resume: dict | None = None, resume_path: Path | None = None) -> dict[str, Any]:
+        resume: dict | None = None, resume_path: Path | None = None,
+        resume_config: dict[str, Any] | None = None) -> dict[str, Any]:
     """Adam on ``train_items`` for ``minutes``; returns the history and leaves the best
-    validation epoch's weights in ``model``."""
+    validation epoch's weights in ``model``. ``resume_path``: the state after every epoch, with
+    ``resume_config`` (what a resumed run must match, :func:`check_resume`)."""
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     history: list[dict[str, float]] = []
     best = (math.inf, None)
@@ -121,7 +123,8 @@ def fit(model: torch.nn.Module, adapter, train_items: list, val_items: list, min
         if resume_path is not None:
             save_training_state(resume_path, {"model": model.state_dict(), "optimizer": opt.state_dict(),
                                               "history": history, "epoch": epoch, "elapsed": time.perf_counter() - t0,
-                                              "best_loss": best[0], "best_state": best[1]})
+                                              "best_loss": best[0], "best_state": best[1],
+                                              "config": resume_config})
     bar.close()
     if best[1] is not None:
         model.load_state_dict(best[1])
@@ -146,6 +149,32 @@ def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDatas
     return data.subset(sorted(order[cut:].tolist())), data.subset(sorted(order[:cut].tolist()))
 
 
+#: The flags a resumed first phase must share with the run that wrote the resume state (with the
+#: model's kind and constructor arguments): its data, model, schedule and random streams.
+RESUME_KEYS = ("task", "model", "problems", "view", "minutes", "batch_size", "lr", "max_snapshots", "seed")
+
+
+def resume_config(args: TrainArgs, kind: str, ctor_args: dict[str, Any]) -> dict[str, Any]:
+    """What :func:`fit` stores with its resume state (plain JSON values)."""
+    import json
+    from agents.checkpoints import plain
+    config = {**{key: getattr(args, key) for key in RESUME_KEYS}, "kind": kind, "ctor_args": ctor_args}
+    return json.loads(json.dumps(plain(config, "resume config")))
+
+
+def check_resume(path: Path, stored: Any, config: dict[str, Any]) -> None:
+    """Refuse, in one line, a resume state written by another run (another model, task, data,
+    learning rate, batch size, seed, ...): its weights would not load, or the run would go on
+    with other settings than it began with, without a word."""
+    if not isinstance(stored, dict):
+        raise TrainError(f"--resume: {path} holds no run configuration (written by another command or an older "
+                         "version); start a new run")
+    for key, value in config.items():
+        if stored.get(key) != value:
+            raise TrainError(f"--resume: {path} is the state of another run ({key} {stored.get(key)!r} there, "
+                             f"{value!r} here); resume with that run's flags or start a new --out")
+
+
 # ---------------------------------------------------------------------------- the whole job
 def train(args: TrainArgs) -> dict[str, Any]:
     """Data, training, DAgger, evaluation, checkpoint; returns the run's summary."""
@@ -167,6 +196,13 @@ def train(args: TrainArgs) -> dict[str, Any]:
     except ValueError as exc:
         raise TrainError(f"--model {args.model} on task {args.task}: {exc}") from None
     started = time.perf_counter()
+    resume_path = run.path("resume.pt")      # checked before the data: a refusal costs nothing
+    if args.resume and not resume_path.exists():
+        raise TrainError(f"--resume: {resume_path} does not exist")
+    config = resume_config(args, adapter.kind, ctor_args)
+    resume = load_training_state(resume_path) if args.resume else None
+    if resume is not None:
+        check_resume(resume_path, resume.get("config"), config)
 
     # 1. data: uniform solutions of training problems
     data_config = TreeDataConfig(task=args.task, split="train", scene=spec.training_scene(), problems=args.problems,
@@ -180,15 +216,11 @@ def train(args: TrainArgs) -> dict[str, Any]:
     train_items = adapter.items(model, train_data, args.view, rng, snapshots)
     val_items = adapter.items(model, val_data, args.view, rng, snapshots)
 
-    resume_path = run.path("resume.pt")
-    if args.resume and not resume_path.exists():
-        raise TrainError(f"--resume: {resume_path} does not exist")
-    resume = load_training_state(resume_path) if args.resume else None
     summary: dict[str, Any] = {"config": asdict(args), "dataset": data_config.file_name(),
                                "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
     # 2. the first phase
     phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed,
-                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path)]
+                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path, resume_config=config)]
     # 3. DAgger
     settings = spec.sampler_defaults(args.model)
     for r in range(args.dagger_rounds):

@@ -18,15 +18,16 @@ segment from start to goal is collision-free is rejected and redrawn.
 Modules: :mod:`~gnn_mp_envs.tasks.arm.world` (the pybullet client and collision check),
 :mod:`~gnn_mp_envs.tasks.arm.problem` (joint-space problems), :mod:`~gnn_mp_envs.tasks.arm.task`
 (the family), :mod:`~gnn_mp_envs.tasks.arm.render` (images), :mod:`~gnn_mp_envs.tasks.arm.scenes`
-(scene families as data).
+(scene families as data; :func:`register_scene_family` adds one by name).
 """
 
 from gnn_mp_envs.tasks.arm.problem import RESOLUTION, STEP_SIZE, ArmProblem
 from gnn_mp_envs.tasks.arm.render import CAMERA, render_arm
-from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, EndEffectorTarget, Obstacle, Scene, sample_scene
+from gnn_mp_envs.tasks.arm.scenes import (LAYOUTS, SCENE_FAMILIES, EndEffectorTarget, Obstacle, Scene,
+                                          register_scene_family, sample_scene)
 from gnn_mp_envs.tasks.arm.task import TRAIN_FAMILIES, ArmTask
 from gnn_mp_envs.tasks.arm.world import EE_LINK, JOINT_HIGH, JOINT_LOW, JOINTS, ArmWorld, tool_quaternion
 
-__all__ = ["CAMERA", "EE_LINK", "JOINTS", "JOINT_HIGH", "JOINT_LOW", "RESOLUTION", "SCENE_FAMILIES",
+__all__ = ["CAMERA", "EE_LINK", "JOINTS", "JOINT_HIGH", "JOINT_LOW", "LAYOUTS", "RESOLUTION", "SCENE_FAMILIES",
            "STEP_SIZE", "TRAIN_FAMILIES", "ArmProblem", "ArmTask", "ArmWorld", "EndEffectorTarget",
-           "Obstacle", "Scene", "render_arm", "sample_scene", "tool_quaternion"]
+           "Obstacle", "Scene", "register_scene_family", "render_arm", "sample_scene", "tool_quaternion"]

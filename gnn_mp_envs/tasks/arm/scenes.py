@@ -310,3 +310,47 @@ def sample_scene(family: str, rng: np.random.Generator) -> Scene:
         raise ValueError(f"unknown arm scene {family!r}; known: {sorted(SCENE_FAMILIES)}") from None
     obstacles, goal, azimuth, side, meta = LAYOUTS[spec["layout"]](rng, spec)
     return Scene(family, tuple(obstacles), goal, float(azimuth), float(side), meta)
+
+
+def register_scene_family(name: str, params: dict[str, Any], layout: str | Callable | None = None, *,
+                          replace: bool = False) -> None:
+    """Add an arm scene family the whole tool chain plans by name: ``ArmTask(scene=name)``,
+    ``gym.make("GNNMP/ArmBiRRT-v0", scene=name)``, ``gnn-mp benchmark --task arm --scene name``
+    (with ``--import`` of the module making this call, so that worker processes and the OMPL
+    runner register it too).
+
+    ``params``: the parameter ranges the layout reads (like an entry of :data:`SCENE_FAMILIES`).
+    ``layout``: the name of a layout in :data:`LAYOUTS` (a shipped layout with other ranges), or
+    a function ``(rng, params) -> (obstacles, goal, azimuth, start_side, meta)`` (see
+    :func:`crevice_layout`), registered in :data:`LAYOUTS` under its ``__name__``; default:
+    ``params["layout"]``. One scene is drawn (seed 0) to check the layout before the family is
+    added; a bad family is a one-line ``ValueError``."""
+    from dataclasses import replace as replaced
+
+    from gnn_mp_envs.registration import TASK_SPECS, register_task
+    if not isinstance(name, str) or not name or name == "train":
+        raise ValueError(f"a scene family needs a name other than 'train' (either training family), got {name!r}")
+    if name in SCENE_FAMILIES and not replace:
+        raise ValueError(f"arm scene family {name!r} already exists (replace=True to redefine it)")
+    if not isinstance(params, dict):
+        raise ValueError(f"scene family {name!r}: params must be a dict of parameter ranges, got {type(params).__name__}")
+    layout = params.get("layout") if layout is None else layout
+    if callable(layout):
+        LAYOUTS[layout.__name__] = layout
+        layout = layout.__name__
+    if layout not in LAYOUTS:
+        raise ValueError(f"scene family {name!r}: unknown layout {layout!r}; known: {', '.join(sorted(LAYOUTS))} "
+                         "(or pass the layout function)")
+    spec = {**params, "layout": layout}
+    try:
+        obstacles, goal, azimuth, side, meta = LAYOUTS[layout](np.random.default_rng(0), spec)
+        if not (all(isinstance(ob, Obstacle) for ob in obstacles) and isinstance(goal, EndEffectorTarget)
+                and math.isfinite(float(azimuth)) and float(side) in (-1.0, 0.0, 1.0) and isinstance(meta, dict)):
+            raise TypeError("expected (obstacles, goal target, azimuth, start side -1/0/1, meta dict)")
+    except Exception as exc:
+        raise ValueError(f"scene family {name!r}: layout {layout!r} failed on a first draw "
+                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
+    SCENE_FAMILIES[name] = spec
+    arm = TASK_SPECS.get("arm")
+    if arm is not None and name not in arm.scenes:      # the environment and the CLI check scenes there
+        register_task(replaced(arm, scenes=(*arm.scenes, name)), replace=True)

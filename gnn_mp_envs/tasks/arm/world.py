@@ -70,7 +70,16 @@ CONTACT_DISTANCE = 0.0
 #: IK seeds tried per target.
 IK_TRIES = 20
 
-_PARK = (0.0, 0.0, -50.0)
+#: Unused obstacle bodies wait below the table, their top at least this far down (m).
+PARK_DEPTH = 50.0
+
+
+def park_position(size: tuple[float, ...]) -> tuple[float, float, float]:
+    """Where an unused body of ``size`` (half extents, or radius and height) waits: its top at
+    least :data:`PARK_DEPTH` below the table whatever its size (a 200 m tower parked at a fixed
+    depth still reached the robot)."""
+    return (0.0, 0.0, -PARK_DEPTH - 2.0 * max(float(v) for v in size))
+
 _POOL_LIMIT = 64
 #: pybullet never frees collision or visual shapes (there is no removeVisualShape, and
 #: removeCollisionShape refuses shapes a removed body used), and scene obstacles have random
@@ -112,22 +121,27 @@ def tool_quaternion(axis: tuple[float, float, float], roll: float) -> np.ndarray
 
 
 def import_pybullet():
-    """``import pybullet`` without the "pybullet build time: ..." line its C module prints on
-    the process's standard output at import (file descriptor 1, so ``sys.stdout`` redirection
-    cannot catch it): it would land in the middle of tables and JSON piped from the CLI."""
+    """``import pybullet`` without the "pybullet build time: ..." line its C module prints at
+    import, straight to a file descriptor (so ``sys.stdout`` / ``sys.stderr`` redirection cannot
+    catch it; this build writes it to stderr, others to stdout): it would land in the middle of
+    tables and JSON piped from the CLI, or under its one-line errors. Both descriptors point to
+    /dev/null for the import; an import error is raised (and printed) after they are restored."""
     import sys
     if "pybullet" in sys.modules:
         return sys.modules["pybullet"]
     import os
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
     try:
         with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 1)
+            for fd in saved:
+                os.dup2(devnull.fileno(), fd)
             import pybullet
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
     return pybullet
 
 
@@ -224,7 +238,7 @@ class ArmWorld:
             raise ValueError(f"unknown obstacle kind {ob.kind!r} (box, cylinder or sphere)")
         self.bodies_created += 1
         self._bodies_in_client += 1
-        return p.createMultiBody(0, col, vis, basePosition=list(_PARK), physicsClientId=cid)
+        return p.createMultiBody(0, col, vis, basePosition=list(park_position(ob.size)), physicsClientId=cid)
 
     def load(self, scene: Scene | tuple[Obstacle, ...]) -> None:
         """Make ``scene`` (a Scene or a tuple of obstacles) the current one.
@@ -239,7 +253,7 @@ class ArmWorld:
             self._rebuild()
         p, cid = self.p, self.client
         for key, body in self._active:
-            p.resetBasePositionAndOrientation(body, _PARK, (0, 0, 0, 1), physicsClientId=cid)
+            p.resetBasePositionAndOrientation(body, park_position(key[1:]), (0, 0, 0, 1), physicsClientId=cid)
             self._pool.setdefault(key, []).append(body)
             self._pooled += 1
         self._active = []
