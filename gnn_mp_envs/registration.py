@@ -268,6 +268,15 @@ BUILTIN_TASKS = (
              max_nodes=5000, scenes=("train-a", "train-b", "train", "test", "pillars", "tall-clutter", "shelves", "bins"),
              benchmark_scene="test", validation_scenes=("pillars",), ood_scenes=("tall-clutter", "shelves", "bins"),
              ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4),
+    # MotionBenchMaker's Panda problems (docs/mbm.md): the benchmark plans the test split of all
+    # seven scenes; training uses the five training scenes ("train"), "test" holds the two held out.
+    # step_scale: tasks/mbm STEP_SIZE (rad).
+    TaskSpec("panda-mbm", "gnn_mp_envs.tasks.mbm:PandaMBMTask",
+             envs={"GNNMP/PandaMBM-v0": {"planner": "birrt"}},
+             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
+                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
+             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
+             step_scale=1.0),
 )
 
 

@@ -29,10 +29,10 @@ def without_wall_time(report: dict) -> dict:
 
 
 def test_summarize_ignores_missing_values_and_never_returns_nan():
-    assert bm.summarize([]) == {"median": None, "mean": None, "q25": None, "q75": None}
+    assert bm.summarize([]) == {"median": None, "mean": None, "q25": None, "q75": None, "p95": None}
     assert bm.summarize([None, float("inf")])["median"] is None
     stats = bm.summarize([1.0, 2.0, 3.0, None])
-    assert stats == {"median": 2.0, "mean": 2.0, "q25": 1.5, "q75": 2.5}
+    assert stats == {"median": 2.0, "mean": 2.0, "q25": 1.5, "q75": 2.5, "p95": 2.9}
 
 
 def test_problem_seeds_are_shared_across_samplers_and_distinct_across_problems():
@@ -187,8 +187,13 @@ def test_every_returned_path_is_rechecked_and_failures_are_named():
     report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "goal-bias"], max_nodes=3000))
     records = [r for runs in report["runs"].values() for r in runs]
     assert all(r["path_valid"] is (True if r["success"] else None) for r in records)
+    assert all(r["path_valid_fine"] is (True if r["success"] else None) for r in records)
     solved = sum(r["success"] for r in records)
     assert solved >= 2
-    assert path_check_note(report) == f"returned paths re-checked edge by edge: {solved} of {solved} valid"
-    next(r for r in report["runs"]["goal-bias"] if r["success"])["path_valid"] = False   # a hand-made failure
-    assert path_check_note(report).endswith(f"1 of {solved} INVALID (goal-bias: 1)")
+    assert path_check_note(report) == (f"returned paths re-checked: {solved} of {solved} valid edge by edge; "
+                                       f"{solved} of {solved} valid at 10x finer resolution")
+    first = next(r for r in report["runs"]["goal-bias"] if r["success"])
+    first["path_valid"] = False   # a hand-made failure
+    assert f"1 of {solved} INVALID edge by edge (goal-bias: 1); {solved} of {solved} valid" in path_check_note(report)
+    first["path_valid_fine"] = False
+    assert path_check_note(report).endswith(f"1 of {solved} INVALID at 10x finer resolution (goal-bias: 1)")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-STATS_KEYS = {"median", "mean", "q25", "q75"}
+STATS_KEYS = {"median", "mean", "q25", "q75", "p95"}
 METRICS = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s", "sampler_time_s",
            "planner_time_s")
 
@@ -48,7 +48,7 @@ def validate_report(report: dict, task: str, problems: int, seed: int, samplers:
             for value in stats.values():
                 assert value is None or (isinstance(value, (int, float)) and math.isfinite(value))
             if stats["median"] is not None:
-                assert stats["q25"] <= stats["median"] <= stats["q75"]
+                assert stats["q25"] <= stats["median"] <= stats["q75"] <= stats["p95"]
 
 
 def test_benchmark_end_to_end_json_plot_and_render(tmp_path: Path):

@@ -185,6 +185,18 @@ def test_rrtconnect_solves_arm_with_the_same_checker():
 
 
 @needs_ompl
+def test_rrtconnect_on_motionbenchmaker_counts_iterations_and_rechecks_paths_finely():
+    """MotionBenchMaker's first two test problems: solved, the path valid at the planner's resolution
+    and at 10x finer, the scene named, and iterations counted (each samples once and checks at least
+    one state)."""
+    results = run_ompl("panda-mbm", [0, 1], split="test", time_limit=10.0)
+    assert [r["family"] for r in results] == ["table_pick", "table_under_pick"]
+    for r in results:
+        assert r["solved"] and r["path_valid"] and r["path_valid_fine"]
+        assert 0 < r["iterations"] <= r["collision_checks"]
+
+
+@needs_ompl
 def test_planner_that_does_not_fit_the_task_is_refused_clearly():
     with pytest.raises(ValueError, match="kinodynamic"):
         run_ompl("pendulum", [0], planner="rrtconnect", time_limit=1.0)

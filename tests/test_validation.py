@@ -70,7 +70,8 @@ def test_arm_obstacles_with_bad_sizes_are_refused_and_named(kind, data):
 
 def test_arm_obstacles_of_unknown_kind_or_bad_position_are_refused():
     with pytest.raises(InvalidProblemError, match="kind"):
-        Obstacle("sphere", (0.1,), (0.3, 0.0, 0.1))
+        Obstacle("cone", (0.1,), (0.3, 0.0, 0.1))     # box, cylinder and sphere (MotionBenchMaker) exist
+    assert Obstacle("sphere", (0.1,), (0.3, 0.0, 0.1)).kind == "sphere"
     with pytest.raises(InvalidProblemError, match="position"):
         Obstacle("box", (0.1, 0.1, 0.1), (0.3, np.nan, 0.1))
 

@@ -49,6 +49,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+
 #: Planner name -> OMPL geometric planner class name.
 GEOMETRIC_PLANNERS = {"rrtconnect": "RRTConnect", "rrt": "RRT"}
 #: Planner name -> OMPL control (kinodynamic) planner class name.
@@ -281,6 +283,17 @@ def _geometric_setup(problem: Any, planner: str) -> _Setup:
     si.setMotionValidator(validator)
     # Only used by OMPL's default validator; kept consistent for anything that reads it.
     si.setStateValidityCheckingResolution(min(1.0, problem.resolution / space.getMaximumExtent()))
+    # Planner iterations, as our planners count them: RRTConnect and RRT draw one uniform sample per
+    # iteration, so a sampler that counts its draws (and draws exactly what OMPL's own would) counts them.
+    samples = {"n": 0}
+
+    class CountingSampler(ob.RealVectorStateSampler):
+        def sampleUniform(self, state: Any) -> None:
+            samples["n"] += 1
+            super().sampleUniform(state)
+
+    allocator = ob.StateSamplerAllocator(lambda s: CountingSampler(s))
+    space.setStateSamplerAllocator(allocator)
     start, goal = ob.State(space), ob.State(space)
     for i in range(d):
         start[i] = float(problem.start[i])
@@ -294,12 +307,14 @@ def _geometric_setup(problem: Any, planner: str) -> _Setup:
         states = np.array([as_array(path.getState(k)) for k in range(path.getStateCount())])
         return {"path_length": float(path.length()), "path": states.tolist(), "path_states": int(len(states)),
                 "goal_reached": bool(problem.in_goal(states[-1])),
-                "path_valid": bool(problem.path_valid(states))}
+                "path_valid": bool(problem.path_valid(states)),
+                "path_valid_fine": bool(problem.path_valid(states, refine=PATH_CHECK_REFINE))}
 
     return _Setup(ss, plan, f"geometric_{GEOMETRIC_PLANNERS[planner]}", path_result,
-                  lambda: {"edges_checked": int(problem.edges_checked)}, lambda: None,
+                  lambda: {"edges_checked": int(problem.edges_checked), "iterations": samples["n"]},
+                  lambda: samples.update(n=0),
                   # Keep the Python-side callbacks alive as long as the setup.
-                  [checker, validator, as_array, space, start, goal])
+                  [checker, validator, as_array, space, start, goal, allocator, CountingSampler])
 
 
 #: KPIECE1's projection of a pendulum state is (theta, omega); these are its grid cell sizes
@@ -499,7 +514,8 @@ def solve_problem(problem: Any, planner: str = "rrtconnect", time_limit: float =
     wall, of ``solve``), plan_time, path_length (None when unsolved; for control planners
     the path's duration in seconds), path_states, nodes (planner graph vertices),
     goal_reached and path_valid (the returned path re-checked, uncounted; None when
-    unsolved), and for control planners propagation_steps (integration steps of
+    unsolved), for geometric planners iterations (uniform samples drawn: one per iteration) and path_valid_fine (the same at ``PATH_CHECK_REFINE`` times
+    the resolution, by the uncounted ``is_state_valid``), and for control planners propagation_steps (integration steps of
     ``EDGE_DURATION / INTEGRATION_STEPS`` each)."""
     from ompl import base as ob
 
@@ -592,8 +608,9 @@ def main(argv: list[str] | None = None) -> None:
         results = []
         try:
             for i in parse_indices(args.indices):
-                r = solve_problem(task.problem(args.split, i), args.planner, args.time_limit)
-                r.update(task=args.task, split=args.split, index=i)
+                problem = task.problem(args.split, i)
+                r = solve_problem(problem, args.planner, args.time_limit)
+                r.update(task=args.task, split=args.split, index=i, family=getattr(problem, "family", None))
                 if not args.keep_paths:
                     for key in ("path", "controls", "durations"):
                         r.pop(key, None)

@@ -17,6 +17,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 
+#: The independent re-check of returned paths (``path_valid(..., refine=...)``) interpolates edges this
+#: many times finer than the planner's collision-checking resolution.
+PATH_CHECK_REFINE = 10
+
 #: The control of a geometric edge: one shared, read-only empty array (no allocation per edge).
 NO_CONTROL = np.zeros(0)
 NO_CONTROL.setflags(write=False)
@@ -107,6 +111,11 @@ class Problem:
         """Uncounted validity of each row of ``states``; subclasses implement this."""
         raise NotImplementedError
 
+    def is_state_valid_exact(self, states: np.ndarray) -> np.ndarray:
+        """Validity without a safety margin the planner's checks may add (default: :meth:`is_state_valid`);
+        the independent re-check of returned paths (``path_valid(..., refine=...)``) uses it."""
+        return self.is_state_valid(states)
+
     def check_state(self, x: np.ndarray) -> bool:
         """Counted validity check of one state."""
         self.collision_checks += 1
@@ -177,13 +186,25 @@ class Problem:
         self.collision_checks = 0
         self.edges_checked = 0
 
-    def path_valid(self, states: np.ndarray, controls: np.ndarray | None = None) -> bool:
-        """Re-check a whole path: endpoints, and every edge at the checker's resolution."""
+    def path_valid(self, states: np.ndarray, controls: np.ndarray | None = None, refine: int = 1) -> bool:
+        """Re-check a whole path: endpoints, and every edge at the checker's resolution.
+
+        ``refine > 1`` (geometric problems): instead of the planner's own edge check, every edge is
+        interpolated ``refine`` times finer than ``resolution`` (both ends included) and the states
+        go through the uncounted :meth:`is_state_valid_exact`: an independent check that catches
+        what the planner's resolution skips over. Kinodynamic edges are re-simulated either way."""
         if len(states) < 1:
             return False
         if not np.allclose(states[0], self.start) or not self.in_goal(states[-1]):
             return False
         if controls is None:
             controls = np.zeros((len(states), self.control_dim))
+        if refine > 1 and self.geometric:
+            step = self.resolution / refine
+            for a, b in zip(states[:-1], states[1:]):
+                n = max(1, int(np.ceil(float(self.distance(b[None], a)[0]) / step)))
+                if not self.is_state_valid_exact(self.interpolate(a, b, np.arange(n + 1) / n)).all():
+                    return False
+            return True
         return all(self.edge_valid(states[i], states[i + 1], controls[i + 1])
                    for i in range(len(states) - 1))

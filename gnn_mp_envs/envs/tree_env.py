@@ -172,7 +172,7 @@ class TreePlanningEnv(gym.Env):
         else:
             index = options.get("index")
             if index is None:
-                index = int(self.np_random.integers(2**31 - 1))
+                index = int(self.np_random.integers(self.task.num_problems(self.split) or 2**31 - 1))
             problem = self.task.problem(self.split, integer("options['index']", index, 0))
         problem.reset_counters()
         self.problem = problem

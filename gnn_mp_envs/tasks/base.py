@@ -47,6 +47,12 @@ class Task:
             raise ValueError(f"problem index must be >= 0, got {index}")
         return self.sample_problem(np.random.default_rng([SPLIT_SEEDS[split], int(index)]))
 
+    def num_problems(self, split: str) -> int | None:
+        """How many problems ``split`` holds; None (the default): unbounded, a generator's stream.
+        A task with a fixed problem set (MotionBenchMaker) bounds it: indices beyond are refused,
+        and a reset without an index draws below it."""
+        return None
+
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Sampling bounds shared by every problem of the family (default: from a probe problem)."""
         probe = self.problem("test", 0)

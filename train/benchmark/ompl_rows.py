@@ -37,10 +37,13 @@ def _ompl_record(planner_row: str, index: int, seed: int, result: dict[str, Any]
         "nodes_expanded": as_int(result.get("nodes")),            # OMPL planner-data vertices
         "edges": as_int(result.get("edges_checked")),
         "collision_checks": as_int(result.get("collision_checks")),
-        "iterations": None,
+        "iterations": as_int(result.get("iterations")),            # geometric planners: samples drawn
         "path_length": _finite_or_none(result.get("path_length")) if success else None,
         "path_valid": bool(result.get("path_valid")) if success else None,   # re-checked by the runner
+        "path_valid_fine": (bool(result.get("path_valid_fine", result.get("path_valid")))   # finer (geometric)
+                            if success else None),
         "wall_time_s": _finite_or_none(result.get("time")),       # OMPL's solve() time
+        "family": result.get("family"),
         "ompl": {k: v for k, v in result.items() if isinstance(v, (int, float, str, bool))},
     }
 
@@ -78,7 +81,8 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
         raise BenchmarkError(f"the OMPL log writer is not available in this checkout ({exc})") from None
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{args.task}.log"
-    results_by_planner = {name: [_as_ompl_run(r) for r in report["runs"][name]] for name in args.samplers}
+    results_by_planner = {name: [_as_ompl_run(r, args.ompl_time_limit) for r in report["runs"][name]]
+                          for name in args.samplers}
     total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
     settings = {name: {"max_nodes": report["max_nodes"]} for name in args.samplers if not is_ompl(name)}
     experiment = f"gnn-mp {report['env_id']}" + (f" scene {args.scene}" if args.scene else "")
@@ -87,13 +91,17 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
     return path
 
 
-def _as_ompl_run(record: dict[str, Any]) -> dict[str, Any]:
-    """A benchmark record in the OMPL runner's keys (which the log writer maps to OMPL property names)."""
+def _as_ompl_run(record: dict[str, Any], time_limit: float = float("inf")) -> dict[str, Any]:
+    """A benchmark record in the OMPL runner's keys (which the log writer maps to OMPL property names).
+    The log states a time limit per run: a run of ours that took longer counts as a timeout there."""
     run = dict(record.get("ompl", {}))   # OMPL rows: the runner's own fields (status, approximate, ...)
-    for key in ("task", "split", "index", "planner"):
+    for key in ("task", "split", "index", "planner", "family"):
         run.pop(key, None)
+    late = record["wall_time_s"] is not None and record["wall_time_s"] > time_limit
+    if late and record["success"]:
+        run["status"] = "Timeout"
     run.update({
-        "solved": record["success"], "time": record["wall_time_s"], "path_length": record["path_length"],
+        "solved": record["success"] and not late, "time": record["wall_time_s"], "path_length": record["path_length"],
         "nodes": record["nodes_expanded"], "edges_checked": record["edges"],
         "collision_checks": record["collision_checks"], "problem": record["problem"],
     })

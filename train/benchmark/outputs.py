@@ -12,7 +12,7 @@ from train.benchmark.args import BenchmarkArgs
 from train.benchmark.ompl_rows import write_ompl_logs
 from train.benchmark.plots import plot_report, render_growth
 from train.benchmark.runs import BenchmarkIncomplete, WorkerPool, run_benchmark
-from train.benchmark.tables import format_table
+from train.benchmark.tables import families_of, format_family_table, format_table
 
 
 def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path]:
@@ -54,6 +54,8 @@ def benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[str, 
                 print(f"no run finished; {args.json} left as it was", file=sys.stderr)
         raise
     print(format_table(report))
+    if len(families_of(report)) > 1:     # problems from several scene families: a line per family too
+        print("\n" + format_family_table(report))
     for kind, path in write_outputs(args, report).items():
         print(f"wrote {path}", file=sys.stderr)
     return report

@@ -53,6 +53,34 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def plot_success_vs_time(report: dict[str, Any], path: Path) -> None:
+    """Planner Arena's progress view: the fraction of problems solved (within the node budget) by
+    each time budget, one curve per sampler, time on a log axis up to the report's time limit."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    from train.benchmark.stats import within_budget
+    limit, max_nodes = report.get("time_limit_s", 10.0), report["max_nodes"]
+    times = [r["wall_time_s"] for runs in report["runs"].values() for r in runs if r.get("wall_time_s")]
+    grid = np.geomspace(max(min(times, default=1e-3) / 2, 1e-4), limit, 200)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for name, runs in report["runs"].items():
+        solved = np.array([r["wall_time_s"] for r in runs if within_budget(r, max_nodes, limit)])
+        ax.step(grid, [(solved <= t).sum() / max(len(runs), 1) for t in grid], where="post", label=name)
+    ax.set_xscale("log")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("time budget [s] (planning loop incl. inference; OMPL: solve time)")
+    ax.set_ylabel("fraction of problems solved")
+    ax.set_title(f"{report['task']}: {report['problems']} problems, node budget {max_nodes:,}", fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+
+
 def snapshot_schedule(max_nodes: int) -> list[int]:
     """Iterations at which tree-growth snapshots are drawn (the final tree is always added)."""
     return [i for i in (25, 100, 400, 1600, 6400) if i < 4 * max_nodes]

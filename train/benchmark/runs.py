@@ -14,6 +14,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
 from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
@@ -74,12 +75,18 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
     except (ValueError, TypeError, RuntimeError, IndexError) as exc:   # e.g. a NaN action
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {message}") from None
-    record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters()}
+    record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters(),
+              "family": getattr(env.problem, "family", None)}   # the problem's scene family (tables per family)
     # every returned path re-checked edge by edge with the problem's own checker (after the counters
-    # were read, so the re-check counts nowhere): a planner or checker fault shows as False
+    # were read, so the re-check counts nowhere): a planner or checker fault shows as False; and,
+    # independently of the planner's edge checks, at PATH_CHECK_REFINE times its resolution
+    # (what the resolution skipped over shows as path_valid_fine False)
     solution = env.planner.solution if run.success else None
-    record["path_valid"] = (bool(env.problem.path_valid(solution.states, solution.controls))
-                            if solution is not None else None)
+    record["path_valid"] = record["path_valid_fine"] = None
+    if solution is not None:
+        record["path_valid"] = bool(env.problem.path_valid(solution.states, solution.controls))
+        record["path_valid_fine"] = bool(env.problem.path_valid(solution.states, solution.controls,
+                                                                refine=PATH_CHECK_REFINE))
     # where the planning loop's wall time went: inside env.step (the planner) and outside it (the sampler)
     record["planner_time_s"] = record.pop("env_time_s")
     record["sampler_time_s"] = max(run.wall_time_s - run.env_time_s, 0.0)
@@ -160,15 +167,21 @@ def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
     return None if path is None else str(path)
 
 
-def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list[tuple]) -> None:
-    """Build the env and every sampler once up front so bad input fails before the progress bar;
-    one inference each warms up lazy imports (as the workers' initializer does)."""
+def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list[tuple],
+                           problems: int | None = None) -> None:
+    """Build the env and every sampler once up front so bad input fails before the progress bar
+    (also ``problems`` beyond the split's size); one inference each warms up lazy imports (as the
+    workers' initializer does)."""
     try:
         env = cached_env(task, env_kwargs)
     except ImportError as exc:
         raise BenchmarkError(f"task {task!r} is not available: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise BenchmarkError(f"cannot build the {task} environment with {env_kwargs}: {exc}") from None
+    size = env.task.num_problems(env.split)
+    if problems is not None and size is not None and problems > size:
+        scene = f" scene {env.scene!r}" if env.scene is not None else ""
+        raise BenchmarkError(f"--problems {problems}: split {env.split!r} of {task}{scene} has {size} problems")
     for name, checkpoint, settings in samplers:
         try:
             cached_sampler(name, task, checkpoint, env, settings)
@@ -191,7 +204,7 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     env_kwargs = env_kwargs_for(args)
     indices = list(range(args.problems))
     learned = [(n, checkpoint_of(args, n), args.sampler_settings(n)) for n in args.samplers if not is_ompl(n)]
-    check_env_and_samplers(args.task, env_kwargs, learned)
+    check_env_and_samplers(args.task, env_kwargs, learned, args.problems)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in args.samplers}
 
     for name in args.samplers:   # first: an unsupported OMPL combination fails before the long part

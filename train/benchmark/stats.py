@@ -10,19 +10,26 @@ import numpy as np
 from train.benchmark.args import BenchmarkArgs, task_spec_for
 
 #: The counters every run reports, in table order.
-METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "path_length", "wall_time_s",
-                            "sampler_time_s", "planner_time_s")
+METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "iterations", "path_length",
+                            "wall_time_s", "sampler_time_s", "planner_time_s")
 #: Metrics summarised over successful runs only (a failed run has no path).
 SUCCESS_ONLY_METRICS: frozenset[str] = frozenset({"path_length"})
 
 
 def summarize(values: list[float | None]) -> dict[str, float | None]:
-    """median, mean, q25, q75 of the finite values; all None when there are none."""
+    """median, mean, q25, q75, p95 of the finite values; all None when there are none."""
     data = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=np.float64)
     if data.size == 0:
-        return {"median": None, "mean": None, "q25": None, "q75": None}
-    q25, median, q75 = np.percentile(data, [25, 50, 75])
-    return {"median": float(median), "mean": float(data.mean()), "q25": float(q25), "q75": float(q75)}
+        return {"median": None, "mean": None, "q25": None, "q75": None, "p95": None}
+    q25, median, q75, p95 = np.percentile(data, [25, 50, 75, 95])
+    return {"median": float(median), "mean": float(data.mean()), "q25": float(q25), "q75": float(q75),
+            "p95": float(p95)}
+
+
+def within_budget(record: dict[str, Any], max_nodes: int, time_limit_s: float) -> bool:
+    """Solved within the node budget and the time budget (as the field reports success)."""
+    nodes, wall = record.get("nodes_expanded"), record.get("wall_time_s")
+    return bool(record["success"]) and (nodes is None or nodes <= max_nodes) and (wall is None or wall <= time_limit_s)
 
 
 def sampler_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
@@ -46,6 +53,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "env_id": spec.env_id,
         "split": args.split,
         "max_nodes": int(max_nodes),
+        "time_limit_s": float(args.ompl_time_limit),   # the time budget (OMPL rows: their solve limit)
         "scene": args.scene,
         "samplers": list(args.samplers),
         "runs": {name: [{k: v for k, v in r.items() if k != "snapshots"} for r in runs[name]]

@@ -26,14 +26,15 @@ from train.benchmark.args import (
 )
 from train.benchmark.outputs import benchmark
 from train.benchmark.runs import WorkerPool
-from train.benchmark.tables import format_table
+from train.benchmark.plots import plot_success_vs_time
+from train.benchmark.tables import format_family_table, format_field_table, format_table
 
 
 @dataclass
 class SuiteOptions:
     """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
 
-    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val); writes "
+    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm); writes "
                             "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
     out: Path = arg(Path("results"), "output directory of --suite")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
@@ -52,6 +53,9 @@ class SuiteEntry:
     scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
     split: str = "test"
+    #: also report as the field does: <name>_field.txt (success within the budgets, median / p95 time,
+    #: iterations, checks, initial path length; per scene) and <name>_success_vs_time.png
+    field: bool = False
 
     @property
     def name(self) -> str:
@@ -72,6 +76,13 @@ SUITES: dict[str, list[SuiteEntry]] = {
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
+    ],
+    # MotionBenchMaker's Panda problems (docs/mbm.md): the whole test split, 30 problems of each of
+    # the seven scenes, reported as the field reports (Planner Arena log in OUT/ompl/). The learned
+    # rows trained on five scenes: bookshelf_thin and cage are their held-out scenes.
+    "mbm": [
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
+                   field=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
@@ -136,6 +147,11 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
         elapsed = time.perf_counter() - task_start
         table = format_table(report)
         atomic_write_text(out / f"{entry.name}.txt", table + "\n")
+        if entry.field:
+            table = "\n\n".join([format_field_table(report), format_family_table(report)])
+            print(table)
+            atomic_write_text(out / f"{entry.name}_field.txt", table + "\n")
+            plot_success_vs_time(report, out / f"{entry.name}_success_vs_time.png")
         tables.append(f"{table}\n({elapsed:.0f} s)")
         reports[entry.name] = report
         print(f"({entry.name}: {elapsed:.0f} s)\n")

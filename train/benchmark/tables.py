@@ -19,15 +19,26 @@ def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -
 
 
 def path_check_note(report: dict[str, Any]) -> str:
-    """How many returned paths passed the re-check of every edge (``problem.path_valid``); the
-    rows with failures are named."""
-    checked = [r for runs in report["runs"].values() for r in runs if r.get("path_valid") is not None]
-    bad = {name: sum(r.get("path_valid") is False for r in runs) for name, runs in report["runs"].items()}
-    bad = {name: n for name, n in bad.items() if n}
-    if not bad:
-        return f"returned paths re-checked edge by edge: {len(checked)} of {len(checked)} valid"
-    return (f"returned paths re-checked edge by edge: {sum(bad.values())} of {len(checked)} INVALID ("
-            + ", ".join(f"{name}: {n}" for name, n in bad.items()) + ")")
+    """How many returned paths passed the re-check of every edge (``problem.path_valid``) at the
+    planner's resolution and, independently, at ``PATH_CHECK_REFINE`` times finer; rows with
+    failures are named."""
+    from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+    runs = report["runs"]
+    checked = [r for rows in runs.values() for r in rows if r.get("path_valid") is not None]
+    fine = [r for rows in runs.values() for r in rows if r.get("path_valid_fine") is not None]
+    notes = []
+    for key, pool, what in (("path_valid", checked, "edge by edge"),
+                            ("path_valid_fine", fine, f"at {PATH_CHECK_REFINE}x finer resolution")):
+        if not pool and key == "path_valid_fine":
+            continue
+        bad = {name: sum(r.get(key) is False for r in rows) for name, rows in runs.items()}
+        bad = {name: n for name, n in bad.items() if n}
+        if not bad:
+            notes.append(f"{len(pool)} of {len(pool)} valid {what}")
+        else:
+            notes.append(f"{sum(bad.values())} of {len(pool)} INVALID {what} ("
+                         + ", ".join(f"{name}: {n}" for name, n in bad.items()) + ")")
+    return "returned paths re-checked: " + "; ".join(notes)
 
 
 def format_table(report: dict[str, Any]) -> str:
@@ -60,3 +71,68 @@ def format_table(report: dict[str, Any]) -> str:
              "sampler / planner = medians of the time in the sampler (inference) and in env.step (the planner)",
              path_check_note(report)]
     return "\n".join([title, *lines, *notes])
+
+
+def _grid(rows: list[list[str]]) -> list[str]:
+    widths = [max(len(r[c]) for r in rows) for c in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in enumerate(zip(r, widths)))
+             for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return lines
+
+
+def _median(values: list[float | None], scale: float = 1.0, digits: int = 0) -> str:
+    import numpy as np
+    data = [v for v in values if v is not None]
+    return "-" if not data else f"{scale * float(np.median(data)):.{digits}f}"
+
+
+def format_field_table(report: dict[str, Any]) -> str:
+    """The figures motion-planning papers report (Planner Arena, MotionBenchMaker, VAMP): success
+    within the node and the time budget, median and 95th-percentile planning time, planner
+    iterations, collision checks and the length of the first path found."""
+    from train.benchmark.stats import within_budget
+    max_nodes, limit = report["max_nodes"], report.get("time_limit_s", 10.0)
+    header = ["sampler", "solved", "time median / p95 [ms]", "iterations median / mean / p95",
+              "collision checks", "initial path length"]
+    rows = [header]
+    for name, s in report["results"].items():
+        runs = report["runs"][name]
+        solved = sum(within_budget(r, max_nodes, limit) for r in runs)
+        t, it = s["wall_time_s"], s.get("iterations", {})
+        times = "-" if t["median"] is None else f"{1e3 * t['median']:.0f} / {1e3 * t['p95']:.0f}"
+        iters = "-" if not it or it.get("median") is None else f"{it['median']:.0f} / {it['mean']:.0f} / {it['p95']:.0f}"
+        rows.append([name, f"{solved}/{len(runs)}", times, iters, _cell(s["collision_checks"]),
+                     _cell(s["path_length"], 2)])
+    title = (f"{report['task']}: {report['problems']} problems, seed {report['seed']}; solved = within "
+             f"{max_nodes:,} nodes and {limit:g} s")
+    notes = ["time: planning loop incl. sampler inference (OMPL: solve time), all runs; iterations: samples drawn "
+             "(OMPL: uniform samples its planner drew); checks and initial path length: median [q25, q75]"]
+    return "\n".join([title, *_grid(rows), *notes])
+
+
+def families_of(report: dict[str, Any]) -> list[str]:
+    """The problem families (scenes) the runs came from, in first-seen order (empty: none named)."""
+    seen: dict[str, None] = {}
+    for runs in report["runs"].values():
+        for r in sorted(runs, key=lambda r: r["problem"]):
+            if r.get("family") is not None:
+                seen.setdefault(r["family"], None)
+    return list(seen)
+
+
+def format_family_table(report: dict[str, Any]) -> str:
+    """Per scene family and sampler: solved within the budgets, median iterations, collision checks
+    and planning time (ms)."""
+    from train.benchmark.stats import within_budget
+    max_nodes, limit = report["max_nodes"], report.get("time_limit_s", 10.0)
+    rows = [["scene", "sampler", "solved", "iterations", "checks", "time [ms]"]]
+    for family in families_of(report):
+        for name in report["results"]:
+            runs = [r for r in report["runs"][name] if r.get("family") == family]
+            if not runs:
+                continue
+            rows.append([family, name, f"{sum(within_budget(r, max_nodes, limit) for r in runs)}/{len(runs)}",
+                         _median([r.get("iterations") for r in runs]), _median([r["collision_checks"] for r in runs]),
+                         _median([r["wall_time_s"] for r in runs], 1e3)])
+    return "\n".join(["per scene (medians over the scene's problems; solved within the budgets):", *_grid(rows)])

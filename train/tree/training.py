@@ -342,6 +342,7 @@ def evaluate_online(task: str, checkpoint: Path, model: str, problems: int, seed
     from agents.registry import load_sampler
     from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
     env = evaluation_env(task, "val", scene=scene)
+    problems = min(problems, env.task.num_problems("val") or problems)   # a fixed problem set (MBM) may hold fewer
     try:
         out = {}
         for name, extra in (("uniform", {}), (model, {"checkpoint": checkpoint})):

@@ -1,5 +1,5 @@
-"""Joint-space planning problems of the xArm6: bounds, straight-line steering and counted,
-sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
+"""Joint-space planning problems of an arm (the xArm6, the Panda): bounds, straight-line steering
+and counted, sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
 
 Each configuration checked counts one collision check; edges are interpolated every
 :data:`RESOLUTION` rad (joint-space L2) and stop at the first invalid configuration.
@@ -7,13 +7,15 @@ Each configuration checked counts one collision check; edges are interpolated ev
 
 from __future__ import annotations
 
+import collections
+import functools
 import math
 
 import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, Problem
 from gnn_mp_envs.tasks.arm.scenes import Obstacle, Scene
-from gnn_mp_envs.tasks.arm.world import JOINT_HIGH, JOINT_LOW, ArmWorld
+from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld
 
 #: RRT/BiRRT extension length in joint space (rad, L2 over the six joints).
 STEP_SIZE = 0.4
@@ -21,15 +23,32 @@ STEP_SIZE = 0.4
 RESOLUTION = 0.05
 
 
+@functools.lru_cache(maxsize=4096)
+def bisection_order(n: int) -> tuple[int, ...]:
+    """``1..n`` as OMPL's ``DiscreteMotionValidator`` visits an edge's states: ``n`` (the far end)
+    first, then the middle of ``1..n-1``, then the middles of its halves, breadth first."""
+    order, queue = [n], collections.deque([(1, n - 1)])
+    while queue:
+        lo, hi = queue.popleft()
+        if lo > hi:
+            continue
+        mid = (lo + hi) // 2
+        order.append(mid)
+        queue.append((lo, mid - 1))
+        queue.append((mid + 1, hi))
+    return tuple(order)
+
+
 class ArmProblem(Problem):
-    """Joint-space planning for the xArm6 in one scene of an :class:`ArmWorld`."""
+    """Joint-space planning for the world's robot (bounds: its joint limits) in one scene of an
+    :class:`ArmWorld`."""
 
     task = "arm"
     geometric = True
 
     def __init__(self, world: ArmWorld, scene: Scene | tuple[Obstacle, ...], start: np.ndarray,
                  goal: np.ndarray, step_size: float = STEP_SIZE, resolution: float = RESOLUTION) -> None:
-        super().__init__(start, goal, low=JOINT_LOW, high=JOINT_HIGH, step_size=step_size,
+        super().__init__(start, goal, low=world.low, high=world.high, step_size=step_size,
                          resolution=resolution)
         self.world = world
         self.scene = scene
@@ -38,6 +57,12 @@ class ArmProblem(Problem):
         self._high = self.high + 1e-12
         self._low_tol = self._low.tolist()
         self._high_tol = self._high.tolist()
+
+    @property
+    def family(self) -> str | None:
+        """The scene family the problem was drawn from (None: a problem given by hand); the
+        benchmark reports results per family."""
+        return self.scene.family if isinstance(self.scene, Scene) else None
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
@@ -54,9 +79,26 @@ class ArmProblem(Problem):
                 ok[i] = False
         return ok
 
+    def is_state_valid_exact(self, states: np.ndarray) -> np.ndarray:
+        """:meth:`is_state_valid` without the robot's padding: any penetration, and only that, is a collision."""
+        s = np.asarray(states, dtype=np.float64).reshape(-1, self.state_dim)
+        ok = self._in_bounds(s)
+        self.world.load(self.scene)
+        rows = s.tolist()
+        for i in np.flatnonzero(ok).tolist():
+            if self.world.collides(rows[i], CONTACT_DISTANCE):
+                ok[i] = False
+        return ok
+
+    #: Order in which an edge's states are checked: False, from ``a`` to ``b`` (the xArm task); True,
+    #: ``b`` first, then by bisection (OMPL's ``DiscreteMotionValidator`` order), which meets a
+    #: blocking obstacle in fewer checks. Either way the edge is valid only if every state is.
+    bisection = False
+
     def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Sequential check at ``resolution`` (``b`` included) that stops at the first
-        invalid configuration; counts exactly as :meth:`Problem.check_motion`.
+        """Check of the states every ``resolution`` (``b`` included) that stops at the first
+        invalid configuration, in :attr:`bisection` order; sequentially it counts exactly as
+        :meth:`Problem.check_motion`.
 
         Plain Python floats: for the ~8 states of an edge this is faster than numpy, and
         ``a + (k / n) * (b - a)`` gives the same states as the base class.
@@ -73,7 +115,7 @@ class ArmProblem(Problem):
                          if not all(l <= x + (k / n) * v <= h for x, v, l, h in zip(al, dl, lo, hi))) - 1
         self.world.load(self.scene)
         collides = self.world.collides
-        for k in range(1, n + 1):
+        for k in (bisection_order(n) if self.bisection else range(1, n + 1)):
             self.collision_checks += 1
             t = k / n
             if k > limit or collides([x + t * v for x, v in zip(al, dl)]):

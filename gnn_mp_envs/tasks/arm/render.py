@@ -40,15 +40,17 @@ def _dots(img: np.ndarray, px: np.ndarray, color: np.ndarray, radius: int = 1) -
 
 
 def render_arm(world: ArmWorld, problem: ArmProblem, tree: Any, path: np.ndarray | None,
-               width: int = 320, height: int = 240, max_tree_nodes: int = 2000) -> np.ndarray:
+               width: int = 320, height: int = 240, max_tree_nodes: int = 2000,
+               camera: tuple = CAMERA) -> np.ndarray:
     """RGB (height, width, 3) uint8 image of an arm problem (see :meth:`ArmTask.render_rgb`).
 
     TinyRenderer does not draw debug lines, so tree nodes and the path are projected with
-    the camera's view/projection matrices and painted onto the image with numpy.
+    the camera's view/projection matrices and painted onto the image with numpy. ``camera``:
+    eye, target and up vector.
     """
     p, cid = world.p, world.client
     world.load(problem.scene)
-    eye, target, up = CAMERA
+    eye, target, up = camera
     view_l = p.computeViewMatrix(eye, target, up, physicsClientId=cid)
     proj_l = p.computeProjectionMatrixFOV(55.0, width / height, 0.05, 6.0, physicsClientId=cid)
     view = np.array(view_l).reshape(4, 4).T

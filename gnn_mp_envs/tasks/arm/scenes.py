@@ -41,22 +41,25 @@ def _floats(name: str, value: Any) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """A static collision shape: ``box`` (``size`` = half extents x, y, z) or ``cylinder``
-    (``size`` = radius, height), centred at ``position`` and rotated by ``yaw`` about z."""
+    """A static collision shape: ``box`` (``size`` = half extents x, y, z), ``cylinder``
+    (``size`` = radius, height; axis along its z) or ``sphere`` (``size`` = radius), centred at
+    ``position`` and rotated by ``yaw`` about z, or by ``orientation``, a unit quaternion
+    (x, y, z, w), for shapes that are not upright (then ``yaw`` stays 0)."""
 
     kind: str
     size: tuple[float, ...]
     position: tuple[float, float, float]
     yaw: float = 0.0
+    orientation: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         """Refuse shapes pybullet would silently accept or misreport (one message naming the field)."""
-        widths = {"box": 3, "cylinder": 2}
+        widths = {"box": 3, "cylinder": 2, "sphere": 1}
         if self.kind not in widths:
-            raise InvalidProblemError(f"obstacle kind must be 'box' or 'cylinder', got {self.kind!r}")
+            raise InvalidProblemError(f"obstacle kind must be 'box', 'cylinder' or 'sphere', got {self.kind!r}")
         size = _floats("size", self.size)
         if len(size) != widths[self.kind]:
-            what = "half extents (x, y, z)" if self.kind == "box" else "(radius, height)"
+            what = {"box": "half extents (x, y, z)", "cylinder": "(radius, height)", "sphere": "(radius,)"}[self.kind]
             raise InvalidProblemError(f"a {self.kind} obstacle's size is {what}: {widths[self.kind]} numbers, "
                                       f"got {len(size)}")
         if not all(math.isfinite(v) and v > 0 for v in size):
@@ -66,9 +69,22 @@ class Obstacle:
             raise InvalidProblemError(f"obstacle position must be 3 finite numbers, got {list(position)}")
         if not math.isfinite(float(self.yaw)):
             raise InvalidProblemError(f"obstacle yaw must be finite, got {self.yaw}")
+        if self.orientation is not None:
+            q = _floats("orientation", self.orientation)
+            if len(q) != 4 or not all(math.isfinite(v) for v in q) or abs(math.hypot(*q) - 1.0) > 1e-6:
+                raise InvalidProblemError(f"obstacle orientation must be a unit quaternion (x, y, z, w), got {list(q)}")
+            if float(self.yaw) != 0.0:
+                raise InvalidProblemError("give an obstacle's rotation as yaw or as orientation, not both")
+            object.__setattr__(self, "orientation", q)
         object.__setattr__(self, "size", size)
         object.__setattr__(self, "position", position)
         object.__setattr__(self, "yaw", float(self.yaw))
+
+    def quaternion(self) -> tuple[float, float, float, float]:
+        """The rotation as a quaternion (x, y, z, w)."""
+        if self.orientation is not None:
+            return self.orientation
+        return (0.0, 0.0, float(np.sin(self.yaw / 2)), float(np.cos(self.yaw / 2)))
 
     def key(self) -> tuple:
         """Shape identity: bodies with the same key can be moved instead of rebuilt."""

@@ -1,10 +1,12 @@
-"""The xArm6 simulator: one pybullet ``DIRECT`` client with the robot, the table and a pool
-of obstacle bodies, and the collision check that is the arm task's hot path.
+"""The arm simulator: one pybullet ``DIRECT`` client with a robot (:class:`RobotModel`: the
+xArm6 of the arm task, the Panda of the MotionBenchMaker task), optionally the table, and a
+pool of obstacle bodies; and the collision check that is the arm tasks' hot path.
 
 Validity of a configuration: within the joint limits, no contact between a robot link
 and the table or an obstacle, and no self-collision. Self-collision is loaded with
 ``URDF_USE_SELF_COLLISION``, under which Bullet skips parent-child (adjacent) link pairs;
-every other link pair is checked. One check sets the six joints
+every other link pair is checked, except the pairs a robot model names in
+``allowed_collisions`` (MoveIt's allowed-collision matrix). One check sets the joints
 (``resetJointStatesMultiDof``), runs ``performCollisionDetection`` and scans
 ``getContactPoints`` of the robot for a point at distance <= 0; this measured ~25 us,
 faster than per-pair ``getClosestPoints`` queries (~35 us for two bodies alone, plus
@@ -12,6 +14,8 @@ faster than per-pair ``getClosestPoints`` queries (~35 us for two bodies alone, 
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,6 +38,33 @@ POSTURES = np.array([[0.0, 0.8, -1.45, np.pi, -0.65, 0.0],
                      [0.0, 0.5, -0.85, 0.0, 0.35, 0.0],
                      [0.0, 0.4, -0.75, np.pi, 1.2, 0.0],
                      [0.0, 0.9, -0.95, 0.0, -1.55, 0.0]])
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """What the simulator needs to know about a robot: its URDF (a ``pybullet_data`` path), the
+    pybullet joint indices planned (in state order) and their limits, the flange link, joints held
+    at a fixed position (the Panda's fingers), link-name pairs whose contact is not a collision,
+    a safety margin of the planner's checks, and whether it stands on the task's table (whose contact
+    with ``base_links`` is then ignored)."""
+
+    urdf: str
+    joints: tuple[int, ...]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    ee_link: int
+    held_joints: tuple[tuple[int, float], ...] = ()
+    allowed_collisions: tuple[tuple[str, str], ...] = ()
+    #: Safety margin of the planner's checks (m): a contact closer than this is a collision (the
+    #: independent re-check of returned paths, ``ArmWorld.collides(q, CONTACT_DISTANCE)``, uses none).
+    padding: float = 0.0
+    table: bool = True
+    base_links: tuple[int, ...] = (-1, 0)
+
+
+#: The arm task's xArm6 on the table.
+XARM6 = RobotModel(URDF, JOINTS, tuple(JOINT_LOW.tolist()), tuple(JOINT_HIGH.tolist()), EE_LINK)
+
 #: A contact at or below this signed distance (m) is a collision.
 CONTACT_DISTANCE = 0.0
 #: IK seeds tried per target.
@@ -115,12 +146,18 @@ def import_pybullet():
 
 
 class ArmWorld:
-    """One pybullet client with the robot, the table and a pool of obstacle bodies."""
+    """One pybullet client with the robot (default: the xArm6), the table (if the robot stands on
+    one) and a pool of obstacle bodies."""
 
-    def __init__(self) -> None:
+    def __init__(self, robot: RobotModel = XARM6) -> None:
         p = import_pybullet()
         self.p = p
-        self._joints = list(JOINTS)
+        self.robot_model = robot
+        self.low = np.array(robot.low, dtype=np.float64)
+        self.high = np.array(robot.high, dtype=np.float64)
+        self._joints = list(robot.joints)
+        #: The planner's collision threshold: contacts at or below this signed distance (m).
+        self.contact_distance = CONTACT_DISTANCE + float(robot.padding)
         self._reset = p.resetJointStatesMultiDof
         self._detect = p.performCollisionDetection
         self._contacts = p.getContactPoints
@@ -131,23 +168,33 @@ class ArmWorld:
     def _connect(self) -> None:
         """A fresh client with the robot and the table (no obstacles)."""
         import pybullet_data
-        p = self.p
+        p, model = self.p, self.robot_model
         self.client = p.connect(p.DIRECT)
         cid = self.client
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
         # Self-collision ON; Bullet then skips parent-child pairs (adjacent links).
         # (URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS would switch off every pair of a chain.)
-        self.robot = p.loadURDF(URDF, [0, 0, 0], useFixedBase=True,
+        self.robot = p.loadURDF(model.urdf, [0, 0, 0], useFixedBase=True,
                                 flags=p.URDF_USE_SELF_COLLISION, physicsClientId=cid)
-        x0, y0, x1, y1 = TABLE_EXTENT
-        half = [(x1 - x0) / 2, (y1 - y0) / 2, TABLE_THICKNESS / 2]
-        self.table = p.createMultiBody(
-            0, p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid),
-            p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=_COLORS["table"], physicsClientId=cid),
-            basePosition=[(x0 + x1) / 2, (y0 + y1) / 2, -TABLE_THICKNESS / 2], physicsClientId=cid)
-        # The base link stands on the table: that contact is not a collision.
-        for link in (-1, 0):
-            p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
+        for joint, value in model.held_joints:   # e.g. the Panda's fingers, beyond the URDF's own limit
+            p.resetJointState(self.robot, joint, value, physicsClientId=cid)
+        if model.allowed_collisions:
+            links = {p.getBodyInfo(self.robot, physicsClientId=cid)[0].decode(): -1}
+            links.update({p.getJointInfo(self.robot, j, physicsClientId=cid)[12].decode(): j
+                          for j in range(p.getNumJoints(self.robot, physicsClientId=cid))})
+            for a, b in model.allowed_collisions:
+                p.setCollisionFilterPair(self.robot, self.robot, links[a], links[b], 0, physicsClientId=cid)
+        self.table = None
+        if model.table:
+            x0, y0, x1, y1 = TABLE_EXTENT
+            half = [(x1 - x0) / 2, (y1 - y0) / 2, TABLE_THICKNESS / 2]
+            self.table = p.createMultiBody(
+                0, p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid),
+                p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=_COLORS["table"], physicsClientId=cid),
+                basePosition=[(x0 + x1) / 2, (y0 + y1) / 2, -TABLE_THICKNESS / 2], physicsClientId=cid)
+            # The base link stands on the table: that contact is not a collision.
+            for link in model.base_links:
+                p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
         self._active: list[tuple[tuple, int]] = []
         self._pool: dict[tuple, list[int]] = {}
         self._pooled = 0
@@ -164,10 +211,10 @@ class ArmWorld:
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict:
         """A world pickles as its current scene; unpickling starts a new client and loads it."""
-        return {"scene": self.scene, "connected": self._connected}
+        return {"scene": self.scene, "connected": self._connected, "robot": self.robot_model}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__()
+        self.__init__(state.get("robot", XARM6))
         if state["scene"] is not None:
             self.load(state["scene"])
         if not state["connected"]:
@@ -184,8 +231,11 @@ class ArmWorld:
             col = p.createCollisionShape(p.GEOM_CYLINDER, radius=ob.size[0], height=ob.size[1], physicsClientId=cid)
             vis = p.createVisualShape(p.GEOM_CYLINDER, radius=ob.size[0], length=ob.size[1], rgbaColor=color,
                                       physicsClientId=cid)
+        elif ob.kind == "sphere":
+            col = p.createCollisionShape(p.GEOM_SPHERE, radius=ob.size[0], physicsClientId=cid)
+            vis = p.createVisualShape(p.GEOM_SPHERE, radius=ob.size[0], rgbaColor=color, physicsClientId=cid)
         else:
-            raise ValueError(f"unknown obstacle kind {ob.kind!r} (box or cylinder)")
+            raise ValueError(f"unknown obstacle kind {ob.kind!r} (box, cylinder or sphere)")
         self.bodies_created += 1
         self._bodies_in_client += 1
         return p.createMultiBody(0, col, vis, basePosition=list(park_position(ob.size)), physicsClientId=cid)
@@ -218,8 +268,7 @@ class ArmWorld:
                     del self._pool[key]
             else:
                 body = self._new_body(ob)
-            orn = (0.0, 0.0, float(np.sin(ob.yaw / 2)), float(np.cos(ob.yaw / 2)))
-            p.resetBasePositionAndOrientation(body, list(ob.position), orn, physicsClientId=cid)
+            p.resetBasePositionAndOrientation(body, list(ob.position), ob.quaternion(), physicsClientId=cid)
             self._active.append((key, body))
         # Keep the pool bounded: drop parked bodies beyond the limit.
         while self._pooled > _POOL_LIMIT:
@@ -239,14 +288,16 @@ class ArmWorld:
         self.p.resetJointStatesMultiDof(self.robot, self._joints, [[v] for v in np.asarray(q).tolist()],
                                         physicsClientId=self.client)
 
-    def collides(self, q: np.ndarray | list[float]) -> bool:
-        """True when configuration ``q`` (six joint angles) touches the table, an obstacle
-        or itself. The hot path of the task: one call per collision check."""
+    def collides(self, q: np.ndarray | list[float], distance: float | None = None) -> bool:
+        """True when configuration ``q`` (the planned joints' angles) touches the table, an
+        obstacle or itself: a contact at or below ``distance`` (default: the robot's padding
+        above :data:`CONTACT_DISTANCE`). The hot path of the task: one call per collision check."""
         cid, robot = self.client, self.robot
+        limit = self.contact_distance if distance is None else distance
         self._reset(robot, self._joints, [[v] for v in q], physicsClientId=cid)
         self._detect(physicsClientId=cid)
         for cp in self._contacts(bodyA=robot, physicsClientId=cid):
-            if cp[8] <= CONTACT_DISTANCE:
+            if cp[8] <= limit:
                 return True
         return False
 
@@ -261,17 +312,57 @@ class ArmWorld:
     def flange(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flange position and tool axis (unit z of the flange frame) at ``q``."""
         self.set_config(q)
-        s = self.p.getLinkState(self.robot, EE_LINK, computeForwardKinematics=True, physicsClientId=self.client)
+        s = self.p.getLinkState(self.robot, self.robot_model.ee_link, computeForwardKinematics=True,
+                                physicsClientId=self.client)
         rot = np.array(self.p.getMatrixFromQuaternion(s[5])).reshape(3, 3)
         return np.array(s[4]), rot[:, 2]
 
+    def flange_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flange position and orientation (quaternion x, y, z, w) at ``q``."""
+        self.set_config(q)
+        s = self.p.getLinkState(self.robot, self.robot_model.ee_link, computeForwardKinematics=True,
+                                physicsClientId=self.client)
+        return np.array(s[4]), np.array(s[5])
+
+    def pose_ik(self, position: np.ndarray, orientation: np.ndarray, seed: np.ndarray, pos_tol: float = 1e-3,
+                angle_tol: float = 1e-2, rounds: int = 4, iterations: int = 100) -> np.ndarray | None:
+        """Planned joints putting the flange at ``position`` with ``orientation`` (quaternion x, y, z, w),
+        by pybullet's IK started at ``seed`` (pulled toward it, restarted from its own answer up to
+        ``rounds`` times); None when the answer leaves the joint limits or misses the pose by more
+        than ``pos_tol`` (m) / ``angle_tol`` (rad). Collisions are not checked; held joints stay."""
+        p, cid, model = self.p, self.client, self.robot_model
+        movable = [j for j in range(p.getNumJoints(self.robot, physicsClientId=cid))
+                   if p.getJointInfo(self.robot, j, physicsClientId=cid)[2] != p.JOINT_FIXED]
+        held = dict(model.held_joints)
+        planned = {j: k for k, j in enumerate(model.joints)}
+        lo = [self.low[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
+        hi = [self.high[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
+        target = np.asarray(orientation, dtype=np.float64) / np.linalg.norm(orientation)
+        q = np.asarray(seed, dtype=np.float64)
+        for _ in range(rounds):
+            rest = [q[planned[j]] if j in planned else held.get(j, 0.0) for j in movable]
+            self.set_config(q)
+            solution = p.calculateInverseKinematics(
+                self.robot, model.ee_link, list(map(float, position)), list(map(float, orientation)),
+                lowerLimits=lo, upperLimits=hi, jointRanges=[max(h - l, 1e-6) for l, h in zip(lo, hi)],
+                restPoses=rest, maxNumIterations=iterations, residualThreshold=1e-7, physicsClientId=cid)
+            q = np.array([solution[movable.index(j)] for j in model.joints])
+            x, quat = self.flange_pose(q)
+            angle = 2.0 * np.arccos(min(1.0, abs(float(np.dot(quat, target)))))
+            if np.linalg.norm(x - np.asarray(position)) <= pos_tol and angle <= angle_tol:
+                return None if np.any(q < self.low) or np.any(q > self.high) else q
+        return None
+
     def flange_positions(self, qs: np.ndarray) -> np.ndarray:
-        """Flange positions (N, 3) of configurations ``qs`` (N, 6)."""
-        return np.array([self.flange(q)[0] for q in np.asarray(qs).reshape(-1, 6)]).reshape(-1, 3)
+        """Flange positions (N, 3) of configurations ``qs`` (N, dof)."""
+        return np.array([self.flange(q)[0] for q in np.asarray(qs).reshape(-1, len(self._joints))]).reshape(-1, 3)
 
     def ik(self, target: EndEffectorTarget, rng: np.random.Generator, tries: int = IK_TRIES,
            pos_tol: float = 0.01, axis_tol: float = 0.15) -> np.ndarray | None:
-        """A collision-free configuration reaching ``target``, from random IK seeds; or None."""
+        """A collision-free configuration reaching ``target``, from random IK seeds; or None.
+        (The xArm6's: seeds around its reaching postures, its continuous joints wrapped.)"""
+        if self.robot_model != XARM6:
+            raise NotImplementedError("ArmWorld.ik seeds and wraps the xArm6's joints; use pose_ik for other robots")
         p, cid = self.p, self.client
         lo, hi = JOINT_LOW.tolist(), JOINT_HIGH.tolist()
         ranges = (JOINT_HIGH - JOINT_LOW).tolist()
@@ -289,7 +380,7 @@ class ArmWorld:
             orn = tool_quaternion(target.axis, float(rng.uniform(*target.roll)))
             self.set_config(seed)
             q = np.array(p.calculateInverseKinematics(
-                self.robot, EE_LINK, pos.tolist(), orn.tolist(), lowerLimits=lo, upperLimits=hi,
+                self.robot, self.robot_model.ee_link, pos.tolist(), orn.tolist(), lowerLimits=lo, upperLimits=hi,
                 jointRanges=ranges, restPoses=seed.tolist(), maxNumIterations=200,
                 residualThreshold=1e-5, physicsClientId=cid))
             for j in (0, 3, 5):  # wrap the continuous joints into their one-turn range
