@@ -242,7 +242,7 @@ BUILTIN_TASKS = (
     TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d:Maze2DTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length",
-             step_scale=0.05, rl_reward={"step_penalty": 1.0, "collision_check_cost": 0.1}),
+             step_scale=0.05, rl_reward={"step_penalty": 1.0, "node_cost": 0.0}),
     # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by
     # tasks/pendulum.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",

@@ -10,14 +10,15 @@ policy sees the same inputs in both.
 **Candidates** (rows in this order; the kind of row ``k`` is fixed, see :data:`CANDIDATE_KINDS`):
 
 * row 0, ``target``: the active tree's target (the goal; BiRRT's goal tree: the start);
-* row 1, ``newest``: the active tree's newest node plus a Gaussian step (continue growing);
-* row 2, ``greedy``: the active tree's node nearest its target plus a Gaussian step;
-* rows 3..K-1, ``uniform``: uniform states over the bounds.
+* row 1, ``near-target``: the target plus a Gaussian of ``target_scale`` times the box's span;
+* row 2, ``newest``: the active tree's newest node plus a Gaussian step (continue growing);
+* row 3, ``greedy``: the active tree's node nearest its target plus a Gaussian step;
+* rows 4..K-1, ``uniform``: uniform states over the bounds.
 
 The Gaussian's standard deviation is ``local_scale`` extensions per coordinate
 (``step_scale / metric_weight``); periodic coordinates are wrapped, every row clipped to the bounds.
 
-**Features** (``(K, F)`` float32, ``F = 12 + 4 d``), all relative to the tree: for candidate
+**Features** (``(K, F)`` float32, ``F = 13 + 4 d``), all relative to the tree: for candidate
 ``c`` with nearest active-tree node ``n`` (the node the planner extends, under the planner's
 metric ``|| w * wrap(a - b) ||``), target ``g``, ``D = dist(start, goal)`` and the tree's best
 node ``b`` (nearest ``g``):
@@ -25,16 +26,16 @@ node ``b`` (nearest ``g``):
 =====  ==========================================================================
 cols   meaning
 =====  ==========================================================================
-0-3    one-hot kind (target, newest, greedy, uniform)
-4      ``log1p(dist(c, n) / step)``: how far the extension reaches
-5      ``dist(c, g) / D``
-6      ``dist(n, g) / D``
-7      ``(dist(n, g) - dist(b, g)) / D``: how much worse ``n`` is than the tree's best node
-8      ``log1p(age of n)`` in nodes added since it (0: the newest)
-9      ``log1p(children of n)``: extensions that succeeded from ``n``
-10     ``log1p(failures of n)``: extensions from ``n`` that were blocked (the planner's history)
-11     BiRRT: ``dist(c, nearest node of the other tree) / D``; RRT: 0
-12..   ``c`` in ``[-1, 1]`` (d), ``n`` in ``[-1, 1]`` (d), ``wrap(c - n) / step`` clipped to
+0-4    one-hot kind (target, near-target, newest, greedy, uniform)
+5      ``log1p(dist(c, n) / step)``: how far the extension reaches
+6      ``dist(c, g) / D``
+7      ``dist(n, g) / D``
+8      ``(dist(n, g) - dist(b, g)) / D``: how much worse ``n`` is than the tree's best node
+9      ``log1p(age of n)`` in nodes added since it (0: the newest)
+10     ``log1p(children of n)``: extensions that succeeded from ``n``
+11     ``log1p(failures of n)``: extensions from ``n`` that were blocked (the planner's history)
+12     BiRRT: ``dist(c, nearest node of the other tree) / D``; RRT: 0
+13..   ``c`` in ``[-1, 1]`` (d), ``n`` in ``[-1, 1]`` (d), ``wrap(c - n) / step`` clipped to
        ``[-4, 4]`` (d), ``wrap(g - n) / span`` (d)
 =====  ==========================================================================
 
