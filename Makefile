@@ -9,10 +9,13 @@ STAMP  := $(VENV)/.installed
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
+	@echo "make: creating $(VENV) and installing gnn-mp-envs with its extras (agents, test, ompl, ray);"
+	@echo "      pip runs quietly (a few minutes on a fresh machine, once)"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e ".[agents,test,ompl,ray]"
 	touch $(STAMP)
+	@echo "make: installed into $(VENV)"
 
 test: install
 	$(BIN)/python -m pytest -q

@@ -298,6 +298,19 @@ def test_render_draws_arm_scene_and_path():
         env.close()
 
 
+def test_the_render_legend_covers_only_its_corner():
+    """The legend of the arm render's colours (issue #21, item 8) is drawn into the top-left corner
+    and leaves every other pixel of the TinyRenderer image as it was (same size, no resampling)."""
+    from gnn_mp_envs.tasks.arm.render import with_legend
+    img = np.random.default_rng(0).integers(0, 256, (360, 480, 3), dtype=np.uint8)
+    out = with_legend(img)
+    assert out.shape == img.shape and out.dtype == np.uint8
+    changed = (out != img).any(-1)
+    rows, cols = np.nonzero(changed)
+    assert changed.sum() > 2000                         # a legend box with five entries was drawn
+    assert rows.max() < 360 // 4 and cols.max() < 480 // 3
+
+
 # ---------------------------------------------------------------------- statistics
 def test_uniform_birrt_solves_heldout_arm_problems():
     """Issue 3: uniform BiRRT solves >= 90% of held-out test-scene problems within 20,000

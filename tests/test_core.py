@@ -188,3 +188,44 @@ def test_maze_pair_distance_is_the_base_metric_bit_for_bit():
     # rows against one state (the nearest-node scan) and one state against one
     assert problem.distance(a, b[0]).tolist() == Problem.distance(problem, a, b[0]).tolist()
     assert float(problem.distance(a[0], b[0])) == float(Problem.distance(problem, a[0], b[0]))
+
+
+def test_pendulum_steer_in_floats_is_the_vectorised_rule_bit_for_bit():
+    """PendulumProblem.steer (plain floats) against the rule written with the problem's numpy parts:
+    rollout every torque, argmin of distance(ends, target), is_state_valid of the kept states in order."""
+    from gnn_mp_envs.tasks.pendulum import PendulumProblem, rollout
+    problem, rng = PendulumProblem(np.zeros(2), np.array([3.0, 0.2])), np.random.default_rng(3)
+    blocked = 0
+    for i in range(2000):
+        a = np.array([rng.uniform(-np.pi, np.pi), rng.uniform(-8.5, 8.5)])    # some starts already too fast
+        b = a.copy() if i % 7 == 0 else np.array([rng.uniform(-np.pi, np.pi), rng.uniform(-8, 8)])
+        traj = rollout(a[0], a[1], problem._controls)
+        best = int(np.argmin(problem.distance(traj[-1], b)))
+        valid = problem.is_state_valid(traj[:, best])
+        bad = np.flatnonzero(~valid)
+        checks = problem.collision_checks
+        edge = problem.steer(a, b)
+        assert problem.collision_checks - checks == (bad[0] + 1 if bad.size else len(valid))
+        if bad.size:
+            blocked += 1
+            assert edge is None
+        else:
+            assert np.array_equal(edge.state, problem.normalize(traj[-1, best]))
+            assert edge.control.tolist() == [problem._controls[best]]
+    assert 0 < blocked < 2000
+
+
+def test_pendulum_distance_and_goal_test_are_the_difference_rule_bit_for_bit():
+    from gnn_mp_envs.tasks.pendulum import PendulumProblem
+    rng = np.random.default_rng(5)
+    problem = PendulumProblem(np.zeros(2), np.array([3.0, 0.2]))
+    states = np.column_stack([rng.uniform(-np.pi, np.pi, 4000), rng.uniform(-8, 8, 4000)])
+    states[:200] = problem.goal + rng.uniform(-0.2, 0.2, (200, 2))      # around the goal box's edges
+    x = states[7]
+    want = np.sqrt(np.einsum("...i,...i->...", problem.difference(states, x) * problem._weights,
+                             problem.difference(states, x) * problem._weights))
+    assert problem.distance(states, x).tolist() == want.tolist()
+    assert float(problem.distance(states[3], x)) == float(want[3])
+    d = problem.difference(states, problem.goal)
+    inside = (np.abs(d[:, 0]) <= 0.15) & (np.abs(d[:, 1]) <= 0.5)
+    assert [problem.in_goal(s) for s in states] == inside.tolist() and 0 < inside.sum() < 200

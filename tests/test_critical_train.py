@@ -110,10 +110,13 @@ def test_shipping_needs_the_flag(data_dir, tmp_path, monkeypatch):
         run_paths(_args(data_dir, out=SHIPPED_DIR / "critical_gnn.pt"))
     shipped = tmp_path / "shipped"
     shipped.mkdir()
+    (shipped / "critical_gnn.json").write_text('{"stale": "the sidecar of older weights"}\n')
     monkeypatch.setattr("agents.checkpoints.SHIPPED_DIR", shipped)
     res = train(_args(data_dir, out=tmp_path / "run" / "x.pt", ship=True), dataset=TINY, progress=False)
     assert res["shipped"] == str(shipped / "critical_gnn.pt")
     assert sorted(p.name for p in shipped.iterdir()) == ["critical_gnn.json", "critical_gnn.pt"]
+    sidecar = json.loads((shipped / "critical_gnn.json").read_text())
+    assert "stale" not in sidecar and sidecar == json.loads((tmp_path / "run" / "x.json").read_text())
     assert load_model(shipped / "critical_gnn.pt", "gnn")[1] == "gnn"
 
 

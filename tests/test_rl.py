@@ -531,3 +531,21 @@ def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_duri
     assert [answers.get(timeout=60), answers.get(timeout=60)] == [True, True]
     for w in env.workers:
         w.join(10)
+
+
+@pytest.mark.parametrize("lib", ["sb3", "torchrl"])
+def test_rerunning_train_rl_into_a_finished_run_is_refused_and_keeps_it(lib, tmp_path, capsys):
+    """The same `train rl --out DIR` twice (issue #21, item 15): the second is one line and rc 2,
+    and the finished run's files stay as they were (default run folders carry a timestamp)."""
+    from train.cli import main
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "config.json").write_text('{"finished": true}\n')
+    (out / "policy.pt").write_bytes(b"the finished run's weights")
+    rc = main(["train", "rl", "--lib", lib, "--task", "maze2d", "--out", str(out)])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "already holds a run" in err[0], err
+    assert (out / "config.json").read_text() == '{"finished": true}\n'
+    assert (out / "policy.pt").read_bytes() == b"the finished run's weights"
+    assert sorted(p.name for p in out.iterdir()) == ["config.json", "policy.pt"]

@@ -145,21 +145,27 @@ def test_resume_refuses_the_state_of_another_run_in_one_line(tmp_path, capsys):
     assert main(base + ["--resume"]) == 0
 
 
-@pytest.mark.parametrize("name, proposals", [("gnn", 1), ("gnn", 8), ("gnn-cvae", 1), ("gnn-cvae", 4)])
-def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(name, proposals):
+@pytest.mark.parametrize("task, name, proposals", [("maze2d", "gnn", 1), ("maze2d", "gnn", 8),
+                                                   ("maze2d", "gnn-cvae", 1), ("maze2d", "gnn-cvae", 4),
+                                                   ("pendulum", "gnn", None), ("pendulum", "gnn-cvae", 4)])
+def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(task, name, proposals):
     """Two envs plan the same problem with different actions, one sampler serves both in turn
     (issue #21, item 17): every forward reads the tree of the observation it was given, as a
-    sampler that only ever saw that env would (the caches recognise another tree of the same size)."""
+    sampler that only ever saw that env would (the caches recognise another tree of the same size).
+    The pendulum's gnn is the candidate scorer (no proposals)."""
     import gymnasium as gym
     from agents.registry import load_sampler
-    envs = [gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True) for _ in range(2)]
+    from gnn_mp_envs.registration import task_spec
+    envs = [gym.make(task_spec(task).env_id, disable_env_checker=True) for _ in range(2)]
     obs = [env.reset(seed=0, options={"index": 0})[0] for env in envs]
     rngs = [np.random.default_rng(s) for s in (1, 2)]
-    for step in range(30):               # two different trees of the same size
+    low, high = envs[0].action_space.low, envs[0].action_space.high
+    for step in range(30):               # two different trees
         for i, env in enumerate(envs):
-            obs[i] = env.step(rngs[i].uniform(0, 1, 2).astype(np.float32))[0]
+            obs[i] = env.step(rngs[i].uniform(low, high).astype(np.float32))[0]
     assert not np.array_equal(obs[0]["nodes"][1], obs[1]["nodes"][1])
-    shared = load_sampler(name, task="maze2d", seed=0, proposals=proposals, uniform_mix=0.0)   # every act reads the tree
+    settings = {"goal_bias": 0.0} if proposals is None else {"proposals": proposals}
+    shared = load_sampler(name, task=task, seed=0, uniform_mix=0.0, **settings)   # every act reads the tree
     for step in range(12):
         for i in (0, 1):
             shared.act(obs[i])

@@ -45,33 +45,48 @@ def wrap_angle(theta: np.ndarray | float) -> np.ndarray:
     return (np.asarray(theta) + np.pi) % (2 * np.pi) - np.pi
 
 
-def rollout(theta: np.ndarray, omega: np.ndarray, torque: np.ndarray,
-            duration: float = EDGE_DURATION, steps: int = INTEGRATION_STEPS) -> np.ndarray:
-    """RK4-integrate a batch of constant-torque edges; returns states (steps, batch, 2).
+def integrate(theta: float, omega: float, torque: float, duration: float = EDGE_DURATION,
+              steps: int = INTEGRATION_STEPS) -> tuple[list[float], list[float]]:
+    """RK4-integrate one constant-torque edge from ``(theta, omega)`` (Python floats); returns the
+    ``steps`` states' angles and velocities (angles not wrapped).
 
-    Plain Python floats on purpose: for a handful of edges it is ~3x faster than numpy,
-    whose per-call overhead dominates on 5-element arrays. Angles are not wrapped.
+    Plain Python floats on purpose: for a handful of edges it is ~3x faster than numpy, whose
+    per-call overhead dominates on 5-element arrays. Every edge of the planner, OMPL's propagator
+    and the path re-check integrate through here, so they agree bit for bit.
     """
     h = duration / steps
+    half, sixth = 0.5 * h, h / 6.0       # the factors of ``0.5 * h * k`` and ``h / 6.0 * (...)``, hoisted
     a = GRAVITY / LENGTH
-    b = 1.0 / (MASS * LENGTH ** 2)
+    bu = 1.0 / (MASS * LENGTH ** 2) * torque
     sin = math.sin
-    batch = []
-    for th, om, u in zip(np.broadcast_to(theta, np.shape(torque)).tolist(),
-                         np.broadcast_to(omega, np.shape(torque)).tolist(),
-                         np.asarray(torque, dtype=np.float64).tolist()):
-        bu = b * u
-        traj = []
-        for _ in range(steps):
-            k1t, k1w = om, bu - a * sin(th)
-            k2t, k2w = om + 0.5 * h * k1w, bu - a * sin(th + 0.5 * h * k1t)
-            k3t, k3w = om + 0.5 * h * k2w, bu - a * sin(th + 0.5 * h * k2t)
-            k4t, k4w = om + h * k3w, bu - a * sin(th + h * k3t)
-            th = th + h / 6.0 * (k1t + 2 * k2t + 2 * k3t + k4t)
-            om = om + h / 6.0 * (k1w + 2 * k2w + 2 * k3w + k4w)
-            traj.append((th, om))
-        batch.append(traj)
-    return np.array(batch, dtype=np.float64).reshape(len(batch), steps, 2).transpose(1, 0, 2)
+    th, om = theta, omega
+    thetas, omegas = [], []
+    for _ in range(steps):
+        k1t, k1w = om, bu - a * sin(th)
+        k2t, k2w = om + half * k1w, bu - a * sin(th + half * k1t)
+        k3t, k3w = om + half * k2w, bu - a * sin(th + half * k2t)
+        k4t, k4w = om + h * k3w, bu - a * sin(th + h * k3t)
+        th = th + sixth * (k1t + 2 * k2t + 2 * k3t + k4t)
+        om = om + sixth * (k1w + 2 * k2w + 2 * k3w + k4w)
+        thetas.append(th)
+        omegas.append(om)
+    return thetas, omegas
+
+
+def rollout(theta: np.ndarray, omega: np.ndarray, torque: np.ndarray,
+            duration: float = EDGE_DURATION, steps: int = INTEGRATION_STEPS) -> np.ndarray:
+    """RK4-integrate a batch of constant-torque edges (:func:`integrate` each); returns states
+    (steps, batch, 2). Angles are not wrapped."""
+    out = [integrate(th, om, u, duration, steps)
+           for th, om, u in zip(np.broadcast_to(theta, np.shape(torque)).tolist(),
+                                np.broadcast_to(omega, np.shape(torque)).tolist(),
+                                np.asarray(torque, dtype=np.float64).tolist())]
+    return np.array(out, dtype=np.float64).reshape(len(out), 2, steps).transpose(2, 0, 1)
+
+
+def _wrapped(theta: float) -> float:
+    """:func:`wrap_angle` of one float (Python's ``%`` is numpy's floor modulo, bit for bit)."""
+    return (theta + math.pi) % (2 * math.pi) - math.pi
 
 
 class PendulumProblem(Problem):
@@ -88,6 +103,8 @@ class PendulumProblem(Problem):
         self.start = self.normalize(self.start)
         self.goal = self.normalize(self.goal)
         self._controls = np.linspace(-MAX_TORQUE, MAX_TORQUE, NUM_CONTROLS)
+        self._control_list = self._controls.tolist()
+        self._goal_floats = self.goal.tolist()
         self._weights = np.array([1.0, VELOCITY_WEIGHT])
         # theta is periodic; omega's box is far larger than its range, i.e. not periodic.
         self.nn_boxsize = np.array([2 * np.pi, 1e6])
@@ -103,7 +120,12 @@ class PendulumProblem(Problem):
         return d
 
     def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray:
-        d = self.difference(states, x) * self._weights
+        d = np.asarray(states, dtype=np.float64) - x      # difference(states, x) * _weights, in place
+        angle = d[..., 0]
+        angle += np.pi
+        np.remainder(angle, 2 * np.pi, out=angle)
+        angle -= np.pi
+        d *= self._weights
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
     def nn_embed(self, states: np.ndarray) -> np.ndarray:
@@ -117,17 +139,30 @@ class PendulumProblem(Problem):
         return np.isfinite(s).all(axis=1) & (np.abs(s[:, 1]) <= MAX_SPEED)
 
     def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
-        traj = rollout(x_from[0], x_from[1], self._controls)
-        ends = traj[-1]
-        best = int(np.argmin(self.distance(ends, x_to)))
-        states = traj[:, best]
-        valid = self.is_state_valid(states)
-        bad = np.flatnonzero(~valid)
+        """Integrate every torque of ``_controls``, keep the one whose end state is nearest ``x_to``
+        (the first on ties), check its states in order. In plain floats: :meth:`distance` and
+        :meth:`is_state_valid`'s answers, bit for bit, without building the five trajectories."""
+        th0, om0 = x_from.tolist()
+        tth, tom = x_to.tolist()
+        w = VELOCITY_WEIGHT
+        trajs, dists = [], []
+        for u in self._control_list:
+            thetas, omegas = integrate(th0, om0, u)
+            dth = _wrapped(thetas[-1] - tth) * 1.0         # difference(ends, x_to) * _weights
+            dom = (omegas[-1] - tom) * w
+            trajs.append((thetas, omegas))
+            dists.append(math.sqrt(dth * dth + dom * dom))
+        nans = [c for c, d in enumerate(dists) if d != d]
+        best = nans[0] if nans else dists.index(min(dists))     # np.argmin: the first NaN, else the first minimum
+        thetas, omegas = trajs[best]
         self.edges_checked += 1
-        self.collision_checks += int(bad[0]) + 1 if bad.size else len(states)
-        if bad.size:
-            return None
-        return Edge(self.normalize(states[-1]), EDGE_DURATION, np.array([self._controls[best]]))
+        isfinite = math.isfinite
+        for i, (th, om) in enumerate(zip(thetas, omegas)):
+            if not (isfinite(th) and isfinite(om) and abs(om) <= MAX_SPEED):
+                self.collision_checks += i + 1
+                return None
+        self.collision_checks += len(thetas)
+        return Edge(np.array([_wrapped(thetas[-1]), omegas[-1]]), EDGE_DURATION, np.array([self._control_list[best]]))
 
     def edge_valid(self, x_from: np.ndarray, x_to: np.ndarray, control: np.ndarray) -> bool:
         """Re-integrate the stored torque and check every state and the arrival point."""
@@ -138,8 +173,9 @@ class PendulumProblem(Problem):
         return bool(arrived and self.is_state_valid(states).all())
 
     def in_goal(self, x: np.ndarray) -> bool:
-        d = self.difference(x, self.goal)
-        return bool(abs(d[0]) <= GOAL_ANGLE_TOLERANCE and abs(d[1]) <= GOAL_SPEED_TOLERANCE)
+        theta, omega = x.tolist()       # difference(x, goal) in floats
+        return (abs(_wrapped(theta - self._goal_floats[0])) <= GOAL_ANGLE_TOLERANCE
+                and abs(omega - self._goal_floats[1]) <= GOAL_SPEED_TOLERANCE)
 
 
 class PendulumTask(Task):

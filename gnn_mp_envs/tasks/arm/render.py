@@ -13,6 +13,7 @@ from gnn_mp_envs.tasks.arm.world import ArmWorld
 CAMERA = ((-0.75, -1.05, 1.15), (0.3, 0.0, 0.1), (0.0, 0.0, 1.0))
 _TREE_RGB = (np.array([40, 110, 220]), np.array([240, 140, 30]))
 _PATH_RGB = np.array([20, 190, 60])
+_START_RGB, _GOAL_RGB = np.array([220, 30, 30]), np.array([30, 160, 30])
 
 
 def _project(points: np.ndarray, view: np.ndarray, proj: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -81,6 +82,34 @@ def render_arm(world: ArmWorld, problem: ArmProblem, tree: Any, path: np.ndarray
         # Join consecutive points so the trace is a continuous line.
         segs = [px[i] + (px[i + 1] - px[i]) * s for i in range(len(px) - 1) for s in np.linspace(0, 1, 6)]
         _dots(img, np.array(segs), _PATH_RGB, radius=1)
-    for q, color in ((problem.start, np.array([220, 30, 30])), (problem.goal, np.array([30, 160, 30]))):
+    for q, color in ((problem.start, _START_RGB), (problem.goal, _GOAL_RGB)):
         _dots(img, _project(world.flange_positions(q), view, proj, width, height), color, radius=3)
-    return img
+    return with_legend(img, num_trees=getattr(tree, "num_trees", 1) if tree is not None else 1)
+
+
+def with_legend(img: np.ndarray, num_trees: int = 2) -> np.ndarray:
+    """``img`` with a legend of its colours in the top-left corner, at the same size: the dots
+    painted by :func:`render_arm` carry no meaning without it."""
+    from matplotlib.lines import Line2D
+
+    from gnn_mp_envs.utils.render import to_rgb
+    height, width = img.shape[:2]
+    fig = _pixel_figure(width, height)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.imshow(img, interpolation="none")
+    ax.axis("off")
+    trees = ["start tree", "goal tree"][:max(1, min(2, num_trees))]
+    entries = [(f"{name} (flange)", _TREE_RGB[t], "s", 4) for t, name in enumerate(trees)]
+    entries += [("path (flange)", _PATH_RGB, "-", 0), ("start", _START_RGB, "o", 5), ("goal (faded arm)", _GOAL_RGB, "o", 5)]
+    handles = [Line2D([], [], color=rgb / 255.0, marker=None if marker == "-" else marker,
+                      linestyle="-" if marker == "-" else "none", markersize=size, linewidth=2)
+               for _, rgb, marker, size in entries]
+    ax.legend(handles, [label for label, *_ in entries], loc="upper left", fontsize=6, framealpha=0.8,
+              handlelength=1.2, borderpad=0.3, labelspacing=0.2)
+    out = to_rgb(fig)
+    return out if out.shape[:2] == (height, width) else img
+
+
+def _pixel_figure(width: int, height: int):
+    from matplotlib.figure import Figure
+    return Figure(figsize=(width / 100.0, height / 100.0), dpi=100)
