@@ -178,4 +178,67 @@ def _plain_mean_sage(conv: nn.Module) -> bool:
             and not conv.normalize and conv.root_weight and not conv._forward_hooks and not conv._forward_pre_hooks)
 
 
-__all__ = ["ACTIVATIONS", "CONVS", "TreeEncoder"]
+class CandidateEncoder(nn.Module):
+    """Candidate-selection observation -> per-candidate embeddings and a summary.
+
+    Reads ``candidate_features`` ``(*S, K, F)`` (the features of
+    :class:`gnn_mp_envs.envs.candidates.CandidateSet`, each relative to the tree) through one
+    MLP shared by the candidates (``F -> hidden -> embed``); with ``tree`` (the keyword
+    arguments of a :class:`TreeEncoder`), the tree view's graph embedding is appended to every
+    candidate's input. ``forward(obs)`` returns ``(per_candidate (*S, K, embed), summary (*S,
+    2 * embed))``: the mean and max over the candidates. :meth:`flat` is what a library head
+    reads: ``[per_candidate.flatten(), summary]``, :attr:`out_channels` wide.
+    """
+
+    def __init__(self, feature_dim: int, count: int, hidden: int = 64, embed: int = 32, act: str = "tanh",
+                 tree: Mapping | None = None) -> None:
+        super().__init__()
+        if act not in ACTIVATIONS:
+            raise ValueError(f"unknown act {act!r}; known: {', '.join(sorted(ACTIVATIONS))}")
+        self.feature_dim, self.count, self.hidden, self.embed, self.act_name = (int(feature_dim), int(count),
+                                                                                 int(hidden), int(embed), act)
+        self.tree_config = None if tree is None else dict(tree)
+        self.tree = None if tree is None else TreeEncoder(**self.tree_config)
+        extra = 0 if self.tree is None else self.tree.out_channels
+        self.net = nn.Sequential(nn.Linear(self.feature_dim + extra, self.hidden), ACTIVATIONS[act](),
+                                 nn.Linear(self.hidden, self.embed), ACTIVATIONS[act]())
+        self.out_channels = self.count * self.embed + 2 * self.embed
+
+    @classmethod
+    def from_space(cls, observation_space: spaces.Dict, tree_context: bool = False, **kwargs) -> "CandidateEncoder":
+        """Sized for a candidate env's observation space; ``tree_context=True`` adds a
+        :class:`TreeEncoder` (``tree_kwargs``: its keyword arguments) over the tree view."""
+        feats = observation_space["candidate_features"]
+        tree_kwargs = dict(kwargs.pop("tree_kwargs", None) or {})
+        if tree_context:
+            enc = TreeEncoder.from_space(observation_space, **tree_kwargs)
+            kwargs["tree"] = {"in_channels": enc.in_channels, "hidden_channels": enc.hidden_channels,
+                              "num_layers": enc.num_layers, "out_channels": enc.out_channels,
+                              "state_dim": enc.state_dim, "conv": enc.conv, "knn": enc.knn,
+                              "feature_scale": enc.feature_scale.tolist(),
+                              "state_low": (enc.state_center - enc.state_half_span).tolist(),
+                              "state_high": (enc.state_center + enc.state_half_span).tolist()}
+        return cls(int(feats.shape[-1]), int(feats.shape[-2]), **kwargs)
+
+    def config(self) -> dict:
+        """Constructor arguments that rebuild this encoder (plain values)."""
+        return {"feature_dim": self.feature_dim, "count": self.count, "hidden": self.hidden, "embed": self.embed,
+                "act": self.act_name, "tree": self.tree_config}
+
+    def forward(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor]:
+        x = obs["candidate_features"]
+        x = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+        x = x.float()
+        if self.tree is not None:
+            ctx = self.tree(obs)[1]
+            x = torch.cat([x, ctx.unsqueeze(-2).expand(*x.shape[:-1], ctx.shape[-1])], -1)
+        per = self.net(x)
+        return per, torch.cat([per.mean(-2), per.amax(-2)], -1)
+
+    def flat(self, obs: Mapping) -> torch.Tensor:
+        """``[per_candidate.flatten(-2), mean, max]`` ``(*S, out_channels)``."""
+        per, summary = self(obs)
+        return torch.cat([per.flatten(-2), summary], -1)
+
+
+__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder"]

@@ -26,6 +26,15 @@ import gymnasium as gym
 import numpy as np
 
 ENTRY_POINT = "gnn_mp_envs.envs.tree_env:TreePlanningEnv"
+#: Entry point of the RL variants of every env id (``<Env>-RLPick-v0``, ``<Env>-RLBox-v0``).
+RL_ENTRY_POINT = "gnn_mp_envs.envs.wrappers:make_rl_env"
+#: What a policy's action is: ``"pick"`` (``Discrete(K)``: one of the step's candidate states,
+#: ``gnn_mp_envs.envs.candidates.CandidatePickWrapper``) or ``"box"`` (``[-1, 1]^d``, a state
+#: through the ``action_frame``).
+ACTIONS = ("pick", "box")
+#: Episode length limit of the RL envs (``TimeLimit``; the registered RL ids carry it as
+#: ``max_episode_steps``): the iterations an evaluation plans at most (``--eval-max-steps``).
+RL_MAX_EPISODE_STEPS = 4000
 #: Sampling settings of a learned sampler when its task names none (see ``TaskSpec.sampler_settings``).
 DEFAULT_SAMPLER_SETTINGS: dict[str, dict[str, Any]] = {
     "gnn": {"uniform_mix": 0.25, "temperature": 0.5, "sigma_scale": 0.6},
@@ -88,6 +97,11 @@ class TaskSpec:
     #: examples with them (``gnn-mp train sampler --augment``). Maze2D: the square's eight
     #: rotations and reflections; the pendulum: ``(theta, omega) -> (-theta, -omega)``.
     symmetries: tuple[tuple[tuple[float, ...], ...], ...] = ()
+    #: The RL reward's settings of this task (``TreePlanningEnv`` reward keywords over
+    #: ``gnn_mp_envs.envs.wrappers.RL_REWARD``, e.g. ``{"node_cost": 0, "collision_check_cost": 1}``
+    #: where collision checks are what the task is judged on): the defaults of ``make_rl_env`` and
+    #: of the registered RL ids (``<Env>-RLPick-v0``, ``-RLBox-v0``).
+    rl_reward: dict[str, float] = field(default_factory=dict)
     #: A task whose shipped learned-sampler weights this one uses when it has none of its own
     #: (a user's own maps in the maze2d state space: ``weights_from="maze2d"``). The state
     #: bounds must be the same; each sampler checks the observations it is given.
@@ -166,6 +180,17 @@ _BOUNDS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 GNN_HEADS = ("mixture", "scorer")
 
 
+def rl_env_id(env_id: str, action: str = "pick") -> str:
+    """The registered RL variant of a planning env id: ``GNNMP/Maze2DRRT-v0`` ->
+    ``GNNMP/Maze2DRRT-RLPick-v0`` (``action="box"``: ``...-RLBox-v0``)."""
+    if action not in ACTIONS:
+        raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+    name, dash, version = env_id.rpartition("-v")
+    if not dash or not version.isdigit():
+        name, version = env_id, "0"
+    return f"{name}-RL{action.capitalize()}-v{version}"
+
+
 def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
     """Add a task family and register its environment ids with Gymnasium."""
     if not spec.envs:
@@ -196,10 +221,18 @@ def register_task(spec: TaskSpec, replace: bool = False) -> TaskSpec:
     _BOUNDS.pop(spec.name, None)
     for env_id, variant in spec.envs.items():
         kwargs = {"task": spec.name, "max_nodes": spec.max_nodes, **variant}
-        if env_id in gym.registry and replace:
-            del gym.registry[env_id]
+        rl_ids = {rl_env_id(env_id, action): action for action in ACTIONS}
+        for known in (env_id, *rl_ids):
+            if known in gym.registry and replace:
+                del gym.registry[known]
         if env_id not in gym.registry:
             gym.register(id=env_id, entry_point=ENTRY_POINT, kwargs=dict(kwargs))
+        for rl_id, action in rl_ids.items():
+            # make_rl_env's MDP (the one `gnn-mp train rl` trains); gym.make adds the TimeLimit
+            if rl_id not in gym.registry:
+                gym.register(id=rl_id, entry_point=RL_ENTRY_POINT, max_episode_steps=RL_MAX_EPISODE_STEPS,
+                             kwargs={"task": spec.name, "planner": variant.get("planner"), "action": action,
+                                     "max_episode_steps": None})
     return spec
 
 
@@ -244,7 +277,7 @@ BUILTIN_TASKS = (
                      "rotated"),
              validation_scenes=("pockets", "slits"),
              ood_scenes=("trap", "goal-trap", "corridor", "spiral", "forest", "rotated"),
-             symmetries=SQUARE_SYMMETRIES),
+             symmetries=SQUARE_SYMMETRIES, rl_reward={"step_penalty": 1.0, "node_cost": 0.0}),
     # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by
     # tasks/pendulum.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",
@@ -253,7 +286,7 @@ BUILTIN_TASKS = (
              ompl_control_setup="gnn_mp_envs.baselines.ompl_runner:pendulum_setup",
              path_unit="seconds of motion", headline_metric="nodes_expanded", step_scale=0.4, periodic=(0,),
              metric_weights=(1.0, 0.4),
-             gnn_head="scorer",
+             gnn_head="scorer", rl_reward={"collision_check_cost": 0.01},
              # Scenes (tasks/pendulum.py SCENE_FAMILIES): other goals, starts and torque limits.
              scenes=("upright", "mixed", "far-goal", "lively", "side-goal", "fast-goal", "moving-start", "weak",
                      "strong", "hang"),
@@ -267,7 +300,8 @@ BUILTIN_TASKS = (
              envs={"GNNMP/ArmBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, scenes=("train-a", "train-b", "train", "test", "pillars", "tall-clutter", "shelves", "bins"),
              benchmark_scene="test", validation_scenes=("pillars",), ood_scenes=("tall-clutter", "shelves", "bins"),
-             ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4),
+             ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4,
+             rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
     # MotionBenchMaker's Panda problems (docs/mbm.md): the benchmark plans the test split of all
     # seven scenes; training uses the five training scenes ("train"), "test" holds the two held out.
     # step_scale: tasks/mbm STEP_SIZE (rad).
@@ -276,7 +310,7 @@ BUILTIN_TASKS = (
              max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
                                      "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
              benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
-             step_scale=1.0),
+             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
 )
 
 

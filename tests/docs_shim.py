@@ -37,6 +37,7 @@ BUDGET: dict[str, list[str]] = {
     "python -m tools.bench_sampler": ["--act-nodes", "60", "--window", "5", "--rounds", "1", "--batch", "4",
                                       "--nodes", "40", "--trees", "2", "--conversions", "1"],
     "python -m tools.tune_proposals": ["--problems", "2", "--repeats", "1"],
+    "python -m tools.rl_tree_swap": ["--problems", "2", "--max-steps", "200"],
     "python -m pytest": ["tests/test_architecture.py"],
 }
 

@@ -110,7 +110,7 @@ def test_view_wrapper_passes_the_checkers():
 
 
 def test_make_rl_env_scales_actions():
-    env = make_rl_env("pendulum", view_nodes=8)
+    env = make_rl_env("pendulum", view_nodes=8, action="box")
     box = env.unwrapped.action_space
     assert np.allclose(env.action_space.low, -1) and np.allclose(env.action_space.high, 1)
     np.testing.assert_allclose(scale_action(np.array([-1, 1]), box.low, box.high), [box.low[0], box.high[1]])
@@ -127,14 +127,14 @@ def test_buffer_formula_matches_sb3_buffers():
 
     from train.rl.memory import sb3_buffer_bytes, sb3_buffer_nbytes
     for k in (None, 32):
-        env = make_rl_env("maze2d", view_nodes=k, max_nodes=200)
+        env = make_rl_env("maze2d", view_nodes=k, max_nodes=200, action="box")
         space, act = env.observation_space, env.action_space
         rollout = DictRolloutBuffer(64, space, act, n_envs=2)
         replay = DictReplayBuffer(100, space, act, n_envs=1)
         assert sb3_buffer_nbytes(rollout) == sb3_buffer_bytes(space, 2, 64, 2, "rollout")
         assert sb3_buffer_nbytes(replay) == sb3_buffer_bytes(space, 2, 100, 1, "replay")
     # the figures of docs/rl.md: SAC's 100k-transition buffer and a 2,048-step PPO rollout on maze2d
-    full, view = (make_rl_env("maze2d", view_nodes=k).observation_space for k in (None, 64))
+    full, view = (make_rl_env("maze2d", view_nodes=k, action="box").observation_space for k in (None, 64))
     assert sb3_buffer_bytes(full, 2, 100_000, 1, "replay") > 30 * 2**30     # ~34 GiB, full padding
     assert sb3_buffer_bytes(view, 2, 100_000, 1, "replay") < 900 * 2**20    # 850 MiB, 64-row view
     assert sb3_buffer_bytes(view, 2, 2048, 1, "rollout") < 20 * 2**20
@@ -146,7 +146,8 @@ def tiny_args(tmp_path, lib, algo, task, **kw):
     defaults = dict(lib=lib, algo=algo, task=task, total_steps=256, n_envs=2, n_steps=64, batch_size=32,
                     n_epochs=1, view_nodes=16, hidden_channels=8, num_layers=1, out_channels=16, net_arch=[16],
                     buffer_size=500, learning_starts=64, eval_every=10_000, eval_problems=1, eval_max_steps=100,
-                    progress=False, out=tmp_path / f"{lib}-{algo}-{task}")
+                    progress=False, out=tmp_path / f"{lib}-{algo}-{task}",
+                    action="box" if algo == "sac" or "init_from" in kw or "encoder" in kw else "pick")
     defaults.update(kw)
     return RLArgs(**defaults)
 
@@ -196,7 +197,8 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         obs, *_ = env.step(env.action_space.sample())
     policies = {"rl/sb3-ppo": (SB3PPOPolicy, {"hidden": [16]}), "rl/sb3-sac": (SB3SACPolicy, {"hidden": [16]}),
                 "rl/torchrl-ppo": (TorchRLPPOPolicy, {"head_hidden": 16})}
-    for name, kind in RL_SAMPLERS.items():
+    for name, kinds in RL_SAMPLERS.items():
+        kind = kinds[0]
         cls, extra = policies[kind]
         torch.manual_seed(0)
         args = {"encoder": enc, "action_dim": 2, **extra}
@@ -244,7 +246,7 @@ def test_warm_start_copies_the_encoder(tmp_path):
 def test_warm_start_flag_in_training(tmp_path):
     from agents.checkpoints import read_checkpoint
     from train.rl.sb3 import train
-    first = train(tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "a"))
+    first = train(tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "a", action="box"))
     src = {k: v for k, v in read_checkpoint(first.best)["state_dict"].items() if k.startswith("encoder.")}
     args = tiny_args(tmp_path, "sb3", "ppo", "maze2d", total_steps=128, out=tmp_path / "b", init_from=first.best,
                      lr=1e-12)
@@ -298,7 +300,7 @@ def test_sampler_maps_actions_as_the_training_env(task):
     from agents.samplers import active_target
     from gnn_mp_envs.envs.wrappers import TargetRelativeAction, policy_action_to_state
     from gnn_mp_envs.registration import task_spec
-    env = make_rl_env(task, view_nodes=8, action_frame="target")
+    env = make_rl_env(task, view_nodes=8, action="box", action_frame="target")
     env.reset(seed=3)
     box = env.unwrapped.action_space
     periodic = task_spec(task).periodic_mask(2)
@@ -364,12 +366,13 @@ def test_docs_tiny_command_runs(tmp_path):
 
 
 def test_docs_python_block_runs():
-    """The python block of docs/rl.md (it loads the shipped maze2d policy)."""
+    """The python blocks of docs/rl.md (they load the shipped maze2d policy)."""
     import re
     import subprocess
     import sys
     from pathlib import Path
-    blocks = re.findall(r"```python\n(.*?)```", _docs_rl(), re.S)
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", _docs_rl(), re.S)
+              if "MultiInputPolicy" not in b]        # the own-agent snippet: tests/test_rl_pick.py runs it
     assert blocks
     root = Path(__file__).resolve().parents[1]
     out = subprocess.run([sys.executable, "-c", "\n".join(blocks)], cwd=root, capture_output=True, text=True,
@@ -403,15 +406,15 @@ def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     (["--net-arch=-5"], "--net-arch"),
     (["--net-arch", "0"], "--net-arch"),
     (["--view-nodes", "100000000"], "--view-nodes"),
-    (["--algo", "sac", "--buffer-size", "1000000000"], "--buffer-size"),
+    (["--algo", "sac", "--action", "box", "--buffer-size", "1000000000"], "--buffer-size"),
     (["--gamma", "1.5"], "--gamma"),
     (["--gae-lambda", "7"], "--gae-lambda"),
     (["--clip-range", "3"], "--clip-range"),
     (["--seed", str(2**64)], "--seed"),
-    (["--init-from", "{dir}"], "no such file"),
-    (["--init-from", "{truncated}"], "truncated.pt"),
-    (["--init-from", "{crafted}"], "crafted.pt"),
-    (["--init-from", "gnm"], "shipped: cvae, gnn, gnn-cvae, rl-ppo"),
+    (["--action", "box", "--init-from", "{dir}"], "no such file"),
+    (["--action", "box", "--init-from", "{truncated}"], "truncated.pt"),
+    (["--action", "box", "--init-from", "{crafted}"], "crafted.pt"),
+    (["--action", "box", "--init-from", "gnm"], "shipped: cvae, gnn, gnn-cvae, rl-ppo"),
 ])
 def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment, tmp_path, capsys):
     """Values that cannot train (issue #21, item 14) end in one line and rc 2 before any env is built."""
@@ -436,7 +439,7 @@ def test_train_rl_init_from_takes_a_shipped_sampler_name(tmp_path, monkeypatch):
     from agents.checkpoints import shipped_checkpoint
     from train.rl.cli import parse
     monkeypatch.chdir(tmp_path)
-    args = parse(["--encoder", "tree-gnn", "--init-from", "gnn", "--task", "pendulum"])
+    args = parse(["--action", "box", "--encoder", "tree-gnn", "--init-from", "gnn", "--task", "pendulum"])
     assert args.init_from == shipped_checkpoint("gnn", "pendulum") and args.init_from.is_file()
 
 
@@ -444,7 +447,7 @@ def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys
     """A checkpoint without a backbone of the run's size: found when the model exists, still one line, rc 2."""
     from train.cli import main
     gnn = Path(__file__).resolve().parents[1] / "agents" / "checkpoints" / "gnn_maze2d.pt"
-    code = main(["train", "rl", "--init-from", str(gnn), "--total-steps", "64",
+    code = main(["train", "rl", "--action", "box", "--init-from", str(gnn), "--total-steps", "64",
                  "--n-envs", "1", "--n-steps", "32", "--batch-size", "32", "--out", str(tmp_path / "run"),
                  "--no-progress"])
     assert code == 2

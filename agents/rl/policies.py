@@ -34,8 +34,9 @@ import torch
 from torch import nn
 
 from agents.checkpoints import CheckpointError, read_checkpoint, register_model_kind
-from agents.encoders import ACTIVATIONS, TreeEncoder
+from agents.encoders import ACTIVATIONS, CandidateEncoder, TreeEncoder
 from agents.rl.backbones import ENCODERS, TreeGNNEncoder
+from agents.rl.pick import PickPolicy, mlp as _mlp
 
 #: SB3 SAC's clamp of the log standard deviation (``stable_baselines3.sac.policies``).
 SAC_LOG_STD_MIN, SAC_LOG_STD_MAX = -20.0, 2.0
@@ -59,15 +60,6 @@ def encoder_config(encoder: nn.Module) -> dict[str, Any]:
         "state_high": (encoder.state_center + encoder.state_half_span).tolist(),
         "features": encoder.features,
     }
-
-
-def _mlp(in_dim: int, hidden: Sequence[int], activation: str) -> nn.Sequential:
-    """``Linear, act, Linear, act, ...`` (SB3's ``create_mlp`` layout: indices 0, 2, ...)."""
-    layers: list[nn.Module] = []
-    for width in hidden:
-        layers += [nn.Linear(in_dim, int(width)), ACTIVATIONS[activation]()]
-        in_dim = int(width)
-    return nn.Sequential(*layers)
 
 
 class RLPolicy(nn.Module):
@@ -147,13 +139,15 @@ class TorchRLPPOPolicy(RLPolicy):
         return self.head(embed)
 
 
-#: checkpoint kind -> policy class
+#: checkpoint kind -> policy class (continuous actions)
 POLICY_KINDS: dict[str, type[RLPolicy]] = {
     "rl/sb3-ppo": SB3PPOPolicy,
     "rl/sb3-sac": SB3SACPolicy,
     "rl/torchrl-ppo": TorchRLPPOPolicy,
 }
-for _kind, _cls in POLICY_KINDS.items():
+#: checkpoint kind -> policy class (candidate selection)
+PICK_KINDS: dict[str, type[PickPolicy]] = {"rl/sb3-ppo-pick": PickPolicy, "rl/torchrl-ppo-pick": PickPolicy}
+for _kind, _cls in {**POLICY_KINDS, **PICK_KINDS}.items():
     register_model_kind(_kind, _cls)
 
 
@@ -167,9 +161,24 @@ def _hidden_of(seq: nn.Sequential) -> tuple[list[int], str]:
     return [m.out_features for m in linears], act
 
 
-def policy_from_sb3(model: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
-    """``(policy, kind, ctor_args)`` holding a copy of an SB3 PPO or SAC model's actor."""
+def policy_from_sb3(model: Any) -> tuple[nn.Module, str, dict[str, Any]]:
+    """``(policy, kind, ctor_args)`` holding a copy of an SB3 PPO or SAC model's actor (a PPO over
+    ``Discrete`` candidate actions: a :class:`PickPolicy`)."""
+    from gymnasium import spaces
     from stable_baselines3 import PPO, SAC
+    if isinstance(model, PPO) and isinstance(model.action_space, spaces.Discrete):
+        sb3 = model.policy
+        encoder = sb3.pi_features_extractor.encoder
+        if not isinstance(encoder, CandidateEncoder):
+            raise TypeError(f"a Discrete-action PPO is exported with a CandidateFeaturesExtractor, "
+                            f"not {type(encoder).__name__}")
+        hidden, act = _hidden_of(sb3.mlp_extractor.policy_net)
+        args = {"encoder": encoder.config(), "hidden": hidden, "activation": act}
+        policy = PickPolicy(**args)
+        policy.encoder.load_state_dict(encoder.state_dict())
+        policy.body.load_state_dict(sb3.mlp_extractor.policy_net.state_dict())
+        policy.logits.load_state_dict(sb3.action_net.state_dict())
+        return policy.eval(), "rl/sb3-ppo-pick", args
     if isinstance(model, PPO):
         sb3 = model.policy
         encoder = sb3.pi_features_extractor.encoder
@@ -197,8 +206,18 @@ def policy_from_sb3(model: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
     raise TypeError(f"cannot export a {type(model).__name__} (PPO and SAC are supported)")
 
 
-def policy_from_torchrl(actor: Any) -> tuple[RLPolicy, str, dict[str, Any]]:
-    """``(policy, kind, ctor_args)`` holding a copy of an :func:`agents.rl.torchrl.make_actor` actor."""
+def policy_from_torchrl(actor: Any) -> tuple[nn.Module, str, dict[str, Any]]:
+    """``(policy, kind, ctor_args)`` holding a copy of an :func:`agents.rl.torchrl.make_actor` actor (or of a
+    :func:`~agents.rl.torchrl.make_pick_actor` picker)."""
+    inner = [m for m in actor.modules() if isinstance(m, PickPolicy)]
+    if inner:
+        source = inner[0]
+        args = {"encoder": source.encoder.config(), "hidden": [m.out_features for m in source.body
+                                                               if isinstance(m, nn.Linear)],
+                "activation": _hidden_of(source.body)[1] if len(source.body) else "tanh"}
+        policy = PickPolicy(**args)
+        policy.load_state_dict(source.state_dict())
+        return policy.eval(), "rl/torchrl-ppo-pick", args
     sequential = actor.module[0] if hasattr(actor, "module") else actor
     encoder_module, head = sequential.module[0], sequential.module[1]
     encoder = encoder_module.encoder
@@ -261,5 +280,5 @@ def warm_start_encoder(path: str | Path, *encoders: nn.Module) -> str:
     return f"{record['kind']}:{prefix}"
 
 
-__all__ = ["POLICY_KINDS", "RLPolicy", "SB3PPOPolicy", "SB3SACPolicy", "TorchRLPPOPolicy", "CheckpointError",
+__all__ = ["PICK_KINDS", "POLICY_KINDS", "PickPolicy", "RLPolicy", "SB3PPOPolicy", "SB3SACPolicy", "TorchRLPPOPolicy", "CheckpointError",
            "encoder_config", "encoder_state_from", "policy_from_sb3", "policy_from_torchrl", "warm_start_encoder"]

@@ -33,18 +33,21 @@ from typing import Any, Mapping
 
 import numpy as np
 import torch
+from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
-from agents.rl.policies import POLICY_KINDS, RLPolicy
+from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
+from gnn_mp_envs.envs.candidates import CandidateSet
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
 from gnn_mp_envs.registration import same_bounds
 
-#: sampler name -> checkpoint kind
-RL_SAMPLERS: dict[str, str] = {"rl-ppo": "rl/sb3-ppo", "rl-sac": "rl/sb3-sac", "rl-ppo-torchrl": "rl/torchrl-ppo"}
+#: sampler name -> the checkpoint kinds it loads (continuous actions; candidate selection)
+RL_SAMPLERS: dict[str, tuple[str, ...]] = {"rl-ppo": ("rl/sb3-ppo", "rl/sb3-ppo-pick"), "rl-sac": ("rl/sb3-sac",),
+                                           "rl-ppo-torchrl": ("rl/torchrl-ppo", "rl/torchrl-ppo-pick")}
 #: checkpoint kind -> sampler name
-SAMPLER_OF_KIND = {kind: name for name, kind in RL_SAMPLERS.items()}
+SAMPLER_OF_KIND = {kind: name for name, kinds in RL_SAMPLERS.items() for kind in kinds}
 
 
 class RLSampler(ModelSampler):
@@ -112,14 +115,128 @@ class RLSampler(ModelSampler):
         return np.minimum(np.maximum(x, self.low32), self.high32)
 
 
+_NUMPY_ACTS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0.0)}
+
+
+def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
+    """A :class:`PickPolicy` without a tree context as numpy arrays (float32): the per-candidate MLP,
+    the body and the logits layer, for :func:`numpy_pick_logits` (a forward of ~10 us instead of
+    torch's ~300 us of per-call overhead on one step's ``(K, F)`` features)."""
+    def layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray, Any]]:
+        out, mods = [], list(seq)
+        for i, m in enumerate(mods):
+            if isinstance(m, nn.Linear):
+                act = mods[i + 1] if i + 1 < len(mods) and not isinstance(mods[i + 1], nn.Linear) else None
+                if act is not None and type(act) not in _NUMPY_ACTS:
+                    raise ValueError(f"no numpy twin for activation {type(act).__name__}")
+                out.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy(),
+                            None if act is None else _NUMPY_ACTS[type(act)]))
+        return out
+    return {"candidate": layers(policy.encoder.net), "body": layers(policy.body),
+            "logits": layers(nn.Sequential(policy.logits))[0]}
+
+
+def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarray:
+    """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
+    h = np.asarray(features, np.float32)
+    for w, b, act in twin["candidate"]:
+        h = h @ w + b
+        h = act(h) if act is not None else h
+    x = np.concatenate([h.reshape(-1), h.mean(0), h.max(0)])
+    for w, b, act in twin["body"]:
+        x = x @ w + b
+        x = act(x) if act is not None else x
+    w, b, _ = twin["logits"]
+    return x @ w + b
+
+
+class PickSampler(ModelSampler):
+    """A trained candidate picker as a sampler: ``K`` candidates -> the policy's categorical -> one of them.
+
+    Each model sample draws the step's candidates from the sampler's stream with the
+    :class:`~gnn_mp_envs.envs.candidates.CandidateSet` the policy was trained with (the same
+    draws and features as the training env's :class:`CandidatePickWrapper`), scores them and
+    draws one (``deterministic=True``: the best). The one mixture of :class:`ModelSampler` puts
+    ``uniform_mix`` / ``goal_bias`` samples in between; every sample sent is recorded, so the
+    tree statistics (blocked extensions per node) are those the training env kept.
+
+    Args:
+        low, high, seed: as for every sampler (the task's state bounds).
+        policy: a :class:`~agents.rl.policies.PickPolicy`.
+        view_nodes: rows of the tree view (read when the policy has a tree context).
+        candidates: keyword arguments of the ``CandidateSet`` (``count``, ``step_scale``,
+            ``periodic``, ``metric_weights``, ``local_scale``), from the checkpoint.
+    """
+
+    settings = ("uniform_mix", "goal_bias", "deterministic")
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: PickPolicy,
+                 view_nodes: int, candidates: Mapping[str, Any], uniform_mix: float = 0.0, goal_bias: float = 0.0,
+                 deterministic: bool = False) -> None:
+        config = dict(candidates)
+        super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
+                         periodic=config.get("periodic"))
+        self.candidate_set = CandidateSet(low, high, **config)
+        if self.candidate_set.count != policy.count:
+            raise ValueError(f"the policy picks among {policy.count} candidates, the candidate set has "
+                             f"{self.candidate_set.count}")
+        self.policy = policy.eval()
+        self.view_nodes = int(view_nodes)
+        self.deterministic = bool(deterministic)
+        self._picked: int | None = None
+        self._twin = None if policy.reads_tree else numpy_pick_layers(policy)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if hasattr(self, "candidate_set"):
+            self.candidate_set.reset()
+
+    def act_stateless(self, obs: Mapping) -> np.ndarray:
+        self.candidate_set.reset()
+        return self.act(obs)
+
+    def act(self, obs: Mapping) -> np.ndarray:
+        self._picked = None
+        x = super().act(obs)
+        self.candidate_set.record(obs, x, self._picked)
+        return x
+
+    def logits(self, obs: Mapping, features: np.ndarray) -> np.ndarray:
+        """The policy's logits ``(K,)`` for one full observation and its candidates' features (a
+        policy without a tree context runs as its numpy twin, :func:`numpy_pick_logits`)."""
+        if self._twin is not None:
+            return numpy_pick_logits(self._twin, features)
+        inputs = {"candidate_features": torch.from_numpy(features)}
+        if self.policy.reads_tree:
+            inputs.update({k: torch.as_tensor(v) for k, v in tree_view(obs, self.view_nodes).items()})
+        with torch.inference_mode():
+            return self.policy(inputs).numpy()
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        cands, feats = self.candidate_set.propose(obs, self.rng)
+        logits = self.timed(lambda o: self.logits(o, feats), obs).astype(np.float64)
+        if self.deterministic:
+            k = int(np.argmax(logits))
+        else:
+            p = np.exp(logits - logits.max())
+            cumulative = np.cumsum(p)
+            k = min(int(np.searchsorted(cumulative, self.rng.random() * cumulative[-1], side="right")), len(p) - 1)
+        self._picked = k
+        return cands[k]
+
+
 # ----------------------------------------------------------------------------- files
 def policy_record(*, task: str, view_nodes: int, low: np.ndarray, high: np.ndarray, uniform_mix: float = 0.0,
                   action_frame: str = "absolute", periodic: list[bool] | None = None,
+                  candidates: Mapping[str, Any] | None = None,
                   meta: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """``(obs_spec, meta)`` of a policy checkpoint: what :func:`sampler_from_checkpoint` reads back."""
+    """``(obs_spec, meta)`` of a policy checkpoint: what :func:`sampler_from_checkpoint` reads back
+    (``candidates``: a picker's ``CandidateSet`` configuration)."""
     obs_spec = {"view_nodes": int(view_nodes), "state_dim": int(len(low)), "action_box": [ACTION_LOW, ACTION_HIGH],
                 "action_frame": action_frame, "periodic": list(periodic or [False] * len(low)),
                 "low": np.asarray(low, np.float64).tolist(), "high": np.asarray(high, np.float64).tolist()}
+    if candidates is not None:
+        obs_spec.update(action="pick", candidates=dict(candidates))
     full_meta = {"task": task, "view_nodes": int(view_nodes), "sampler": {"uniform_mix": float(uniform_mix)},
                  **dict(meta or {})}
     return obs_spec, full_meta
@@ -133,10 +250,12 @@ def save_policy(path: str | Path, policy: RLPolicy, kind: str, ctor_args: Mappin
 
 
 def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray, *, seed: int | None = None,
-                            kind: str | None = None, task: str | None = None, uniform_mix: float | None = None,
-                            deterministic: bool = False, proposals: int | None = None) -> RLSampler:
-    """An :class:`RLSampler` from a policy checkpoint (``uniform_mix`` / ``proposals`` None: the file's)."""
-    policy, record = load_checkpoint(path, expected_kind=kind or list(POLICY_KINDS))
+                            kind: str | tuple[str, ...] | None = None, task: str | None = None,
+                            uniform_mix: float | None = None, deterministic: bool = False,
+                            proposals: int | None = None, goal_bias: float | None = None) -> RLSampler | PickSampler:
+    """The sampler of a policy checkpoint: an :class:`RLSampler` (continuous actions) or a
+    :class:`PickSampler` (candidate selection); settings None: the file's."""
+    policy, record = load_checkpoint(path, expected_kind=kind or [*POLICY_KINDS, *PICK_KINDS])
     meta, spec = record["meta"], record["obs_spec"] or {}
     check_trained_for(path, meta.get("task"), task)
     if "low" in spec and not same_bounds((spec["low"], spec["high"]), (low, high)):
@@ -144,6 +263,15 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
                          f"not {np.asarray(low).tolist()}..{np.asarray(high).tolist()}")
     stored = meta.get("sampler", {})
     uniform_mix = float(stored.get("uniform_mix", 0.0)) if uniform_mix is None else uniform_mix
+    if record["kind"] in PICK_KINDS:
+        if proposals not in (None, 1):
+            raise ValueError("a candidate picker scores the candidates of every step (proposals=1)")
+        goal_bias = float(stored.get("goal_bias", 0.0)) if goal_bias is None else goal_bias
+        return PickSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
+                           candidates=spec["candidates"], uniform_mix=uniform_mix, goal_bias=goal_bias,
+                           deterministic=deterministic)
+    if goal_bias not in (None, 0.0):
+        raise ValueError("goal_bias is a setting of candidate pickers; a continuous policy has uniform_mix")
     proposals = int(stored.get("proposals", 1)) if proposals is None else proposals
     return RLSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
                      uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
@@ -152,12 +280,14 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
 
 def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | None = None, seed: int | None = None,
                     checkpoint: str | Path | None = None, uniform_mix: float | None = None,
-                    deterministic: bool = False, proposals: int | None = None) -> RLSampler:
+                    deterministic: bool = False, proposals: int | None = None,
+                    goal_bias: float | None = None) -> RLSampler | PickSampler:
     """The registry factory of ``rl-ppo``, ``rl-sac`` and ``rl-ppo-torchrl`` (the registry applies the
     thread policy: measured 0.8 ms per ``act`` with 1 thread against 12 ms with 2)."""
     path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train rl --task {task}")
     return sampler_from_checkpoint(path, low, high, seed=seed, kind=RL_SAMPLERS[name], task=task,
-                                   uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals)
+                                   uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
+                                   goal_bias=goal_bias)
 
 
-__all__ = ["RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]
+__all__ = ["PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]

@@ -16,6 +16,7 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
+from agents.encoders import CandidateEncoder
 from agents.rl.backbones import encoder_from_space
 
 
@@ -34,3 +35,27 @@ class TreeFeaturesExtractor(BaseFeaturesExtractor):
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
         return self.encoder(observations)[1]
+
+
+class CandidateFeaturesExtractor(BaseFeaturesExtractor):
+    """Candidate-selection observation -> ``[per-candidate embeddings, their mean and max]``.
+
+    For the ``Discrete(K)`` envs (``GNNMP/*-RLPick-v0``): one MLP shared by the ``K`` candidates
+    reads each one's features relative to the tree (:class:`agents.encoders.CandidateEncoder`);
+    the flattened embeddings let ``action_net`` score each candidate slot, the mean and max
+    summarise the step for the value head. ``features_extractor_kwargs``: ``hidden``, ``embed``,
+    ``act``, ``tree_context`` (add a ``TreeEncoder`` embedding of the tree view; ``tree_kwargs``
+    its keyword arguments)::
+
+        model = PPO("MultiInputPolicy", gym.make("GNNMP/Maze2DRRT-RLPick-v0"),
+                    policy_kwargs={"features_extractor_class": CandidateFeaturesExtractor,
+                                   "net_arch": {"pi": [], "vf": [64, 64]}})
+    """
+
+    def __init__(self, observation_space: spaces.Dict, **encoder_kw) -> None:
+        encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
+        super().__init__(observation_space, features_dim=encoder.out_channels)
+        self.encoder = encoder
+
+    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.encoder.flat(observations)

@@ -17,11 +17,17 @@ from __future__ import annotations
 import numpy as np
 import torch
 from gymnasium import spaces
-from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
+from tensordict import TensorDictBase
+from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictModuleBase, TensorDictSequential
 from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
+from agents.encoders import CandidateEncoder
 from agents.rl.backbones import EncoderModule
+from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
+
+#: The observation keys a candidate picker reads (the tree view's, with a tree context).
+PICK_KEYS = ("candidate_features",)
 
 
 def _encoder(observation_space: spaces.Dict, encoder: EncoderModule | None, encoder_kw: dict) -> EncoderModule:
@@ -73,3 +79,56 @@ def make_value(observation_space: spaces.Dict, encoder: EncoderModule | None = N
     enc = _encoder(observation_space, encoder, encoder_kw)
     net = MLP(in_features=enc.out_channels, out_features=1, num_cells=[hidden, hidden], activation_class=nn.ReLU)
     return TensorDictSequential(enc, ValueOperator(net, in_keys=[enc.out_keys[0]]))
+
+
+
+class PickModule(TensorDictModuleBase):
+    """A :class:`~agents.rl.policies.PickPolicy` (or a value net over a :class:`CandidateEncoder`) as a
+    TensorDict module: ``candidate_features`` (and, with a tree context, the view's keys) in, ``out_key`` out."""
+
+    def __init__(self, net: nn.Module, out_key: str, reads_tree: bool) -> None:
+        super().__init__()
+        self.net = net
+        self.in_keys = list(PICK_KEYS) + (list(OBSERVATION_KEYS) if reads_tree else [])
+        self.out_keys = [out_key]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict.set(self.out_keys[0], self.net(tensordict))
+        return tensordict
+
+
+class CandidateValue(nn.Module):
+    """``CandidateEncoder.flat`` -> MLP -> the state value ``(*batch, 1)``."""
+
+    def __init__(self, encoder: CandidateEncoder, hidden: list[int]) -> None:
+        super().__init__()
+        self.encoder = encoder
+        self.mlp = MLP(in_features=encoder.out_channels, out_features=1, num_cells=list(hidden),
+                       activation_class=nn.Tanh)
+
+    def forward(self, obs) -> torch.Tensor:
+        return self.mlp(self.encoder.flat(obs))
+
+
+def make_pick_actor(observation_space: spaces.Dict, *, head_hidden: list[int] | tuple[int, ...] = (),
+                    **encoder_kw) -> ProbabilisticActor:
+    """A candidate picker: ``PickPolicy`` -> ``"logits"`` -> a categorical over the candidates.
+
+    For envs wrapped as ``GymWrapper(env, categorical_action_encoding=True)`` (integer actions);
+    ``return_log_prob=True`` as ``ClipPPOLoss`` needs. ``encoder_kw`` go to
+    ``CandidateEncoder.from_space`` (``hidden``, ``embed``, ``tree_context``, ...).
+    """
+    from agents.rl.pick import PickPolicy
+    encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
+    policy = PickPolicy(encoder.config(), hidden=list(head_hidden), activation="tanh")
+    policy.encoder.load_state_dict(encoder.state_dict())
+    module = PickModule(policy, "logits", policy.reads_tree)
+    return ProbabilisticActor(module, in_keys=["logits"], out_keys=["action"],
+                              distribution_class=torch.distributions.Categorical, return_log_prob=True)
+
+
+def make_pick_value(observation_space: spaces.Dict, *, head_hidden: list[int] | tuple[int, ...] = (64, 64),
+                    **encoder_kw) -> TensorDictModuleBase:
+    """``CandidateEncoder`` (its own) -> MLP -> ``"state_value"``."""
+    encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
+    return PickModule(CandidateValue(encoder, list(head_hidden)), "state_value", encoder.tree is not None)

@@ -76,8 +76,8 @@ class TreePlanningEnv(gym.Env):
     place as nodes are added; by default each step returns a copy.
 
     ## Rewards
-    ``-step_penalty`` every step, ``-collision_check_cost`` per validity check the step
-    made, and ``+success_reward`` on the step that finds a path.
+    ``-step_penalty`` every step, ``-node_cost`` per node the step added, ``-collision_check_cost``
+    per validity check the step made, and ``+success_reward`` on the step that finds a path.
 
     ## Starting state
     A tree holding only its root(s). ``reset(seed=s)`` reproduces the problem and tree;
@@ -106,7 +106,7 @@ class TreePlanningEnv(gym.Env):
                  max_steps: int | None = None, split: str = "train", scene: str | None = None,
                  task_kwargs: dict[str, Any] | None = None, render_mode: str | None = None,
                  step_penalty: float = 1.0, success_reward: float = 10.0,
-                 collision_check_cost: float = 0.0, copy_observations: bool = True) -> None:
+                 collision_check_cost: float = 0.0, copy_observations: bool = True, node_cost: float = 0.0) -> None:
         spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
@@ -119,6 +119,7 @@ class TreePlanningEnv(gym.Env):
         self.step_penalty = real("step_penalty", step_penalty)
         self.success_reward = real("success_reward", success_reward)
         self.collision_check_cost = real("collision_check_cost", collision_check_cost)
+        self.node_cost = real("node_cost", node_cost)
         task_kwargs = dict(task_kwargs or {})
         if spec.scenes:
             if scene is not None and task_kwargs.get("scene", scene) != scene:
@@ -195,6 +196,7 @@ class TreePlanningEnv(gym.Env):
         obs.active_tree[0] = planner.active_tree
         reward = (-self.step_penalty
                   - self.collision_check_cost * (problem.collision_checks - checks_before)
+                  - (self.node_cost * len(result.added) if self.node_cost else 0.0)
                   + (self.success_reward if result.solved else 0.0))
         terminated = planner.solution is not None
         truncated = (not terminated) and (planner.tree.full or planner.iterations >= self.max_steps)

@@ -33,7 +33,11 @@ from typing import Any, Mapping
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.wrappers import RescaleAction, TransformReward
+from gymnasium.wrappers import RescaleAction, TimeLimit, TransformReward
+
+from gnn_mp_envs.registration import ACTIONS, RL_MAX_EPISODE_STEPS, rl_env_id
+from gnn_mp_envs.envs.candidates import (DEFAULT_CANDIDATES, DEFAULT_LOCAL_SCALE, DEFAULT_TARGET_SCALE,
+                                         CandidatePickWrapper)
 
 #: Default number of rows of the view (roots + most recent nodes).
 DEFAULT_VIEW_NODES = 64
@@ -142,12 +146,13 @@ class TreeViewWrapper(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 class ProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Potential-based shaping (Ng et al. 1999) of the planning reward: progress toward the target.
 
-    ``reward += coef * (gamma * phi(s') - phi(s))`` with ``phi = -D / distance(start, goal)``,
-    ``D`` the smallest planner distance from a tree node to its tree's target (the goal for the
-    start tree, the start for BiRRT's goal tree), and ``phi = 0`` once the path is found. It
-    rewards samples whose extension gets a tree closer to its target, a per-step signal the
-    sparse reward lacks, and leaves the optimal policy of the discounted MDP unchanged (use
-    the agent's ``gamma``). Wrap the planning env itself (it reads the planner's tree).
+    ``reward += coef * (gamma * phi(s') - phi(s))`` with ``phi = -D / distance(start, goal)`` and
+    ``phi = 0`` once the path is found. ``D`` is the gap the planner still has to close under its
+    own metric: for RRT the smallest distance from a tree node to the goal; for BiRRT the smallest
+    distance between a node of the start tree and a node of the goal tree (the trees meet when it
+    closes). It rewards samples whose extension closes the gap, a per-step signal the sparse
+    reward lacks, and leaves the optimal policy of the discounted MDP unchanged (use the agent's
+    ``gamma``). Wrap the planning env itself (it reads the planner's tree).
     """
 
     def __init__(self, env: gym.Env, coef: float, gamma: float = 0.99) -> None:
@@ -161,11 +166,15 @@ class ProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
         tree, problem = base.planner.tree, base.problem
         n = len(tree)
         if n > self._seen:
-            states, ids = tree.states[self._seen:n], tree.tree_id[self._seen:n]
-            for tid, target in ((0, problem.goal), (1, problem.start)):
-                rows = states[ids == tid]
-                if len(rows):
-                    self._best = min(self._best, float(problem.distance(rows, target).min()))
+            states, ids = tree.states[:n], tree.tree_id[:n]
+            if getattr(base.planner, "num_trees", 1) == 1:
+                self._best = min(self._best, float(problem.distance(states[self._seen:n], problem.goal).min()))
+            else:
+                # every new node against the other tree's nodes (old and new: each pair once)
+                for i in range(self._seen, n):
+                    others = states[:n][ids[:n] != ids[i]]
+                    if len(others):
+                        self._best = min(self._best, float(problem.distance(others, states[i]).min()))
             self._seen = n
         return -self._best / self._scale
 
@@ -276,22 +285,64 @@ def scale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nd
     return policy_action_to_state(action, "absolute", np.asarray(low, np.float64), high).astype(np.float32)
 
 
+#: The RL reward when the task's ``TaskSpec.rl_reward`` says nothing else: a node costs one, blocked
+#: iterations cost nothing but their checks (the benchmark counts nodes, not iterations), success
+#: earns ten (``TreePlanningEnv``'s reward keywords).
+RL_REWARD = {"step_penalty": 0.0, "node_cost": 1.0, "collision_check_cost": 0.0, "success_reward": 10.0}
+#: The uniform mixture when none is given: the classical half for continuous policies; none
+#: for pickers, whose candidates include uniform states already.
+DEFAULT_UNIFORM_MIX = {"pick": 0.0, "box": 0.5}
+
+
+def candidate_settings(task: str, count: int = DEFAULT_CANDIDATES, local_scale: float = DEFAULT_LOCAL_SCALE,
+                       target_scale: float = DEFAULT_TARGET_SCALE) -> dict[str, Any]:
+    """The :class:`~gnn_mp_envs.envs.candidates.CandidateSet` keyword arguments of ``task``: the
+    candidate env's (:func:`make_rl_env` with ``action="pick"``) and its sampler's; the extension
+    scale, periodic coordinates and metric come from the task's ``TaskSpec`` (``step_scale`` None:
+    the step size of the task's first training problem)."""
+    from gnn_mp_envs.registration import make_task, task_spec
+    spec = task_spec(task)
+    low, _ = spec.state_bounds()
+    step = spec.step_scale
+    if step is None:
+        instance = make_task(task, **({"scene": spec.training_scene()} if spec.scenes else {}))
+        try:
+            step = float(instance.problem("train", 0).step_size)
+        finally:
+            instance.close()
+    return {"count": int(count), "step_scale": float(step), "periodic": spec.periodic_mask(len(low)).tolist(),
+            "metric_weights": None if spec.metric_weights is None else [float(w) for w in spec.metric_weights],
+            "local_scale": float(local_scale), "target_scale": float(target_scale)}
+
+
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
-                planner: str | None = None, scale_actions: bool = True, uniform_mix: float = 0.0,
-                action_frame: str = "absolute", progress_reward: float = 0.0, gamma: float = 0.99,
-                reward_scale: float = 1.0, **env_kwargs: Any) -> gym.Env:
-    """The environment every RL training script (and the RL sampler's conventions) use.
+                planner: str | None = None, action: str = "pick", candidates: int = DEFAULT_CANDIDATES,
+                local_scale: float = DEFAULT_LOCAL_SCALE, target_scale: float = DEFAULT_TARGET_SCALE,
+                scale_actions: bool = True, uniform_mix: float | None = None,
+                action_frame: str = "target", progress_reward: float = 10.0, gamma: float = 0.99,
+                reward_scale: float = 0.01, max_episode_steps: int | None = RL_MAX_EPISODE_STEPS,
+                **env_kwargs: Any) -> gym.Env:
+    """The environment of ``gnn-mp train rl`` (its defaults are this function's) and of the
+    registered RL ids (``GNNMP/<Env>-RLPick-v0``, ``-RLBox-v0``, :func:`rl_env_id`).
 
     ``task``'s benchmark environment (``planner="rrt"``/``"birrt"`` picks another registered
-    variant), problems of ``split`` (``"train"`` to learn, ``"val"`` to tune), wrapped in
-    :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation) and
-    ``RescaleAction`` to ``[-1, 1]`` (``action_frame="absolute"``) or
-    :class:`TargetRelativeAction` (``action_frame="target"``: offsets from the active tree's
-    target), ``scale_actions=False`` keeping state-space actions; with ``uniform_mix > 0``,
-    :class:`UniformMixAction` (that fraction of the samples replaced by uniform states, as
-    the sampler will do); with ``progress_reward > 0``,
-    :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``); rewards are
-    multiplied by ``reward_scale`` (Gymnasium's ``TransformReward``).
+    variant), problems of ``split`` (``"train"`` to learn, ``"val"`` to tune), then:
+
+    * the reward: the env's (``step_penalty``, ``node_cost``, ``collision_check_cost``,
+      ``success_reward``; defaults: :data:`RL_REWARD` updated by the task's ``TaskSpec.rl_reward``),
+      with ``progress_reward > 0``
+      :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``), multiplied
+      by ``reward_scale`` (Gymnasium's ``TransformReward``);
+    * ``action="pick"``: :class:`~gnn_mp_envs.envs.candidates.CandidatePickWrapper`, ``Discrete(candidates)``
+      actions over the step's candidate states (features relative to the tree in the observation);
+      ``action="box"``: ``[-1, 1]^d`` actions, offsets from the active tree's target
+      (``action_frame="target"``, :class:`TargetRelativeAction`) or the rescaled box
+      (``"absolute"``; ``scale_actions=False`` keeps state-space actions);
+    * ``uniform_mix``: that fraction of the samples replaced by uniform states, as the sampler
+      does (None: :data:`DEFAULT_UNIFORM_MIX` of the action);
+    * :class:`TreeViewWrapper` (``view_nodes=None``: the full padded observation);
+    * ``TimeLimit(max_episode_steps)`` (None: the env's own limits only).
+
     ``env_kwargs`` go to the environment: ``step_penalty``, ``collision_check_cost``,
     ``success_reward`` (the reward, see ``docs/rl.md``), ``max_nodes``, ``max_steps``,
     ``scene``, ``task_kwargs``. Observations are not copied by the env
@@ -302,6 +353,10 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     spec = task_spec(task)
     env_id = spec.env_id_for(planner)
     env_kwargs.setdefault("copy_observations", view_nodes is None)
+    for key, value in {**RL_REWARD, **spec.rl_reward}.items():
+        env_kwargs.setdefault(key, value)
+    if action not in ACTIONS:
+        raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
     if action_frame not in ACTION_FRAMES:
         raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
     budget = int(env_kwargs.get("max_nodes", spec.max_nodes))
@@ -309,28 +364,36 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
                                    or not 2 <= view_nodes <= budget):
         raise ValueError(f"view_nodes must be an integer in [2, {budget}] (the tree's node budget) or None, "
                          f"got {view_nodes!r}")
+    uniform_mix = DEFAULT_UNIFORM_MIX[action] if uniform_mix is None else uniform_mix
     if not (isinstance(uniform_mix, (int, float)) and 0.0 <= uniform_mix <= 1.0):     # NaN fails too
         raise ValueError(f"uniform_mix must be a number in [0, 1], got {uniform_mix!r}")
     if not (isinstance(reward_scale, (int, float)) and math.isfinite(reward_scale) and reward_scale > 0):
         raise ValueError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
+    if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or int(max_episode_steps) < 1):
+        raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
     env = gym.make(env_id, split=split, disable_env_checker=True, **env_kwargs)
-    if uniform_mix > 0.0:
+    if uniform_mix > 0.0 and action == "box":
         env = UniformMixAction(env, uniform_mix)      # state-space samples: uniform over the box
     if progress_reward > 0.0:
         env = ProgressReward(env, progress_reward, gamma)
     if reward_scale != 1.0:
         env = TransformReward(env, partial(_scaled_reward, float(reward_scale)))
+    if action == "pick":
+        env = CandidatePickWrapper(env, uniform_mix, **candidate_settings(task, candidates, local_scale, target_scale))
     if view_nodes is not None:
         env = TreeViewWrapper(env, view_nodes)
-    if scale_actions:
+    if action == "box" and scale_actions:
         if action_frame == "target":
             env = TargetRelativeAction(env)
         else:
             d = env.action_space.shape[0]
             env = RescaleAction(env, np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
+    if max_episode_steps is not None:
+        env = TimeLimit(env, int(max_episode_steps))
     return env
 
 
-__all__ = ["ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_VIEW_NODES", "ProgressReward",
+__all__ = ["ACTIONS", "ACTION_FRAMES", "ACTION_HIGH", "ACTION_LOW", "DEFAULT_UNIFORM_MIX", "DEFAULT_VIEW_NODES",
+           "ProgressReward", "RL_MAX_EPISODE_STEPS", "RL_REWARD", "candidate_settings", "rl_env_id",
            "TargetRelativeAction", "TreeViewWrapper", "UniformMixAction", "make_rl_env", "policy_action_to_state",
            "scale_action", "tree_view", "view_rows", "view_space"]

@@ -15,17 +15,37 @@ the evaluation on validation problems (:mod:`train.rl.evaluation`) and the run s
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gnn_mp_envs.envs.wrappers import ACTIONS, RL_MAX_EPISODE_STEPS, make_rl_env
 from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int
 from train.run import RunFlags
+
+#: The defaults of ``make_rl_env``: the flags of the MDP take them, so a run trains the MDP of the
+#: registered RL ids (``GNNMP/<Env>-RLPick-v0``) unless told otherwise.
+_ENV_DEFAULTS = {name: p.default for name, p in inspect.signature(make_rl_env).parameters.items()
+                 if p.default is not inspect.Parameter.empty}
+#: Where the per-task hyperparameter files live (``<task>.yml``, RL Zoo style: a section per algorithm).
+HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 
 LIBS = ("sb3", "torchrl")
 ALGOS = ("ppo", "sac")
 #: (lib, algo) -> registry name of the sampler a run's policy becomes
 SAMPLER_NAMES = {("sb3", "ppo"): "rl-ppo", ("sb3", "sac"): "rl-sac", ("torchrl", "ppo"): "rl-ppo-torchrl"}
+
+
+def _widths(text: str) -> list[int]:
+    """Comma-separated layer widths; ``""`` or ``none``: no hidden layer."""
+    import argparse
+    if text.strip().lower() in ("", "none"):
+        return []
+    try:
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers (or none), got {text!r}") from None
 
 
 def _mixes(text: str) -> list[float]:
@@ -52,26 +72,55 @@ class RLArgs(RunFlags):
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
+    hyperparams: Path | None = arg(None, "YAML hyperparameter file (RL Zoo style: a section per <lib>-<algo> of flag "
+                                   "values; explicit flags win); default: the task's shipped "
+                                   "train/rl/hyperparams/<task>.yml when there is one", metavar="FILE")
+    resume: bool = arg(False, "continue the run in --out from its last saved SB3 model (model.zip) or TorchRL "
+                       "state (training_state.pt), up to --total-steps")
+    device: str = arg("cpu", "torch device of the networks (cpu, cuda, auto: cuda when available)")
     # --- environment (make_rl_env)
     n_envs: int = arg(4, "environments stepped together (vectorised)", parse=positive_int)
     parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
-    view_nodes: int = arg(64, "rows of the tree view the policy sees (roots + most recent nodes)", parse=positive_int)
+    view_nodes: int = arg(_ENV_DEFAULTS["view_nodes"], "rows of the tree view the policy sees (roots + most recent "
+                          "nodes)", parse=positive_int)
     max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)", parse=positive_int)
-    action_frame: str = arg("target", "policy actions in [-1, 1]: offsets from the active tree's target "
-                            "(target) or the rescaled state box (absolute)", choices=("target", "absolute"))
-    step_penalty: float = arg(1.0, "reward: -step_penalty per planner iteration", parse=non_negative_float)
-    collision_check_cost: float = arg(0.0, "reward: -cost per validity check of the step", parse=non_negative_float)
-    success_reward: float = arg(10.0, "reward: +success_reward on the step that finds a path", parse=non_negative_float)
-    progress_reward: float = arg(10.0, "reward shaping: coef of the potential-based progress term "
-                                 "(ProgressReward; 0: the env's reward only)", parse=non_negative_float)
-    reward_scale: float = arg(0.01, "multiply every reward by this (returns of order 1)", parse=positive_float)
+    action: str = arg(_ENV_DEFAULTS["action"], "what the policy does: pick one of --candidates candidate states "
+                      "(Discrete; features relative to the tree) or output a state (box: [-1, 1]^d, --action-frame)",
+                      choices=ACTIONS)
+    candidates: int = arg(_ENV_DEFAULTS["candidates"], "pick: candidates per step (target, near-target, newest, "
+                          "greedy, the rest uniform)", parse=positive_int)
+    local_scale: float = arg(_ENV_DEFAULTS["local_scale"], "pick: std of the newest/greedy candidates, in extensions",
+                             parse=positive_float)
+    target_scale: float = arg(_ENV_DEFAULTS["target_scale"], "pick: std of the near-target candidate, as a "
+                              "fraction of the box", parse=positive_float)
+    action_frame: str = arg(_ENV_DEFAULTS["action_frame"], "box: policy actions in [-1, 1] are offsets from the "
+                            "active tree's target (target) or the rescaled state box (absolute)",
+                            choices=("target", "absolute"))
+    step_penalty: float | None = arg(None, "reward: -step_penalty per planner iteration (default: the task's "
+                                     "TaskSpec.rl_reward, else RL_REWARD's 0)", parse=non_negative_float)
+    node_cost: float | None = arg(None, "reward: -cost per node added (default: the task's, else 1)",
+                                  parse=non_negative_float)
+    collision_check_cost: float | None = arg(None, "reward: -cost per validity check of the step (default: the "
+                                             "task's, else 0)", parse=non_negative_float)
+    success_reward: float | None = arg(None, "reward: +success_reward on the step that finds a path (default: the "
+                                       "task's, else 10)", parse=non_negative_float)
+    progress_reward: float = arg(_ENV_DEFAULTS["progress_reward"], "reward shaping: coef of the potential-based "
+                                 "progress term (ProgressReward; 0: the env's reward only)", parse=non_negative_float)
+    reward_scale: float = arg(_ENV_DEFAULTS["reward_scale"], "multiply every reward by this (returns of order 1)",
+                              parse=positive_float)
     # --- networks (the shared TreeEncoder + the library's head)
     hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=positive_int)
     num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
     out_channels: int = arg(64, "TreeEncoder graph embedding width", parse=positive_int)
     conv: str = arg("sage", "TreeEncoder convolution", choices=("sage", "graph", "gcn", "gatv2"))
     knn: int = arg(0, "TreeEncoder k-NN edges per node (0: tree edges only)", parse=non_negative_int)
-    net_arch: list[int] = arg([64, 64], "hidden widths of the policy and value heads")
+    net_arch: list[int] = arg([64, 64], "hidden widths of the value head (box: and of the policy head)")
+    pi_arch: list[int] = arg([], "pick: hidden widths of the policy head over the candidate embeddings (none: "
+                             "a linear score per candidate slot)", parse=_widths)
+    candidate_hidden: int = arg(64, "pick: hidden width of the per-candidate MLP", parse=positive_int)
+    candidate_embed: int = arg(32, "pick: per-candidate embedding width", parse=positive_int)
+    tree_context: bool = arg(False, "pick: also encode the tree view with a TreeEncoder (sized by the flags above) and "
+                             "give its embedding to every candidate")
     encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
                        "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))
@@ -80,7 +129,7 @@ class RLArgs(RunFlags):
                                  "gnn with --encoder tree-gnn)", metavar="PATH|NAME")
     # --- optimisation
     lr: float = arg(3e-4, "Adam learning rate", parse=positive_float)
-    gamma: float = arg(0.99, "discount", parse=positive_float)
+    gamma: float = arg(_ENV_DEFAULTS["gamma"], "discount (and the shaping's gamma)", parse=positive_float)
     batch_size: int = arg(128, "minibatch size", parse=positive_int)
     n_steps: int = arg(256, "PPO: steps per env per rollout", parse=positive_int)
     n_epochs: int = arg(4, "PPO: passes over each rollout", parse=positive_int)
@@ -94,21 +143,49 @@ class RLArgs(RunFlags):
     # --- evaluation, outputs
     eval_every: int = arg(10_000, "evaluate (and checkpoint) every N steps", parse=positive_int)
     eval_problems: int = arg(10, "problems 0..N-1 of split val per evaluation", parse=positive_int)
-    eval_max_steps: int = arg(4000, "planner iterations per evaluation problem (then a failure)", parse=positive_int)
-    uniform_mix: float = arg(0.5, "probability of a uniform sample instead of the policy's, in training "
-                             "(UniformMixAction) and in the sampler", parse=non_negative_float)
+    select_on: str = arg("nodes", "best.pt: the evaluation with the highest success rate, then the fewest median "
+                         "nodes or collision checks", choices=("nodes", "collision_checks"))
+    eval_max_steps: int = arg(RL_MAX_EPISODE_STEPS, "planner iterations per evaluation problem (then a failure)",
+                              parse=positive_int)
+    max_episode_steps: int = arg(RL_MAX_EPISODE_STEPS, "training episodes end (truncated) after this many "
+                                 "iterations", parse=positive_int)
+    uniform_mix: float | None = arg(None, "probability of a uniform sample instead of the policy's, in training and "
+                                    "in the sampler (default: box 0.5, pick 0)", parse=non_negative_float)
     tune_mix: list[float] | None = arg(None, "after training, pick the final policy's uniform_mix among these "
                                        "on split val (e.g. 0.25,0.5,0.75)", parse=_mixes)
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
-        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner, "action_frame": self.action_frame,
-                              "step_penalty": self.step_penalty, "collision_check_cost": self.collision_check_cost,
-                              "success_reward": self.success_reward, "uniform_mix": self.uniform_mix,
-                              "progress_reward": self.progress_reward, "gamma": self.gamma,
-                              "reward_scale": self.reward_scale}
+        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner, "action": self.action,
+                              "candidates": self.candidates, "local_scale": self.local_scale,
+                              "target_scale": self.target_scale, "action_frame": self.action_frame,
+                              "uniform_mix": self.uniform_mix, "progress_reward": self.progress_reward,
+                              "gamma": self.gamma, "reward_scale": self.reward_scale,
+                              "max_episode_steps": self.max_episode_steps}
+        for name in ("step_penalty", "node_cost", "collision_check_cost", "success_reward"):
+            if getattr(self, name) is not None:
+                kw[name] = getattr(self, name)
         if self.max_nodes is not None:
             kw["max_nodes"] = self.max_nodes
+        return kw
+
+    @property
+    def sampler_uniform_mix(self) -> float:
+        """The uniform mixture of the run's sampler (the flag, else the action's default)."""
+        from gnn_mp_envs.envs.wrappers import DEFAULT_UNIFORM_MIX
+        return DEFAULT_UNIFORM_MIX[self.action] if self.uniform_mix is None else float(self.uniform_mix)
+
+    def candidate_settings(self) -> dict[str, Any]:
+        """The run's ``CandidateSet`` configuration (pick): what its env and its sampler use."""
+        from gnn_mp_envs.envs.wrappers import candidate_settings
+        return candidate_settings(self.task, self.candidates, self.local_scale, self.target_scale)
+
+    def candidate_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of the pick policy's ``CandidateEncoder.from_space``."""
+        kw: dict[str, Any] = {"hidden": self.candidate_hidden, "embed": self.candidate_embed,
+                              "tree_context": self.tree_context}
+        if self.tree_context:
+            kw["tree_kwargs"] = self.encoder_kwargs()
         return kw
 
     def encoder_kwargs(self) -> dict[str, Any]:
@@ -157,8 +234,24 @@ def check_args(args: RLArgs) -> None:
     if not 2 <= args.view_nodes <= max_nodes:
         raise ValueError(f"--view-nodes must be in [2, {max_nodes}] (the tree's node budget), got {args.view_nodes}")
     for name, value in (("--gamma", args.gamma), ("--gae-lambda", args.gae_lambda), ("--uniform-mix", args.uniform_mix)):
-        if not 0.0 <= value <= 1.0:
+        if value is not None and not 0.0 <= value <= 1.0:
             raise ValueError(f"{name} must be in [0, 1], got {value}")
+    if args.action == "pick":
+        from gnn_mp_envs.envs.candidates import CANDIDATE_KINDS
+        if args.algo == "sac":
+            raise ValueError("--algo sac acts in a box: use --action box (pick is a Discrete action, for PPO)")
+        if args.candidates < len(CANDIDATE_KINDS):
+            raise ValueError(f"--candidates must be >= {len(CANDIDATE_KINDS)} (one of each kind: "
+                             f"{', '.join(CANDIDATE_KINDS)}), got {args.candidates}")
+        if args.encoder != "tree" or args.init_from is not None:
+            raise ValueError("--encoder tree-gnn and --init-from warm-start a box policy's tree encoder; a picker "
+                             "(--action pick) reads candidate features (--tree-context adds a TreeEncoder)")
+    elif args.tree_context:
+        raise ValueError("--tree-context is a picker's (--action pick); a box policy always reads the tree")
+    if args.device not in ("cpu", "cuda", "auto") and not args.device.startswith("cuda:"):
+        raise ValueError(f"--device must be cpu, cuda, cuda:N or auto, got {args.device!r}")
+    if args.resume and args.out is None:
+        raise ValueError("--resume needs --out RUN_DIR (the run to continue)")
     if args.clip_range >= 1.0:
         raise ValueError(f"--clip-range must be in (0, 1), got {args.clip_range}")
     if not args.net_arch or any(w < 1 or w > 65536 for w in args.net_arch):
@@ -175,6 +268,54 @@ def check_args(args: RLArgs) -> None:
         from agents.checkpoints import read_checkpoint
         args.init_from = init_from_path(args.init_from, args.task)
         read_checkpoint(args.init_from)        # a CheckpointError (a ValueError) names the file and what is wrong
+
+
+def torch_device(name: str) -> str:
+    """``--device`` as a torch device string (``auto``: cuda when available, else cpu)."""
+    if name == "auto":
+        import torch
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
+def hyperparams_file(args: RLArgs) -> Path | None:
+    """The YAML file a run reads: ``--hyperparams``, else the task's shipped one (None: none)."""
+    if args.hyperparams is not None:
+        return Path(args.hyperparams)
+    shipped = HYPERPARAMS_DIR / f"{args.task}.yml"
+    return shipped if shipped.is_file() else None
+
+
+#: RL Zoo's names of flags that are spelled otherwise here.
+ZOO_ALIASES = {"n_timesteps": "total_steps", "learning_rate": "lr"}
+
+
+def read_hyperparams(path: Path, section: str) -> dict[str, Any]:
+    """The ``section`` (``<lib>-<algo>``) of a YAML hyperparameter file as flag values (field names;
+    RL Zoo's ``n_timesteps`` and ``learning_rate`` accepted); one-line ``ValueError`` otherwise."""
+    import dataclasses
+
+    import yaml
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except FileNotFoundError:
+        raise ValueError(f"--hyperparams {path}: no such file") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"--hyperparams {path}: not YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"--hyperparams {path}: expected a mapping of sections (e.g. sb3-ppo:), got "
+                         f"{type(data).__name__}")
+    values = data.get(section) or {}
+    if not isinstance(values, dict):
+        raise ValueError(f"--hyperparams {path}: section {section!r} is not a mapping")
+    fields = {f.name for f in dataclasses.fields(RLArgs)} - {"hyperparams", "lib", "algo", "task", "modules"}
+    out = {}
+    for key, value in values.items():
+        name = ZOO_ALIASES.get(str(key), str(key).replace("-", "_"))
+        if name not in fields:
+            raise ValueError(f"--hyperparams {path}: unknown key {key!r} in section {section!r}")
+        out[name] = value
+    return out
 
 
 def init_from_path(value: str | Path, task: str) -> Path:
@@ -211,4 +352,5 @@ def run_config(args: RLArgs) -> dict[str, Any]:
             "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
 
 
-__all__ = ["ALGOS", "LIBS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args", "run_config"]
+__all__ = ["ALGOS", "HYPERPARAMS_DIR", "LIBS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args",
+           "hyperparams_file", "read_hyperparams", "run_config", "torch_device"]

@@ -14,14 +14,50 @@ from __future__ import annotations
 
 import sys
 
-from train.args import OneLineParser, add_dataclass_arguments, from_namespace
-from train.rl.args import RLArgs, check_args
+import dataclasses
+from typing import Any
+
+from train.args import OneLineParser, add_dataclass_arguments, from_namespace, import_modules
+from train.rl.args import RLArgs, check_args, hyperparams_file, read_hyperparams
+
+
+def hyperparam_tokens(values: dict[str, Any]) -> list[str]:
+    """Flag values (field name -> value) as command-line tokens, so that a YAML file's values are
+    parsed and checked exactly as flags (``[--lr, 0.0003, --tree-context, ...]``)."""
+    fields = {f.name: f for f in dataclasses.fields(RLArgs)}
+    tokens: list[str] = []
+    for name, value in values.items():
+        field = fields[name]
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        if isinstance(default, bool):
+            if bool(value) != default:
+                tokens.append(field.metadata.get("flag") or ("--no-" if default else "--") + name.replace("_", "-"))
+            continue
+        text = ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+        if isinstance(value, (list, tuple)) and not value:
+            text = "none"
+        tokens += [f"--{name.replace('_', '-')}", text]
+    return tokens
 
 
 def parse(argv: list[str]) -> RLArgs:
+    """The flags: the dataclass's defaults, then the task's YAML section (``--hyperparams``, by
+    default ``train/rl/hyperparams/<task>.yml``), then the command line."""
     parser = OneLineParser(prog="gnn-mp train rl", description=__doc__.splitlines()[0])
     add_dataclass_arguments(parser, RLArgs)
-    args = from_namespace(RLArgs, parser.parse_args(argv))
+    first = from_namespace(RLArgs, parser.parse_args(argv))
+    try:
+        import_modules(first.modules)
+        path = hyperparams_file(first)
+        tokens = hyperparam_tokens(read_hyperparams(path, f"{first.lib}-{first.algo}")) if path else []
+    except ValueError as exc:
+        parser.error(str(exc))
+    if tokens:
+        checker = OneLineParser(prog=f"gnn-mp train rl: {path}", add_help=False)
+        add_dataclass_arguments(checker, RLArgs)
+        checker.parse_args(tokens)           # a bad value names the file
+    args = from_namespace(RLArgs, parser.parse_args(tokens + argv))
+    args.hyperparams = path
     try:
         check_args(args)
     except ValueError as exc:

@@ -25,20 +25,20 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 from tqdm import tqdm
 
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
-from agents.rl.sb3 import TreeFeaturesExtractor
+from agents.rl.sb3 import CandidateFeaturesExtractor, TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl.args import RLArgs, RunResult, check_args, run_config
+from train.rl.args import RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
 from train.run import RunError, TrainingRun
 
 
 class EvalCallback(BaseCallback):
-    """Every ``--eval-every`` steps: evaluate on split val, checkpoint, log to TensorBoard."""
+    """Every ``--eval-every`` steps: evaluate on split val, checkpoint (and ``model.zip``), log to TensorBoard."""
 
-    def __init__(self, evaluator: Evaluator) -> None:
+    def __init__(self, evaluator: Evaluator, run: TrainingRun) -> None:
         super().__init__()
-        self.evaluator = evaluator
+        self.evaluator, self.run = evaluator, run
 
     def _on_training_start(self) -> None:
         self._on_step()   # the untrained policy: the learning curve's first point
@@ -46,6 +46,7 @@ class EvalCallback(BaseCallback):
     def _on_step(self) -> bool:
         if self.evaluator.due(self.num_timesteps):
             row = self.evaluator(self.num_timesteps)
+            self.model.save(self.run.path("model.zip"))
             self.logger.dump(self.num_timesteps)
             lead = "\n" if self.evaluator.args.progress else ""   # below the progress bar
             print(f"{lead}  step {row['steps']:>7}: val success {row['success_rate']:.2f}, "
@@ -71,14 +72,26 @@ class ProgressCallback(BaseCallback):
         self.bar.close()
 
 
-def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
-    """PPO or SAC over the env with the tree encoder as features extractor."""
-    policy_kwargs = {"features_extractor_class": TreeFeaturesExtractor,
-                     "features_extractor_kwargs": args.encoder_kwargs(), "net_arch": list(args.net_arch)}
-    common = {"learning_rate": args.lr, "gamma": args.gamma, "batch_size": args.batch_size, "seed": args.seed,
-              "device": "cpu", "tensorboard_log": str(run_dir / "tb"), "verbose": 0}
+def policy_kwargs_of(args: RLArgs) -> dict:
+    """SB3's ``policy_kwargs``: the candidate extractor with a linear score per slot (``pick``) or
+    the tree encoder with a Gaussian head (``box``)."""
+    if args.action == "pick":
+        return {"features_extractor_class": CandidateFeaturesExtractor,
+                "features_extractor_kwargs": args.candidate_kwargs(),
+                "net_arch": {"pi": list(args.pi_arch), "vf": list(args.net_arch)}}
+    kwargs = {"features_extractor_class": TreeFeaturesExtractor, "features_extractor_kwargs": args.encoder_kwargs(),
+              "net_arch": list(args.net_arch)}
     if args.algo == "ppo":
-        policy_kwargs["log_std_init"] = args.log_std_init
+        kwargs["log_std_init"] = args.log_std_init
+    return kwargs
+
+
+def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
+    """PPO or SAC over the env with the tree encoder (or the candidate extractor) as features extractor."""
+    policy_kwargs = policy_kwargs_of(args)
+    common = {"learning_rate": args.lr, "gamma": args.gamma, "batch_size": args.batch_size, "seed": args.seed,
+              "device": torch_device(args.device), "tensorboard_log": str(run_dir / "tb"), "verbose": 0}
+    if args.algo == "ppo":
         return PPO("MultiInputPolicy", env, n_steps=args.n_steps, n_epochs=args.n_epochs,
                    gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
                    policy_kwargs=policy_kwargs, **common)
@@ -94,17 +107,26 @@ def encoders_of(model: PPO | SAC) -> list:
 def train(args: RLArgs) -> RunResult:
     check_args(args)
     torch.set_num_threads(args.threads)
-    run = TrainingRun.create("rl", f"sb3-{args.algo}-{args.task}", args.seed, out=args.out, overwrite=args.overwrite)
-    run.write_config(run_config(args))
+    run = TrainingRun.create("rl", f"sb3-{args.algo}-{args.task}", args.seed, out=args.out, overwrite=args.overwrite,
+                             resume=args.resume)
+    if args.resume and not run.path("model.zip").is_file():
+        raise RunError(f"--resume: {run.dir} holds no SB3 model (model.zip) to continue")
+    run.write_config(run_config(args), "config.json" if not args.resume else "config_resumed.json")
 
-    # 1. environments: n_envs copies of make_rl_env (tree view + actions in [-1, 1]), seeded
+    # 1. environments: n_envs copies of make_rl_env (the registered RL ids' MDP), seeded
     env_kwargs = {"task": args.task, "split": "train", **args.env_kwargs()}
     vec_env = make_vec_env(make_rl_env, n_envs=args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
                            vec_env_cls=SubprocVecEnv if args.parallel else DummyVecEnv)
 
-    # 2. the agent, the optional warm start of its encoder(s)
-    model = build_model(args, vec_env, run.dir)
-    if args.init_from is not None:
+    # 2. the agent (or the saved one, --resume), the optional warm start of its encoder(s)
+    if args.resume:
+        cls = PPO if args.algo == "ppo" else SAC
+        model = cls.load(run.path("model.zip"), env=vec_env, device=torch_device(args.device),
+                         tensorboard_log=str(run.path("tb")))
+        print(f"resuming {run.dir} at step {model.num_timesteps:,}")
+    else:
+        model = build_model(args, vec_env, run.dir)
+    if args.init_from is not None and not args.resume:
         try:
             source = warm_start_encoder(args.init_from, *encoders_of(model))
         except ValueError as exc:        # no backbone of this run's size in the file
@@ -120,16 +142,26 @@ def train(args: RLArgs) -> RunResult:
     def log(name: str, value: float, step: int) -> None:
         model.logger.record(name, value)
 
-    evaluator = Evaluator(args, run, lambda: policy_from_sb3(model), log=log)
+    def save_best(steps: int) -> None:      # SB3's own format beside best.pt (PPO.load reads it)
+        model.save(run.path("best_model.zip"))
 
-    # 4. learn
-    callbacks = [EvalCallback(evaluator)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
+    candidates = args.candidate_settings() if args.action == "pick" else None
+    evaluator = Evaluator(args, run, lambda: policy_from_sb3(model), log=log, candidates=candidates,
+                          on_best=save_best)
+    if args.resume:
+        evaluator.restore()
+
+    # 4. learn (the model saved as model.zip at every evaluation: what --resume continues)
+    callbacks = [EvalCallback(evaluator, run)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
     started = time.perf_counter()
-    model.learn(total_timesteps=args.total_steps, callback=callbacks, tb_log_name=f"{args.algo}_{args.task}")
+    remaining = max(args.total_steps - model.num_timesteps, 0)
+    model.learn(total_timesteps=remaining, callback=callbacks, tb_log_name=f"{args.algo}_{args.task}",
+                reset_num_timesteps=not args.resume)
     train_time = time.perf_counter() - started
 
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(model.num_timesteps)
+    model.save(run.path("model.zip"))
     vec_env.close()
     print(f"trained {model.num_timesteps:,} steps in {tqdm.format_interval(train_time)}; policy {best}")
     return RunResult(run.dir, best, int(model.num_timesteps), train_time, buffer_bytes, evaluator.rows)

@@ -28,10 +28,11 @@ from torchrl.record.loggers import TensorboardLogger
 
 from tqdm import tqdm
 
+from agents.checkpoints import load_training_state, save_training_state
 from agents.rl.policies import policy_from_torchrl, warm_start_encoder
-from agents.rl.torchrl import make_actor, make_value
+from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl.args import RLArgs, RunResult, check_args, run_config
+from train.rl.args import RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.run import RunError, TrainingRun
 
@@ -44,8 +45,10 @@ def keep_threads(threads: int) -> None:
 
 
 def make_env(args: RLArgs, seed: int) -> GymWrapper:
-    """One training env: ``make_rl_env`` (view + rescaled actions) as a TorchRL env, seeded."""
-    env = GymWrapper(make_rl_env(args.task, split="train", **args.env_kwargs()))
+    """One training env: ``make_rl_env`` (the registered RL ids' MDP) as a TorchRL env, seeded; a
+    picker's ``Discrete`` action as an integer (``categorical_action_encoding``)."""
+    env = GymWrapper(make_rl_env(args.task, split="train", **args.env_kwargs()),
+                     categorical_action_encoding=args.action == "pick")
     env.set_seed(seed)
     return env
 
@@ -100,8 +103,12 @@ def train(args: RLArgs) -> RunResult:
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
     run = TrainingRun.create("rl", f"torchrl-{args.algo}-{args.task}", args.seed, out=args.out,
-                             overwrite=args.overwrite)
-    run.write_config(run_config(args))
+                             overwrite=args.overwrite, resume=args.resume)
+    state_path = run.path("training_state.pt")
+    if args.resume and not state_path.is_file():
+        raise RunError(f"--resume: {run.dir} holds no TorchRL training state (training_state.pt) to continue")
+    run.write_config(run_config(args), "config.json" if not args.resume else "config_resumed.json")
+    device = torch.device(torch_device(args.device))
 
     # 1. environments
     probe = make_rl_env(args.task, split="train", **args.env_kwargs())
@@ -109,11 +116,17 @@ def train(args: RLArgs) -> RunResult:
     probe.close()
     env = make_batched_env(args)
 
-    # 2. actor (TanhNormal on [-1, 1]) and critic, each over its own TreeEncoder
-    actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
-                       init_scale=float(math.exp(args.log_std_init)), **args.encoder_kwargs())
-    value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
-    if args.init_from is not None:
+    # 2. actor and critic, each over its own encoder: a categorical over the candidates (pick) or a
+    #    TanhNormal on [-1, 1] over a TreeEncoder (box)
+    if args.action == "pick":
+        actor = make_pick_actor(observation_space, head_hidden=args.pi_arch, **args.candidate_kwargs())
+        value = make_pick_value(observation_space, head_hidden=args.net_arch, **args.candidate_kwargs())
+    else:
+        actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
+                           init_scale=float(math.exp(args.log_std_init)), **args.encoder_kwargs())
+        value = make_value(observation_space, hidden=args.net_arch[0], **args.encoder_kwargs())
+    actor, value = actor.to(device), value.to(device)
+    if args.init_from is not None and not args.resume:
         encoders = [m for m in (*actor.modules(), *value.modules()) if type(m).__name__ in ("TreeEncoder", "TreeGNNEncoder")]
         try:
             source = warm_start_encoder(args.init_from, *encoders)
@@ -124,6 +137,15 @@ def train(args: RLArgs) -> RunResult:
     # 3. collector, advantage, loss, optimiser, logger
     frames_per_batch = args.n_steps * args.n_envs
     total_frames = math.ceil(args.total_steps / frames_per_batch) * frames_per_batch   # whole batches, as collected
+    steps = 0
+    optimiser_state = None
+    if args.resume:
+        state = load_training_state(state_path)
+        actor.load_state_dict(state["actor"])
+        value.load_state_dict(state["value"])
+        optimiser_state, steps = state["optimiser"], int(state["steps"])
+        print(f"resuming {run.dir} at step {steps:,}")
+    total_frames = max(total_frames - steps, frames_per_batch)
     collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
                           auto_register_policy_transforms=False)
     # deactivate_vmap: the graph conversion has data-dependent shapes, which vmap cannot batch
@@ -132,17 +154,31 @@ def train(args: RLArgs) -> RunResult:
     loss_module = ClipPPOLoss(actor, value, clip_epsilon=args.clip_range, entropy_coeff=args.ent_coef,
                               normalize_advantage=False)
     optimiser = torch.optim.Adam(loss_module.parameters(), lr=args.lr)
+    if optimiser_state is not None:
+        optimiser.load_state_dict(optimiser_state)
     logger = TensorboardLogger(exp_name=f"ppo_{args.task}", log_dir=str(run.path("tb")))
+    candidates = args.candidate_settings() if args.action == "pick" else None
     evaluator = Evaluator(args, run, lambda: policy_from_torchrl(actor),
-                          log=lambda name, v, step: logger.log_scalar(name, v, step=step))
+                          log=lambda name, v, step: logger.log_scalar(name, v, step=step), candidates=candidates)
+    if args.resume:
+        evaluator.restore()
+
+    def save_state(steps: int) -> None:        # what --resume continues
+        save_training_state(state_path, {"actor": actor.state_dict(), "value": value.state_dict(),
+                                         "optimiser": optimiser.state_dict(), "steps": int(steps)})
     print(f"TorchRL PPO on {args.task}: {sum(p.numel() for p in loss_module.parameters()):,} parameters, "
           f"{frames_per_batch} frames per batch, run directory {run.dir}")
 
     # 4. the loop: collect a batch, GAE, epochs of minibatch updates, log, evaluate
-    bar = tqdm(total=args.total_steps, unit="step", disable=not args.progress, dynamic_ncols=True)
-    started, steps, batch_bytes = time.perf_counter(), 0, 0
-    evaluator(0)
+    bar = tqdm(total=args.total_steps, initial=steps, unit="step", disable=not args.progress, dynamic_ncols=True)
+    started, batch_bytes = time.perf_counter(), 0
+    if evaluator.due(steps):
+        row = evaluator(steps)
+        bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
+                  f"({row['eval_wall_s']:.0f} s)")
     for batch in collector:
+        if steps >= args.total_steps:
+            break
         keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
         steps += batch.numel()
         batch_bytes = max(batch_bytes, batch.bytes())   # the rollout storage of one batch
@@ -166,6 +202,7 @@ def train(args: RLArgs) -> RunResult:
         bar.update(batch.numel())
         if evaluator.due(steps):
             row = evaluator(steps)
+            save_state(steps)
             bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
                       f"({row['eval_wall_s']:.0f} s)")
     bar.close()
@@ -175,6 +212,7 @@ def train(args: RLArgs) -> RunResult:
 
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(steps)
+    save_state(steps)
     if not env.is_closed:
         env.close()
     keep_threads(args.threads)
