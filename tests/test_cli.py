@@ -148,6 +148,18 @@ def test_listing_the_samplers_imports_no_torch():
     assert lines[-1] == "False" and any(line.startswith("gnn ") for line in lines)
 
 
+@pytest.mark.parametrize("argv", [["train", "sampler", "--help"], ["train", "sampler", "--model", "nope"]])
+def test_train_sampler_help_and_bad_flags_import_no_torch(argv):
+    """`gnn-mp train sampler --help` took 10-14 s importing torch before argparse (issue #21, item 10):
+    the flags live in train.tree.args, and torch is imported once they parsed."""
+    code = ("import sys\nfrom train.cli import main\ntry:\n    main(%r)\nexcept SystemExit as exc:\n"
+            "    print('rc', exc.code)\nprint('torch' in sys.modules)" % (argv,))
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    lines = result.stdout.strip().splitlines()
+    assert lines[-1] == "False", result.stdout + result.stderr
+    assert lines[-2] == ("rc 0" if "--help" in argv else "rc 2"), result.stdout + result.stderr
+
+
 def test_version_and_render_without_a_mode(capsys):
     """`gnn-mp --version` names the installed version; render() without a render mode warns as
     Gymnasium's own envs do instead of returning None silently (issue #21, item 10)."""

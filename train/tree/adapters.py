@@ -22,6 +22,7 @@ from gymnasium import spaces
 from agents.tree.models import TreeCVAE, TreeGNN, TreeGNNCVAE
 from agents.tree.scorer import TreeGNNScorer
 from gnn_mp_envs.registration import TaskSpec, task_spec
+from train.tree.args import MODELS as ARG_MODELS
 from train.tree.data import TreeDataset
 from train.tree.items import Run, ScorerRun, make_run, make_scorer_run
 
@@ -219,6 +220,7 @@ class ScorerAdapter:
 
 ADAPTERS: dict[str, Adapter] = {"gnn": GNNAdapter(), "cvae": CVAEAdapter(), "gnn-cvae": GNNCVAEAdapter()}
 MODELS = tuple(ADAPTERS)
+assert MODELS == ARG_MODELS, "train.tree.args.MODELS names the adapters' models"
 
 
 def adapter_for(model: str, task: str) -> Adapter:

@@ -1,4 +1,4 @@
-"""``gnn-mp train sampler``: flags from :class:`~train.tree.training.TrainArgs`."""
+"""``gnn-mp train sampler``: flags from :class:`~train.tree.args.TrainArgs`."""
 
 from __future__ import annotations
 
@@ -10,15 +10,16 @@ from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from agents.checkpoints import CheckpointError
-    from gnn_mp_envs.utils.npz import DatasetCacheError
-    from train.run import RunError
-    from train.tree.training import TrainArgs, TrainError, train
+    from train.tree.args import TrainArgs
     parser = OneLineParser(prog="gnn-mp train sampler",
                            description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
                            "evaluate it against uniform on validation problems.")
     add_dataclass_arguments(parser, TrainArgs)
     args = from_namespace(TrainArgs, parser.parse_args(argv))
+    from agents.checkpoints import CheckpointError       # torch: only once the flags are known to be good
+    from gnn_mp_envs.utils.npz import DatasetCacheError
+    from train.run import RunError
+    from train.tree.training import TrainError, train
     try:
         summary = train(args)
     except (TrainError, RunError, CheckpointError, DatasetCacheError) as exc:

@@ -1,0 +1,50 @@
+"""Flags of ``gnn-mp train sampler`` without torch: ``--help`` and bad flags answer at once, and an
+install without the ``agents`` extra gets its one-line refusal before anything heavy is imported."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from train.args import arg, non_negative_int, positive_float, positive_int, seed_int
+from train.run import RunFlags
+from train.tree.data import VIEWS
+
+#: The learned tree samplers ``--model`` trains (``train.tree.adapters.ADAPTERS`` holds one adapter each).
+MODELS = ("gnn", "cvae", "gnn-cvae")
+
+
+@dataclass
+class TrainArgs(RunFlags):
+    """Flags of ``gnn-mp train sampler`` (the run shell's from :class:`train.run.RunFlags`)."""
+
+    task: str = arg("pendulum", "task (any registered task; --import adds your own)")
+    model: str = arg("gnn", "model", choices=MODELS)
+    problems: int = arg(400, "training problems solved by the uniform sampler (split train)", parse=positive_int)
+    scene: str | None = arg(None, "scene family of the training problems (default: the task's training family; "
+                            "maze2d / pendulum: 'mixed' is the domain randomisation over kinds); OOD scenes "
+                            "are refused")
+    augment: bool = arg(False, "augment every training batch with the task's symmetries (TaskSpec.symmetries: "
+                        "maze2d's eight rotations/reflections, the pendulum's mirror)")
+    relative_inputs: bool = arg(False, "gnn (node mixture) and gnn-cvae: read no absolute position, only the "
+                                "nodes' offsets to start and goal")
+    view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
+                    "start + path prefix)", choices=VIEWS)
+    minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)
+    dagger_rounds: int = arg(1, "DAgger rounds: plan with the sampler, relabel its own trees, fine-tune",
+                             parse=non_negative_int)
+    dagger_problems: int = arg(400, "fresh training problems planned per DAgger round", parse=positive_int)
+    dagger_minutes: float = arg(6.0, "fine-tuning time per DAgger round (minutes)", parse=positive_float)
+    batch_size: int = arg(8, "runs (solved problems) per optimisation step", parse=positive_int)
+    lr: float = arg(2e-3, "Adam learning rate (cosine-annealed)", parse=positive_float)
+    max_snapshots: int = arg(96, "snapshots per run in an epoch (the scorer: negative samples per run)",
+                             parse=positive_int)
+    eval_problems: int = arg(60, "validation problems planned at the end (sampler and uniform)",
+                             parse=non_negative_int)
+    seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=seed_int)
+    data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
+    workers: int = arg(1, "processes that plan the training problems (the dataset is the same for any count)",
+                       parse=positive_int)
+    resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
+
+
