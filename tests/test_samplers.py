@@ -413,6 +413,32 @@ def test_the_proposals_tuning_rule():
     assert choose(rows, [1, 8], inference_share=0.1) == 8
 
 
+def test_a_tuned_setting_is_stored_in_the_weights_and_the_sidecar(tmp_path, monkeypatch):
+    """tools.shipped_settings (the --write of tune_proposals and tune_adaptive): the chosen value joins
+    meta["sampler"], which load_sampler applies; the tuning table and the command go beside it in the
+    checkpoint and its sidecar; the other settings and the weights stay."""
+    import json
+    import shutil
+
+    from agents.checkpoints import SHIPPED_DIR, read_checkpoint
+    from agents.registry import load_sampler
+    from tools.shipped_settings import store_tuned_setting, tool_command
+    for suffix in (".pt", ".json"):
+        shutil.copy(SHIPPED_DIR / f"cvae_maze2d{suffix}", tmp_path / f"cvae_maze2d{suffix}")
+    monkeypatch.setattr("agents.checkpoints.SHIPPED_DIR", tmp_path)
+    before = read_checkpoint(tmp_path / "cvae_maze2d.pt")
+    command = tool_command("tools.tune_proposals", ["--candidates", "[1, 2]"])
+    assert command == "python -m tools.tune_proposals --candidates '[1, 2]'"
+    store_tuned_setting("cvae", "maze2d", {"proposals": 7}, "proposals_tuning", {"command": command, "rows": {}})
+    after = read_checkpoint(tmp_path / "cvae_maze2d.pt")
+    assert after["meta"]["sampler"] == {**before["meta"]["sampler"], "proposals": 7}
+    assert after["meta"]["proposals_tuning"]["command"] == command
+    side = json.loads((tmp_path / "cvae_maze2d.json").read_text())
+    assert side["sampler"]["proposals"] == 7 and side["proposals_tuning"]["command"] == command
+    assert all(torch.equal(after["state_dict"][k], v) for k, v in before["state_dict"].items())
+    assert load_sampler("cvae", task="maze2d", seed=0).proposals == 7
+
+
 def test_the_mixture_uniform_draw_is_generator_uniform():
     """ModelSampler's uniform share draws rng.uniform(low, high)'s exact values (written without its
     broadcasting overhead): the tree samplers' recorded counters depend on them."""

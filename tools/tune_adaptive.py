@@ -19,16 +19,13 @@ from __future__ import annotations
 
 import json
 import math
-import shlex
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
+from tools.shipped_settings import store_tuned_setting, tool_command
 
 
 @dataclass
@@ -92,7 +89,6 @@ def choose(summary: dict, worst: float) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from agents.checkpoints import load_checkpoint, save_checkpoint, shipped_checkpoint
     from gnn_mp_envs.registration import task_spec
     parser = OneLineParser(prog="python -m tools.tune_adaptive", description=__doc__.splitlines()[0])
     add_dataclass_arguments(parser, Args)
@@ -115,19 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     chosen = choose({k: v for k, v in summary.items() if k != "false"}, args.worst)
     print(f"chosen: adaptive={chosen}")
     if args.write:
-        path = shipped_checkpoint(args.sampler, args.task)
-        model, record = load_checkpoint(path)
-        meta = dict(record["meta"])
-        meta["sampler"] = {**meta.get("sampler", {}), "adaptive": json.loads(chosen)}
-        command = "python -m tools.tune_adaptive " + shlex.join(sys.argv[1:] if argv is None else argv)
-        meta["adaptive_tuning"] = {"command": command, "val_problems_per_kind": args.problems, "rows": summary}
-        save_checkpoint(path, model, record["kind"], record["ctor_args"], obs_spec=record["obs_spec"], meta=meta)
-        sidecar = Path(path).with_suffix(".json")
-        side = json.loads(sidecar.read_text()) if sidecar.exists() else {}
-        side["sampler"] = meta["sampler"]
-        side["adaptive_tuning"] = meta["adaptive_tuning"]
-        atomic_write_text(sidecar, json.dumps(side, indent=2) + "\n")
-        print(f"wrote {path} and its sidecar")
+        store_tuned_setting(args.sampler, args.task, {"adaptive": json.loads(chosen)}, "adaptive_tuning",
+                            {"command": tool_command("tools.tune_adaptive", argv),
+                             "val_problems_per_kind": args.problems, "rows": summary})
     return 0
 
 

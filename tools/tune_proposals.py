@@ -15,16 +15,12 @@ passes cost at most ``S`` of the planner's time. ``--write`` stores it in the sh
 
 from __future__ import annotations
 
-import json
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
-from agents.checkpoints import load_checkpoint, save_checkpoint, shipped_checkpoint
 from agents.registry import load_sampler
 from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
-from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+from tools.shipped_settings import store_tuned_setting, tool_command
 
 
 @dataclass
@@ -90,25 +86,14 @@ def main(argv: list[str] | None = None) -> int:
     chosen = choose(rows, args.candidates, args.inference_share)
     print(f"chosen: proposals={chosen}")
     if args.write:
-        path = shipped_checkpoint(args.sampler, args.task)
-        model, record = load_checkpoint(path)
-        meta = dict(record["meta"])
-        meta["sampler"] = {**meta.get("sampler", {}), "proposals": int(chosen)}
-        meta["proposals_tuning"] = {"command": "python -m tools.tune_proposals " + " ".join(sys.argv[1:] if argv is None
-                                                                                              else argv),
-                                    "val_problems": args.problems,
-                                    "rows": {str(k): {"median_wall_ms": 1e3 * r["median_wall_time_s"],
-                                                      "median_nodes": r["median_nodes"],
-                                                      "success_rate": r["success_rate"],
-                                                      "inference_share": r["inference_share"]}
-                                             for k, r in rows.items()}}
-        save_checkpoint(path, model, record["kind"], record["ctor_args"], obs_spec=record["obs_spec"], meta=meta)
-        sidecar = Path(path).with_suffix(".json")
-        side = json.loads(sidecar.read_text()) if sidecar.exists() else {}
-        side["sampler"] = meta["sampler"]
-        side["proposals_tuning"] = meta["proposals_tuning"]
-        atomic_write_text(sidecar, json.dumps(side, indent=2) + "\n")
-        print(f"wrote {path} and its sidecar")
+        store_tuned_setting(args.sampler, args.task, {"proposals": int(chosen)}, "proposals_tuning",
+                            {"command": tool_command("tools.tune_proposals", argv),
+                             "val_problems": args.problems,
+                             "rows": {str(k): {"median_wall_ms": 1e3 * r["median_wall_time_s"],
+                                               "median_nodes": r["median_nodes"],
+                                               "success_rate": r["success_rate"],
+                                               "inference_share": r["inference_share"]}
+                                      for k, r in rows.items()}})
     return 0
 
 
