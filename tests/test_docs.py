@@ -75,7 +75,7 @@ def test_the_pages_with_blocks_are_the_expected_ones():
     assert {"README.md", "environments.md", "samplers.md", "rl.md", "adding_a_task.md"} <= names
     assert {"README.md", "quickstart.md", "rl.md", "critical.md", "adding_a_task.md", "learned_samplers.md",
             "results.md", "samplers.md"} <= {p.name for p in WITH_COMMANDS}
-    assert set(file_blocks(ROOT / "docs" / "adding_a_task.md")) == {"my_pkg/disks.py"}
+    assert set(file_blocks(ROOT / "docs" / "adding_a_task.md")) == {"my_pkg/disks.py", "my_pkg/my_maps.py"}
     assert sum(len(shell_blocks(p)) for p in PAGES) >= 15
 
 
