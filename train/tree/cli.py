@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from typing import Sequence
@@ -10,6 +11,8 @@ from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    if importlib.util.find_spec("torch") is None:     # an environments-only install: one line naming the extra
+        raise ModuleNotFoundError("No module named 'torch'", name="torch")
     from train.tree.args import TrainArgs
     parser = OneLineParser(prog="gnn-mp train sampler",
                            description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
