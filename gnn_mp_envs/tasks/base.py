@@ -81,3 +81,11 @@ class Task:
 
     def close(self) -> None:
         """Release simulator resources."""
+
+    def __del__(self) -> None:
+        """A task that owns a simulator (the arm's, panda-mbm's pybullet client) releases it when
+        collected, also if nobody called :meth:`close`."""
+        try:
+            self.close()
+        except Exception:  # pragma: no cover - interpreter teardown, or a half-built task
+            pass

@@ -115,9 +115,3 @@ class ArmTask(Task):
 
     def close(self) -> None:
         self.world.close()
-
-    def __del__(self) -> None:
-        try:
-            self.world.close()
-        except Exception:  # pragma: no cover - interpreter teardown
-            pass

@@ -238,9 +238,3 @@ class PandaMBMTask(Task):
 
     def close(self) -> None:
         self.world.close()
-
-    def __del__(self) -> None:
-        try:
-            self.world.close()
-        except Exception:  # pragma: no cover - interpreter teardown
-            pass
