@@ -173,7 +173,7 @@ register_sampler("cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "cva
                  settings=None, learned=True)
 register_sampler("gnn-cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn-cvae"),
                  "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True)
-for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d and pendulum"),
+for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum and arm"),
                              ("rl-sac", "SB3 SAC", "no shipped weights"),
                              ("rl-ppo-torchrl", "TorchRL PPO", "no shipped weights")):
     register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),

@@ -72,7 +72,7 @@ SUITES: dict[str, list[SuiteEntry]] = {
                    ompl=("rrt", "rrtconnect")),
         SuiteEntry("pendulum", ["uniform", "goal-bias", *LEARNED, "rl-ppo"], problems=60,
                    ompl=("rrt", "kpiece")),
-        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED], problems=40, ompl=("rrtconnect",)),
+        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED, "rl-ppo"], problems=40, ompl=("rrtconnect",)),
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
@@ -90,7 +90,7 @@ OOD_PROBLEMS = 20
 #: Samplers of the OOD suites per task: the classical rows and every learned sampler the task ships.
 OOD_SAMPLERS = {"maze2d": ["uniform", "goal-bias", *LEARNED, "rl-ppo"],
                 "pendulum": ["uniform", "goal-bias", *LEARNED, "rl-ppo"],
-                "arm": ["uniform", "goal-bias", *LEARNED]}
+                "arm": ["uniform", "goal-bias", *LEARNED, "rl-ppo"]}
 
 
 def _ood_entries(role: str) -> list[SuiteEntry]:
