@@ -66,6 +66,14 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     n = dist.shape[1]
     if k >= n or n <= 64:
         return np.argsort(dist, axis=1, kind="stable")[:, :k]
+    if dist.shape[0] == 1:      # one new node (the common case): the same steps on the row, in plain Python where k is small
+        row = dist[0]
+        part = row.argpartition(k - 1)[:k]
+        vals = row[part]
+        kth = vals.max()
+        if np.count_nonzero(row == kth) != np.count_nonzero(vals == kth):
+            return np.argsort(row, kind="stable")[None, :k]
+        return np.array([j for _, j in sorted(zip(vals.tolist(), part.tolist()))], dtype=np.int64)[None]
     rows = np.arange(dist.shape[0])[:, None]
     part = np.argpartition(dist, k - 1, axis=1)[:, :k]
     vals = dist[rows, part]
