@@ -76,19 +76,25 @@ class TorchCompatibleStream:
         """``n`` float32 standard normals: ``torch.randn(n)`` for ``n < 16``."""
         if n >= 16:
             raise ValueError("torch draws 16 or more normals with another algorithm; draw fewer per call")
-        out = []
-        for _ in range(n):
-            if self._normal is not None:
-                out.append(self._normal)
-                self._normal = None
-                continue
+        out = np.empty(n, dtype=np.float32)      # each value rounded to float32 as np.array(values, float32) would
+        i = 0
+        if n and self._normal is not None:
+            out[0] = self._normal
+            self._normal = None
+            i = 1
+        while i < n:
             hi1, lo1, hi2, lo2 = self.raw(4).tolist()     # two 53-bit uniforms, as torch draws them
             u1 = ((hi1 << 32 | lo1) & _MASK53) * 2.0 ** -53
             u2 = ((hi2 << 32 | lo2) & _MASK53) * 2.0 ** -53
             r = math.sqrt(-2.0 * math.log1p(-u2))
             theta = 2.0 * math.pi * u1
-            self._normal = r * math.sin(theta)
-            out.append(r * math.cos(theta))
-        return np.array(out, dtype=np.float32)
+            out[i] = r * math.cos(theta)
+            i += 1
+            if i < n:
+                out[i] = r * math.sin(theta)     # the pair's second value, used at once ...
+                i += 1
+            else:
+                self._normal = r * math.sin(theta)   # ... or kept for the next call, as torch keeps it
+        return out
 
 __all__ = ["TorchCompatibleStream"]
