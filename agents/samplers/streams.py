@@ -48,24 +48,26 @@ class TorchCompatibleStream:
         rest = self._raw[self._next:]
         self._raw = np.concatenate([rest, self.bits.random_raw(max(BLOCK, n - len(rest)))])
         self._low24 = (self._raw & _MASK24).astype(np.float32)
+        self._raw.flags.writeable = self._low24.flags.writeable = False     # handed out as views
         self._next = 0
+
+    def _take(self, n: int) -> int:
+        """Hand out the next ``n`` draws of the block: the index of the first (refilling when short)."""
+        i = self._next
+        if i + n > len(self._raw):
+            self._refill(n)
+            i = 0
+        self._next = i + n
+        return i
 
     def raw(self, n: int) -> np.ndarray:
         """The next ``n`` 32-bit draws (uint64), as ``bits.random_raw(n)`` would give them."""
-        i = self._next
-        if i + n > len(self._raw):
-            self._refill(n)
-            i = 0
-        self._next = i + n
+        i = self._take(n)
         return self._raw[i:i + n]
 
     def low24(self, n: int) -> np.ndarray:
-        """The next ``n`` draws' low 24 bits as float32 (``unit(n)`` is these times ``2**-24``), a read-only view."""
-        i = self._next
-        if i + n > len(self._raw):
-            self._refill(n)
-            i = 0
-        self._next = i + n
+        """The next ``n`` draws' low 24 bits as float32 (``unit(n)`` is these times ``2**-24``), a view."""
+        i = self._take(n)
         return self._low24[i:i + n]
 
     def unit(self, n: int) -> np.ndarray:
