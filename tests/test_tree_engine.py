@@ -171,3 +171,20 @@ def test_nearest_k_is_the_stable_argsort():
         dist[rng.uniform(size=(rows, n)) < 0.3] = np.inf
         k = min(k, n)
         np.testing.assert_array_equal(nearest_k(dist, k), np.argsort(dist, axis=1, kind="stable")[:, :k])
+
+
+def test_scaled_sq_dist_is_the_broadcast_expression():
+    """The engines' causal k-NN distances, a coordinate at a time, equal the (B, n, d) broadcast expression
+    bit for bit: periodic and plain coordinates, 1 to 9 of them (8 and more take the expression itself)."""
+    from agents.samplers.base import wrap_periodic
+    from agents.tree.kernels import scaled_sq_dist
+    rng = np.random.default_rng(0)
+    for trial in range(120):
+        d = int(rng.integers(1, 10))
+        periodic = rng.uniform(size=d) < 0.4
+        step = rng.uniform(0.01, 0.5, d)
+        states = rng.uniform(-np.pi, np.pi, (int(rng.integers(1, 400)), d))
+        x = rng.uniform(-np.pi, np.pi, (int(rng.integers(1, 20)), d))
+        x[0, :] = states[0]                       # a zero difference, and one of exactly pi below
+        diff = wrap_periodic(states[None] - x[:, None], periodic) / step
+        np.testing.assert_array_equal(scaled_sq_dist(states, x, periodic, step), np.add.reduce(diff * diff, -1))

@@ -110,8 +110,12 @@ class RLSampler(ModelSampler):
         z = loc if self.deterministic else loc + scale * self.rng.normal(self.state_dim)
         u = np.minimum(np.maximum(z, ACTION_LOW), ACTION_HIGH) if self.policy.squash == "clip" else \
             self.policy.squash_action(torch.from_numpy(z)).numpy()
-        x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
-                                   np.asarray(active_target(obs), np.float32), self._periodic_or_none)
+        if self.action_frame == "target" and self._periodic_or_none is None:
+            # policy_action_to_state's target map, in float32: u is already in [-1, 1]
+            x = np.asarray(active_target(obs), np.float32) + u * self.span32
+        else:
+            x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
+                                       np.asarray(active_target(obs), np.float32), self._periodic_or_none)
         return np.minimum(np.maximum(x, self.low32), self.high32)
 
 

@@ -33,6 +33,7 @@ one ``rng.random()`` per step (:class:`~agents.samplers.base.ModelSampler`). Num
 
 from __future__ import annotations
 
+import math
 from typing import Mapping
 
 import numpy as np
@@ -71,14 +72,17 @@ class AdaptiveShare:
         self.scale = float(cells) / (np.asarray(high, np.float64) - self.low)
         self.periodic = np.asarray(periodic, bool)
         self.cells = int(cells)
+        # per coordinate, as plain floats: (low, scale, periodic) for the per-row cell of _new_cells
+        self._axes = list(zip(self.low.tolist(), self.scale.tolist(), self.periodic.tolist()))
         self.top, self.floor, self.discount, self.power = float(top), float(floor), float(discount), float(power)
         self.prior, self.prior_weight = float(prior), float(prior_weight)
         self.clear()
 
     def clear(self) -> None:
         """Forget the episode."""
-        self.pulls = np.full(2, self.prior_weight)
-        self.useful = np.full(2, self.prior)
+        # per source (uniform, model), plain floats: a step updates two numbers of each
+        self.pulls = [self.prior_weight, self.prior_weight]
+        self.useful = [self.prior, self.prior]
         self.visited: set[tuple] = set()
         self.seen = 0                       # observation rows already scored
         self.pending: int | None = None     # the source of the last sample, until its outcome is read
@@ -96,13 +100,18 @@ class AdaptiveShare:
             self.clear()
             self.episode = episode
         useful = self._new_cells(obs, n)
-        if self.pending is not None and self.pending != OTHER:
-            self.pulls *= self.discount
-            self.useful *= self.discount
-            self.pulls[self.pending] += 1.0
-            self.useful[self.pending] += float(useful)
-            rate = self.useful / self.pulls
-            relative = 1.0 if rate[MODEL] >= rate[UNIFORM] else rate[MODEL] / max(rate[UNIFORM], 1e-12)
+        source = self.pending
+        if source is not None and source != OTHER:
+            # both sources' statistics decay; the pulled one gains a pull and its outcome (plain floats)
+            pulls, hits, discount = self.pulls, self.useful, self.discount
+            pulls[0] *= discount
+            pulls[1] *= discount
+            hits[0] *= discount
+            hits[1] *= discount
+            pulls[source] += 1.0
+            hits[source] += float(useful)
+            rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
+            relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
             self.share = self.floor + (self.top - self.floor) * relative ** self.power
         self.pending = None
         return self.share
@@ -116,13 +125,16 @@ class AdaptiveShare:
         """Mark the cells of rows ``seen..n-1``; whether any was new."""
         if n <= self.seen:
             return False
-        rows = np.asarray(obs["nodes"][self.seen:n], np.float64)
-        trees = np.asarray(obs["node_features"][self.seen:n, -1])
-        idx = np.floor((rows - self.low) * self.scale).astype(np.int64)
-        idx = np.where(self.periodic, idx % self.cells, np.clip(idx, 0, self.cells - 1))
+        rows = np.asarray(obs["nodes"][self.seen:n], np.float64).tolist()
+        trees = np.asarray(obs["node_features"][self.seen:n, -1]).tolist()
+        top, floor = self.cells - 1, math.floor
         new = False
-        for tree, cell in zip(trees.tolist(), map(tuple, idx.tolist())):
-            key = (tree, *cell)
+        for tree, row in zip(trees, rows):
+            key = [tree]
+            for x, (low, scale, periodic) in zip(row, self._axes):
+                i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
+                key.append(i % self.cells if periodic else min(max(i, 0), top))
+            key = tuple(key)
             if key not in self.visited:
                 self.visited.add(key)
                 new = True

@@ -14,7 +14,7 @@ from typing import Mapping
 import numpy as np
 
 from agents.samplers.base import Sampler, active_target, as_arrays
-from agents.samplers.streams import _MASK24, _UNIT24, TorchCompatibleStream
+from agents.samplers.streams import _UNIT24, TorchCompatibleStream
 
 class _TorchCompatible(Sampler):
     """Draws float32 uniforms exactly as ``torch.rand`` does from the same seed."""
@@ -47,8 +47,7 @@ class UniformSampler(_TorchCompatible):
     def act(self, obs: Mapping) -> np.ndarray:
         if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without the reshapes
             # (m * 2**-24) * span == m * (span * 2**-24) in float32: scaling by a power of two is exact
-            x = (self.rng.bits.random_raw(self.state_dim) & _MASK24).astype(np.float32)
-            x *= self._scale32
+            x = self.rng.low24(self.state_dim) * self._scale32
             x += self.low32
             return x
         return self.uniform(self.batch_shape(obs))
@@ -81,10 +80,10 @@ class GoalBiasSampler(_TorchCompatible):
         if shape:
             return self.propose(obs)
         # uniform(()) then the choice: d + 1 draws of the stream, in that order
-        raw = self.rng.bits.random_raw(self.state_dim + 1) & _MASK24
-        if np.float32(raw[-1]) * _UNIT24 < self._goal_bias32:
+        low24 = self.rng.low24(self.state_dim + 1)
+        if low24[-1] * _UNIT24 < self._goal_bias32:
             return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
-        return self.low32 + raw[:-1].astype(np.float32) * self._scale32
+        return self.low32 + low24[:-1] * self._scale32
 
     def propose(self, obs: Mapping) -> np.ndarray:
         """All uniform states of the batch first, then all the choices (one ``unit`` call each)."""

@@ -21,7 +21,8 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.kernels import gelu, layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
+from agents.tree.kernels import (gelu, layer_norm, linears, mlp, nearest_k, norms_of, scaled_sq_dist, vector,
+                                wrap_periodic)
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 
@@ -153,10 +154,13 @@ class IncrementalTreeGNN(_Engine):
         B = n - i0
         # causal k-NN: earlier nodes of the same tree, distances in step units, angles wrapped
         if self.k:
-            diff = wrap_periodic(self.states[None, :n] - x[:, None], self.periodic) / self.step
-            dist = (diff * diff).sum(-1)
-            later = np.arange(n)[None, :] >= np.arange(i0, n)[:, None]
-            dist[later | (self.tree_id[None, :n] != tid[:, None])] = np.inf
+            dist = scaled_sq_dist(self.states[:n], x, self.periodic, self.step)
+            if B == 1:
+                dist[0, i0] = np.inf                                        # the node itself: the only later one
+            else:
+                dist[np.arange(n)[None, :] >= np.arange(i0, n)[:, None]] = np.inf
+            if self.trees > 1 or tid.any():                                 # another tree's nodes are no neighbours
+                dist[self.tree_id[None, :n] != tid[:, None]] = np.inf
             k = min(self.k, n)
             near = nearest_k(dist, k)                                   # ties to the earlier node, as the model
             near_ok = np.isfinite(dist[np.arange(B)[:, None], near])

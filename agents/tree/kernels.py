@@ -58,6 +58,32 @@ def layer_norm(norm: tuple[np.ndarray, np.ndarray, float], x: np.ndarray) -> np.
     return centred / np.sqrt(var + eps) * g + b
 
 
+def scaled_sq_dist(states: np.ndarray, x: np.ndarray, periodic: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """``(B, n)`` squared distances in step units from rows ``x`` ``(B, d)`` to ``states`` ``(n, d)``, the
+    periodic coordinates' differences wrapped: ``add.reduce((wrap_periodic(states[None] - x[:, None]) / step) ** 2, -1)``
+    bit for bit, a coordinate at a time (no ``(B, n, d)`` temporaries; only the periodic columns take the slow
+    float modulo). Below 8 coordinates numpy's reduction adds them left to right, as the loop does; wider states
+    take the expression itself (``tests/test_tree_engine.py`` compares both)."""
+    d = states.shape[1]
+    if d >= 8:
+        diff = wrap_periodic(states[None] - x[:, None], periodic) / step
+        return _add_reduce(diff * diff, -1)
+    out = None
+    for c in range(d):
+        dc = states[None, :, c] - x[:, c, None]
+        if periodic[c]:                       # wrap_periodic's (v + pi) % (2 pi) - pi, in place
+            dc += np.pi
+            dc %= 2 * np.pi
+            dc -= np.pi
+        dc /= step[c]
+        dc *= dc
+        if out is None:
+            out = dc
+        else:
+            out += dc
+    return out
+
+
 def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     """``np.argsort(dist, axis=1, kind="stable")[:, :k]`` (ties to the lower index) without sorting
     whole rows: ``argpartition`` finds each row's k smallest distances, which are then ordered by
@@ -66,12 +92,20 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     n = dist.shape[1]
     if k >= n or n <= 64:
         return np.argsort(dist, axis=1, kind="stable")[:, :k]
+    if dist.shape[0] == 1:      # one new node (the common case): the same steps on the row, in plain Python where k is small
+        row = dist[0]
+        part = row.argpartition(k - 1)[:k]
+        vals = row[part]
+        kth = vals.max()
+        if np.count_nonzero(row == kth) != np.count_nonzero(vals == kth):
+            return np.argsort(row, kind="stable")[None, :k]
+        return np.array([j for _, j in sorted(zip(vals.tolist(), part.tolist()))], dtype=np.int64)[None]
     rows = np.arange(dist.shape[0])[:, None]
     part = np.argpartition(dist, k - 1, axis=1)[:, :k]
     vals = dist[rows, part]
     out = part[rows, np.lexsort((part, vals), axis=-1)]
     kth = vals.max(1, keepdims=True)
-    for r in np.flatnonzero(np.count_nonzero(dist == kth, axis=1) != np.count_nonzero(vals == kth, axis=1)):
+    for r in np.flatnonzero((dist == kth).sum(1) != (vals == kth).sum(1)):     # a tie at the k-th value
         out[r] = np.argsort(dist[r], kind="stable")[:k]
     return out
 
@@ -81,4 +115,5 @@ def vector(t: torch.Tensor) -> np.ndarray:
     return t.detach().numpy().astype(np.float64).copy()
 
 
-__all__ = ["gelu", "layer_norm", "linears", "mlp", "nearest_k", "norms_of", "vector", "wrap_periodic"]
+__all__ = ["gelu", "layer_norm", "linears", "mlp", "nearest_k", "norms_of", "scaled_sq_dist", "vector",
+           "wrap_periodic"]
