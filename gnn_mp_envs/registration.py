@@ -268,14 +268,15 @@ SQUARE_SYMMETRIES = tuple(
 BUILTIN_TASKS = (
     # maze2d: step_scale is the extension length (tasks/maze2d.py STEP_SIZE).
     # Scenes (tasks/maze2d_scenes.py): "walls" is every split's family; "mixed" the training
-    # domain randomisation; pockets, slits held-out validation kinds; the rest the OOD test kinds.
+    # domain randomisation ("mixed-angled": plus walls at an angle); pockets, slits, slanted held-out
+    # validation kinds; the rest the OOD test kinds.
     TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d_scenes:Maze2DScenesTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length",
              step_scale=0.05,
-             scenes=("walls", "mixed", "pockets", "slits", "trap", "goal-trap", "corridor", "spiral", "forest",
-                     "rotated"),
-             validation_scenes=("pockets", "slits"),
+             scenes=("walls", "mixed", "mixed-angled", "pockets", "slits", "slanted", "trap", "goal-trap",
+                     "corridor", "spiral", "forest", "rotated"),
+             validation_scenes=("pockets", "slits", "slanted"),
              ood_scenes=("trap", "goal-trap", "corridor", "spiral", "forest", "rotated"),
              symmetries=SQUARE_SYMMETRIES, rl_reward={"step_penalty": 1.0, "node_cost": 0.0}),
     # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by

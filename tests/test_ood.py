@@ -151,6 +151,34 @@ def test_trap_faces_the_start_and_the_goal_trap_holds_the_goal():
         assert sum(rays) == 3
 
 
+def test_angled_training_and_validation_kinds_are_seeded_in_bounds_and_turned():
+    """``mixed-angled`` (training) draws walls at an angle as well as the axis-aligned kinds;
+    ``slanted`` (validation) is a tilted wall plus turned bays. Problems are reproducible, their
+    endpoints free and inside the square, their oriented boxes off the axes."""
+    def off_axis(boxes):
+        turn = np.mod(boxes[:, 4], math.pi / 2)
+        return bool(np.any((turn > 1e-6) & (turn < math.pi / 2 - 1e-6)))
+
+    for scene in ("mixed-angled", "slanted"):
+        task = Maze2DScenesTask(scene=scene)
+        angled = 0
+        for i in range(12):
+            split = "train" if scene == "mixed-angled" else "val"
+            p, again = task.problem(split, i), task.problem(split, i)
+            np.testing.assert_array_equal(p.goal, again.goal)
+            np.testing.assert_array_equal(maze_rows(p.maze, 64), maze_rows(again.maze, 64))
+            ends = np.array([p.start, p.goal])
+            assert np.all((ends > 0) & (ends < 1)) and p.maze.is_free(ends).all()
+            assert connected(p.maze, p.start, p.goal, clearance=0.0)
+            angled += len(p.maze.boxes) > 0 and off_axis(p.maze.boxes)
+        if scene == "slanted":
+            assert angled == 12
+        else:
+            assert 0 < angled < 12          # angled and axis-aligned kinds both occur
+    spec = task_spec("maze2d")
+    assert "slanted" in spec.validation_scenes and "mixed-angled" not in spec.validation_scenes + spec.ood_scenes
+
+
 def test_scene_roles_are_registered_and_kept_apart():
     for task in ("maze2d", "pendulum", "arm"):
         spec = task_spec(task)
@@ -229,7 +257,8 @@ def test_ood_summary_ratios_and_geometric_mean():
 
 def test_training_refuses_ood_and_validation_scenes(tmp_path):
     from train.tree.training import TrainArgs, TrainError, train
-    for scene, match in (("spiral", "out-of-distribution"), ("pockets", "validation scene")):
+    for scene, match in (("spiral", "out-of-distribution"), ("rotated", "out-of-distribution"),
+                         ("pockets", "validation scene"), ("slanted", "validation scene")):
         with pytest.raises(TrainError, match=match):
             train(TrainArgs(task="maze2d", model="gnn", scene=scene, out=tmp_path / scene, progress=False))
 

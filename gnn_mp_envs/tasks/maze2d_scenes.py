@@ -6,9 +6,12 @@ other families are named in :data:`SCENE_FAMILIES` by their role:
 
 * ``mixed`` (training, domain randomisation): per problem one of the walls generator, walls
   with blobs, a grid of rooms with doors, scattered bars, in one of the square's eight
-  symmetries.
+  symmetries. ``mixed-angled`` (training): the same plus walls and bars at an angle (oriented
+  boxes: each wall tilted on its own, bars at any orientation), so a model sees walls that are
+  not axis-aligned without seeing the ``rotated`` test maps.
 * validation kinds (held out from training, for decisions): ``pockets`` (walls plus dead-end
-  bays), ``slits`` (a thick wall crossed by one long narrow channel).
+  bays), ``slits`` (a thick wall crossed by one long narrow channel), ``slanted`` (a thick wall
+  tilted 15-75 degrees crossed by one channel, plus bays turned at any angle).
 * out-of-distribution test kinds (never trained or tuned on): ``trap`` (a U facing the start,
   the goal behind its base), ``goal-trap`` (the goal inside a U that opens away from the
   start), ``corridor`` (one long zig-zag corridor), ``spiral`` (the goal at the centre of a
@@ -222,6 +225,79 @@ def mixed_scene(rng: np.random.Generator):
     return kinds[int(rng.integers(len(kinds)))](rng)
 
 
+def _chord_wall(rng: np.random.Generator, centre: np.ndarray, angle: float, thick: float,
+                gaps: int, gap_width: tuple[float, float] = (0.035, 0.06)) -> list[list[float]]:
+    """Oriented boxes ``[cx, cy, half_length, half_width, angle]`` of a wall ``thick`` thick along
+    the line through ``centre`` at ``angle``, across the whole square (it overhangs by 0.1), with
+    ``gaps`` gaps ``gap_width`` wide at random places of the stretch inside the square."""
+    u = np.array([math.cos(angle), math.sin(angle)])
+    # The line's parameters t with centre + t u inside the square.
+    with np.errstate(divide="ignore"):
+        t_lo = np.where(u != 0, (0.0 - centre) / u, -np.inf)
+        t_hi = np.where(u != 0, (1.0 - centre) / u, np.inf)
+    enter = float(np.max(np.minimum(t_lo, t_hi)))
+    leave = float(np.min(np.maximum(t_lo, t_hi)))
+    span = leave - enter
+    cuts = sorted((enter + span * _u(rng, 0.1, 0.9), _u(rng, *gap_width)) for _ in range(gaps))
+    edges = [enter - 0.1]
+    for c, w in cuts:
+        edges += [c - w / 2, c + w / 2]
+    edges.append(leave + 0.1)
+    out = []
+    for a, b in zip(edges[0::2], edges[1::2]):
+        if b - a > 1e-6:
+            mid = centre + u * (a + b) / 2
+            out.append([mid[0], mid[1], (b - a) / 2, thick / 2, angle])
+    return out
+
+
+def angled_walls_scene(rng: np.random.Generator):
+    """1-3 walls with 1-2 gaps each, like the walls generator's, but each wall tilted on its own by
+    up to +-55 degrees from upright (oriented boxes, not parallel to each other); start and goal
+    near opposite sides, joined through the gaps."""
+    for _ in range(MAX_TRIES):
+        n = int(rng.integers(1, 4))
+        slot = 0.8 / n
+        boxes = []
+        for k in range(n):
+            x = 0.1 + slot * (k + _u(rng, 0.35, 0.65))
+            angle = math.pi / 2 + math.radians(_u(rng, -55, 55))
+            boxes += _chord_wall(rng, np.array([x, _u(rng, 0.3, 0.7)]), angle, _u(rng, 0.03, 0.06),
+                                 int(rng.integers(1, 3)))
+        maze = MazeMap(boxes=np.array(boxes))
+        start = np.array([_u(rng, 0.02, 0.15), _u(rng, 0.05, 0.95)])
+        goal = np.array([_u(rng, 0.85, 0.98), _u(rng, 0.05, 0.95)])
+        if clear(maze, start) and clear(maze, goal) and connected(maze, start, goal):
+            return _symmetric(rng, maze, start, goal)
+    raise RuntimeError("angled-walls: no connected map")
+
+
+def angled_bars_scene(rng: np.random.Generator):
+    """5-9 scattered bars 0.15-0.45 long at any orientation (the ``bars`` kind, turned); start and
+    goal on opposite sides."""
+    for _ in range(MAX_TRIES):
+        n = int(rng.integers(5, 10))
+        boxes = np.column_stack([rng.uniform(0.15, 0.85, n), rng.uniform(0.1, 0.9, n), rng.uniform(0.075, 0.225, n),
+                                 rng.uniform(0.015, 0.025, n), rng.uniform(0.0, math.pi, n)])
+        maze = MazeMap(boxes=boxes)
+        start = np.array([_u(rng, 0.03, 0.12), _u(rng, 0.05, 0.95)])
+        goal = np.array([_u(rng, 0.88, 0.97), _u(rng, 0.05, 0.95)])
+        if clear(maze, start) and clear(maze, goal) and connected(maze, start, goal):
+            return _symmetric(rng, maze, start, goal)
+    raise RuntimeError("angled-bars: no connected map")
+
+
+#: The angled kinds that ``mixed-angled`` adds to :data:`MIXED_KINDS` (training only).
+ANGLED_KINDS: dict[str, Generator] = {"angled-walls": angled_walls_scene, "angled-bars": angled_bars_scene}
+
+
+def mixed_angled_scene(rng: np.random.Generator):
+    """Domain randomisation with walls at an angle: one of :data:`MIXED_KINDS` and
+    :data:`ANGLED_KINDS` per problem (a third of the problems angled)."""
+    kinds = list(MIXED_KINDS.values()) + list(ANGLED_KINDS.values())
+    return kinds[int(rng.integers(len(kinds)))](rng)
+
+
 # ---------------------------------------------------------------------------- validation kinds
 def pockets_scene(rng: np.random.Generator):
     """One or two walls with gaps, plus 2-3 dead-end bays (U shapes 0.12-0.2 across) in the rooms,
@@ -255,6 +331,35 @@ def slits_scene(rng: np.random.Generator):
     maze = MazeMap(walls)
     start, goal = sample_endpoints(rng, maze, 0)
     return _symmetric(rng, maze, start, goal)
+
+
+def slanted_scene(rng: np.random.Generator):
+    """A wall 0.1-0.2 thick across the square, tilted 15-75 degrees from an axis, crossed by one
+    channel 0.045-0.065 wide (a slanted ``slits``), plus 1-2 dead-end bays (U shapes 0.12-0.18
+    across) turned by any angle; start and goal on opposite sides of the wall."""
+    for _ in range(MAX_TRIES):
+        thick, width = _u(rng, 0.1, 0.2), _u(rng, 0.045, 0.065)
+        angle = math.radians(_u(rng, 15, 75)) * (1 if rng.random() < 0.5 else -1) + math.pi / 2
+        centre = np.array([_u(rng, 0.4, 0.6), _u(rng, 0.4, 0.6)])
+        boxes = _chord_wall(rng, centre, angle, thick, 1, (width, width))
+        for _ in range(int(rng.integers(1, 3))):
+            size, t = _u(rng, 0.12, 0.18), _u(rng, 0.025, 0.04)
+            x0, y0 = _u(rng, 0.05, 0.95 - size), _u(rng, 0.05, 0.95 - size)
+            bay = walls_as_boxes(np.array(_u_walls(x0, y0, size, size, t, True)))
+            boxes += turned(bay, _u(rng, -math.pi, math.pi), (x0 + size / 2, y0 + size / 2)).tolist()
+        maze = MazeMap(boxes=np.array(boxes))
+        normal = np.array([-math.sin(angle), math.cos(angle)])
+        out = []
+        for side in (-1, 1):
+            for _ in range(MAX_TRIES):
+                p = rng.uniform(0.03, 0.97, 2)
+                if side * float((p - centre) @ normal) > thick / 2 + ENDPOINT_MARGIN and clear(maze, p):
+                    out.append(p)
+                    break
+        if len(out) == 2 and connected(maze, *out):
+            start, goal = out if rng.random() < 0.5 else out[::-1]
+            return maze, start, goal
+    raise RuntimeError("slanted: no connected map")
 
 
 # ---------------------------------------------------------------------------- out-of-distribution kinds
@@ -385,8 +490,10 @@ def rotated_scene(rng: np.random.Generator):
 SCENE_FAMILIES: dict[str, tuple[str, Generator]] = {
     "walls": ("default", walls_scene),
     "mixed": ("train", mixed_scene),
+    "mixed-angled": ("train", mixed_angled_scene),
     "pockets": ("val", pockets_scene),
     "slits": ("val", slits_scene),
+    "slanted": ("val", slanted_scene),
     "trap": ("ood", trap_scene),
     "goal-trap": ("ood", goal_trap_scene),
     "corridor": ("ood", corridor_scene),
@@ -423,5 +530,5 @@ class Maze2DScenesTask(Maze2DTask):
         return problem
 
 
-__all__ = ["MIXED_KINDS", "SCENE_FAMILIES", "STEP_SIZE", "Maze2DScenesTask", "connected", "families",
+__all__ = ["ANGLED_KINDS", "MIXED_KINDS", "SCENE_FAMILIES", "STEP_SIZE", "Maze2DScenesTask", "connected", "families",
            "square_symmetry", "turned", "walls_as_boxes"]
