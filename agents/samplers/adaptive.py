@@ -68,12 +68,11 @@ class AdaptiveShare:
         if not 0.0 < discount <= 1.0 or not power > 0 or int(cells) < 1 or not 0 <= prior <= prior_weight:
             raise ValueError(f"adaptive settings out of range: discount {discount} (0, 1], power {power} > 0, "
                              f"cells {cells} >= 1, 0 <= prior {prior} <= prior_weight {prior_weight}")
-        self.low = np.asarray(low, np.float64)
-        self.scale = float(cells) / (np.asarray(high, np.float64) - self.low)
-        self.periodic = np.asarray(periodic, bool)
+        low = np.asarray(low, np.float64)
+        scale = float(cells) / (np.asarray(high, np.float64) - low)
         self.cells = int(cells)
-        # per coordinate, as plain floats: (low, scale, periodic) for the per-row cell of _new_cells
-        self._axes = list(zip(self.low.tolist(), self.scale.tolist(), self.periodic.tolist()))
+        #: Per coordinate, as plain floats: ``(low, cells per unit, periodic)``, what a row's cell is made of.
+        self.axes = list(zip(low.tolist(), scale.tolist(), np.asarray(periodic, bool).tolist()))
         self.top, self.floor, self.discount, self.power = float(top), float(floor), float(discount), float(power)
         self.prior, self.prior_weight = float(prior), float(prior_weight)
         self.clear()
@@ -131,7 +130,7 @@ class AdaptiveShare:
         new = False
         for tree, row in zip(trees, rows):
             key = [tree]
-            for x, (low, scale, periodic) in zip(row, self._axes):
+            for x, (low, scale, periodic) in zip(row, self.axes):
                 i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
                 key.append(i % self.cells if periodic else min(max(i, 0), top))
             key = tuple(key)

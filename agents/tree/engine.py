@@ -155,12 +155,8 @@ class IncrementalTreeGNN(_Engine):
         # causal k-NN: earlier nodes of the same tree, distances in step units, angles wrapped
         if self.k:
             dist = scaled_sq_dist(self.states[:n], x, self.periodic, self.step)
-            if B == 1:
-                dist[0, i0] = np.inf                                        # the node itself: the only later one
-            else:
-                dist[np.arange(n)[None, :] >= np.arange(i0, n)[:, None]] = np.inf
-            if self.trees > 1 or tid.any():                                 # another tree's nodes are no neighbours
-                dist[self.tree_id[None, :n] != tid[:, None]] = np.inf
+            later = np.arange(n)[None, :] >= np.arange(i0, n)[:, None]
+            dist[later | (self.tree_id[None, :n] != tid[:, None])] = np.inf
             k = min(self.k, n)
             near = nearest_k(dist, k)                                   # ties to the earlier node, as the model
             near_ok = np.isfinite(dist[np.arange(B)[:, None], near])
