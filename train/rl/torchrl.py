@@ -63,6 +63,7 @@ def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
     (``multiprocessing.active_children``), Ctrl-C works here again, also while they import and
     build their envs (seconds)."""
     before = set(multiprocessing.active_children())     # children of earlier work may exit meanwhile
+    spawned: set = set()     # new children seen so far (one may exit before the next is spawned)
     failure: list[BaseException] = []
 
     def start() -> None:
@@ -75,7 +76,10 @@ def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         starter.start()
-        while starter.is_alive() and len(set(multiprocessing.active_children()) - before) < workers:
+        while starter.is_alive():
+            spawned |= set(multiprocessing.active_children()) - before
+            if len(spawned) >= workers:
+                break
             time.sleep(0.005)
     finally:
         signal.signal(signal.SIGINT, previous)
