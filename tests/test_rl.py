@@ -533,13 +533,16 @@ def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_duri
             release.wait(60)     # an ignored Ctrl-C: start returns, and no KeyboardInterrupt is raised
 
     env = SlowStartingEnv()
-    handler = signal.getsignal(signal.SIGINT)
+    # Python's own Ctrl-C handler, whatever an earlier test left behind (an ignored SIGINT here would
+    # make the Ctrl-C below silent however the mechanism behaved); the suite's handler is put back after.
+    suite_handler = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with pytest.raises(KeyboardInterrupt):
             start_workers_deaf_to_ctrl_c(env, 2)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler     # restored by the mechanism
     finally:
         release.set()
-    assert signal.getsignal(signal.SIGINT) is handler
+        signal.signal(signal.SIGINT, suite_handler)
     assert [answers.get(timeout=60), answers.get(timeout=60)] == [True, True]
     for w in [*env.workers, leftover]:
         w.join(10)
