@@ -88,7 +88,8 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     """``np.argsort(dist, axis=1, kind="stable")[:, :k]`` (ties to the lower index) without sorting
     whole rows: ``argpartition`` finds each row's k smallest distances, which are then ordered by
     (distance, index). A row whose k-th smallest value also occurs outside the chosen k (a tie at
-    the boundary, e.g. the infinities of a small tree) takes the exact stable sort."""
+    the boundary: the infinities of a small tree, or repeated states, common on the pendulum) sorts
+    only its entries at or below that value, in index order (:func:`_tied_row`)."""
     n = dist.shape[1]
     if k >= n or n <= 64:
         return np.argsort(dist, axis=1, kind="stable")[:, :k]
@@ -98,7 +99,7 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
         vals = row[part]
         kth = vals.max()
         if np.count_nonzero(row == kth) != np.count_nonzero(vals == kth):
-            return np.argsort(row, kind="stable")[None, :k]
+            return _tied_row(row, kth, k)[None]
         return np.array([j for _, j in sorted(zip(vals.tolist(), part.tolist()))], dtype=np.int64)[None]
     rows = np.arange(dist.shape[0])[:, None]
     part = np.argpartition(dist, k - 1, axis=1)[:, :k]
@@ -106,8 +107,16 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     out = part[rows, np.lexsort((part, vals), axis=-1)]
     kth = vals.max(1, keepdims=True)
     for r in np.flatnonzero((dist == kth).sum(1) != (vals == kth).sum(1)):     # a tie at the k-th value
-        out[r] = np.argsort(dist[r], kind="stable")[:k]
+        out[r] = _tied_row(dist[r], kth[r, 0], k)
     return out
+
+
+def _tied_row(row: np.ndarray, kth: float, k: int) -> np.ndarray:
+    """A row's stable-argsort first ``k`` when its ``k``-th smallest value ``kth`` is tied: every entry
+    at or below ``kth`` is a candidate (at least ``k`` of them, in index order), and a stable sort
+    of their values keeps the lower index first, as the full row's stable sort does."""
+    candidates = np.flatnonzero(row <= kth)
+    return candidates[np.argsort(row[candidates], kind="stable")[:k]]
 
 
 def vector(t: torch.Tensor) -> np.ndarray:
