@@ -161,7 +161,7 @@ class TreeCVAESampler(ModelSampler):
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
         with torch.inference_mode():
-            return list(self.model.decode(z, condition.expand(self.proposals, -1)).double().numpy())
+            return list(self.model.decode_for_one(z, condition).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         return self.refreshed(obs, self.decode).pop()
@@ -187,9 +187,8 @@ class TreeGNNCVAESampler(_EngineSampler):
         q, _ = self.tree_context(obs)
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
-        context = torch.as_tensor(q, dtype=torch.float32)[None].expand(self.proposals, -1)
         with torch.inference_mode():
-            return list(self.model.decode(z, context).double().numpy())
+            return list(self.model.decode_for_one(z, torch.as_tensor(q, dtype=torch.float32)).double().numpy())
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         return self.refreshed(obs, self.decode).pop()
