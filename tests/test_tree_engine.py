@@ -176,17 +176,18 @@ def test_nearest_k_is_the_stable_argsort():
 def test_scaled_sq_dist_is_the_broadcast_expression():
     """The engines' causal k-NN distances, a coordinate at a time, equal the (B, n, d) broadcast expression
     bit for bit: periodic and plain coordinates, 1 to 9 of them (8 and more take the expression itself)."""
-    from agents.samplers.base import wrap_periodic
     from agents.tree.kernels import scaled_sq_dist
     rng = np.random.default_rng(0)
     for trial in range(120):
         d = int(rng.integers(1, 10))
         periodic = rng.uniform(size=d) < 0.4
         step = rng.uniform(0.01, 0.5, d)
-        states = rng.uniform(-np.pi, np.pi, (int(rng.integers(1, 400)), d))
-        x = rng.uniform(-np.pi, np.pi, (int(rng.integers(1, 20)), d))
+        span = np.pi if trial % 4 else 3 * np.pi  # wrapped states, and (every 4th) wider ones: the modulo's path
+        states = rng.uniform(-span, span, (int(rng.integers(1, 400)), d))
+        x = rng.uniform(-span, span, (int(rng.integers(1, 20)), d))
         x[0, :] = states[0]                       # a zero difference, and one of exactly pi below
-        diff = wrap_periodic(states[None] - x[:, None], periodic) / step
+        v = states[None] - x[:, None]
+        diff = np.where(periodic, (v + np.pi) % (2 * np.pi) - np.pi, v) / step   # the float modulo itself
         np.testing.assert_array_equal(scaled_sq_dist(states, x, periodic, step), np.add.reduce(diff * diff, -1))
 
 
@@ -207,3 +208,35 @@ def test_decode_for_one_condition_equals_the_full_decoder(name, task):
             shared = m.decode_for_one(z, condition)
         assert shared.shape == full.shape == (300, m.state_dim if name == "cvae" else m.gnn.state_dim)
         torch.testing.assert_close(shared, full, rtol=tol, atol=tol)
+
+
+def test_wrap_pi_is_the_float_modulo_bit_for_bit():
+    """The wrapped angle differences without numpy's float modulo equal ``(v + pi) % (2 pi) - pi``
+    bit for bit (sign of zero included), for arrays in the exact step's range and beyond it (the
+    modulo's fallback), with the edge values of that range, NaN and infinities, float64 and float32;
+    and ``wrap_periodic`` equals its ``np.where`` expression on mixed periodic and plain columns."""
+    from agents.samplers.base import wrap_periodic, wrap_pi
+    rng = np.random.default_rng(0)
+    two_pi = 2 * np.pi
+    edges = np.array([0.0, -0.0, np.pi, -np.pi, two_pi, -two_pi, 3 * np.pi, -3 * np.pi, np.nextafter(two_pi, 0),
+                      np.nextafter(-np.pi, 0), np.nextafter(3 * np.pi, 0), np.nextafter(3 * np.pi, 10), -1e-300, 1e-300,
+                      -1e-17, np.nextafter(-two_pi, 0), np.nextafter(-two_pi, -10)])
+
+    def expected(v):
+        return (v + np.pi) % two_pi - np.pi
+
+    def same(a, b):
+        return a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=True) and \
+            np.array_equal(np.signbit(a), np.signbit(b))
+
+    for trial in range(300):
+        span = [two_pi, 3 * np.pi, 20.0][trial % 3]
+        v = rng.uniform(-span, span, (int(rng.integers(1, 30)), int(rng.integers(1, 40))))
+        flat = v.reshape(-1)
+        flat[:len(edges)] = edges[:len(flat)]
+        if trial % 7 == 0:
+            flat[-1] = [np.nan, np.inf, -np.inf][trial % 3]
+        for arr in (v, v.astype(np.float32)):
+            assert same(wrap_pi(arr), expected(arr)), trial
+            periodic = rng.uniform(size=arr.shape[-1]) < 0.5
+            assert same(wrap_periodic(arr, periodic), np.where(periodic, expected(arr), arr)), trial

@@ -89,11 +89,41 @@ def active_target(obs: Mapping) -> np.ndarray:
     return obs["start"] if int(np.asarray(obs["active_tree"]).reshape(-1)[0]) == 1 else obs["goal"]
 
 
+_TWO_PI = 2 * np.pi
+#: Below this many values numpy's float modulo is cheaper than :func:`wrap_pi`'s extra passes.
+_WRAP_BY_PASSES = 64
+
+
+def wrap_pi(v: np.ndarray, in_range: bool = False) -> np.ndarray:
+    """``(v + pi) % (2 pi) - pi``, bit for bit (signed zeros included), as a new array.
+
+    numpy's float modulo costs about 16 ns per value (a branchy ``fmod``); for ``v + pi`` in
+    ``[-2 pi, 4 pi)`` (differences of two wrapped angles, the engines' case) it is one exact
+    step instead: minus ``2 pi`` from ``[2 pi, 4 pi)`` (exact, by Sterbenz's lemma, as ``fmod``
+    is) and plus ``2 pi`` below 0 (the rounded addition numpy's modulo makes there). Other
+    values, NaN or infinite ones, float32 and small arrays take the modulo itself. ``in_range``:
+    the caller has bounded ``v`` within ``(-2.9 pi, 2.9 pi)`` (float64), so the range is not scanned.
+    """
+    a = np.add(v, np.pi)
+    if not in_range and (a.size < _WRAP_BY_PASSES or a.dtype != np.float64
+                         or not (a.min() >= -_TWO_PI and a.max() < 2 * _TWO_PI)):
+        a %= _TWO_PI
+    else:
+        a -= (a >= _TWO_PI) * _TWO_PI
+        a += (a < 0.0) * _TWO_PI
+    a -= np.pi
+    return a
+
+
 def wrap_periodic(x: np.ndarray, periodic: np.ndarray) -> np.ndarray:
     """``x`` with the periodic coordinates (a bool mask) wrapped into ``[-pi, pi)``."""
     if not periodic.any():
         return x
-    return np.where(periodic, (x + np.pi) % (2 * np.pi) - np.pi, x)
+    if x.size < _WRAP_BY_PASSES or x.dtype != np.float64:
+        return np.where(periodic, (x + np.pi) % (2 * np.pi) - np.pi, x)
+    out = x.copy()                      # the same values; only the periodic columns are wrapped
+    out[..., periodic] = wrap_pi(x[..., periodic])
+    return out
 
 
 class Sampler:

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from scipy.special import erf
 
-from agents.samplers.base import wrap_periodic
+from agents.samplers.base import wrap_periodic, wrap_pi
 
 Linear = tuple[np.ndarray, np.ndarray]
 _add_reduce = np.add.reduce      # ndarray.sum's reduction without its Python wrapper (the same values)
@@ -61,8 +61,8 @@ def layer_norm(norm: tuple[np.ndarray, np.ndarray, float], x: np.ndarray) -> np.
 def scaled_sq_dist(states: np.ndarray, x: np.ndarray, periodic: np.ndarray, step: np.ndarray) -> np.ndarray:
     """``(B, n)`` squared distances in step units from rows ``x`` ``(B, d)`` to ``states`` ``(n, d)``, the
     periodic coordinates' differences wrapped: ``add.reduce((wrap_periodic(states[None] - x[:, None]) / step) ** 2, -1)``
-    bit for bit, a coordinate at a time (no ``(B, n, d)`` temporaries; only the periodic columns take the slow
-    float modulo). Below 8 coordinates numpy's reduction adds them left to right, as the loop does; wider states
+    bit for bit, a coordinate at a time (no ``(B, n, d)`` temporaries; only the periodic columns are wrapped,
+    by :func:`wrap_pi`). Below 8 coordinates numpy's reduction adds them left to right, as the loop does; wider states
     take the expression itself (``tests/test_tree_engine.py`` compares both)."""
     d = states.shape[1]
     if d >= 8:
@@ -70,11 +70,12 @@ def scaled_sq_dist(states: np.ndarray, x: np.ndarray, periodic: np.ndarray, step
         return _add_reduce(diff * diff, -1)
     out = None
     for c in range(d):
-        dc = states[None, :, c] - x[:, c, None]
-        if periodic[c]:                       # wrap_periodic's (v + pi) % (2 pi) - pi, in place
-            dc += np.pi
-            dc %= 2 * np.pi
-            dc -= np.pi
+        column, xc = states[:, c], x[:, c]
+        dc = column[None] - xc[:, None]
+        if periodic[c]:                       # wrap_periodic's (v + pi) % (2 pi) - pi
+            # every difference lies between these two (rounding is monotonic): no scan of the (B, n) block
+            lowest, highest = column.min() - xc.max(), column.max() - xc.min()
+            dc = wrap_pi(dc, in_range=bool(-2.9 * np.pi < lowest and highest < 2.9 * np.pi and dc.size >= 64))
         dc /= step[c]
         dc *= dc
         if out is None:
@@ -106,8 +107,15 @@ def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
     vals = dist[rows, part]
     out = part[rows, np.lexsort((part, vals), axis=-1)]
     kth = vals.max(1, keepdims=True)
-    for r in np.flatnonzero((dist == kth).sum(1) != (vals == kth).sum(1)):     # a tie at the k-th value
-        out[r] = _tied_row(dist[r], kth[r, 0], k)
+    tied = np.flatnonzero((dist == kth).sum(1) != (vals == kth).sum(1))     # a tie at the k-th value
+    if len(tied):
+        # every tied row at once: its entries at or below its k-th value, ordered by (row, value, index);
+        # each row has at least k of them, and its first k are the stable sort's
+        sub = dist[tied]
+        r, c = np.nonzero(sub <= kth[tied])
+        order = np.lexsort((c, sub[r, c], r))
+        starts = np.searchsorted(r[order], np.arange(len(tied)))
+        out[tied] = c[order][starts[:, None] + np.arange(k)]
     return out
 
 
