@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -124,7 +126,10 @@ def test_training_resumes_from_its_state(tmp_path):
     fresh, _ = adapter.build(task_scales("maze2d"))
     second = fit(fresh, adapter, items, items, minutes=0.3, lr=1e-3, batch_size=2, seed=0, writer=None, phase="b",
                  progress=False, resume=state)
-    assert second["epochs"] > first["epochs"] and second["history"][:first["epochs"]] == first["history"]
+    assert second["epochs"] > first["epochs"]
+    # compared as text: an epoch whose time ran out before its first batch has a NaN training loss,
+    # and NaN != NaN (the full suite under load failed the plain == once)
+    assert json.dumps(second["history"][:first["epochs"]]) == json.dumps(first["history"])
 
 
 def test_resume_refuses_the_state_of_another_run_in_one_line(tmp_path, capsys):
