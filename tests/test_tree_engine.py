@@ -173,24 +173,6 @@ def test_nearest_k_is_the_stable_argsort():
         np.testing.assert_array_equal(nearest_k(dist, k), np.argsort(dist, axis=1, kind="stable")[:, :k])
 
 
-def test_scaled_sq_dist_is_the_broadcast_expression():
-    """The engines' causal k-NN distances, a coordinate at a time, equal the (B, n, d) broadcast expression
-    bit for bit: periodic and plain coordinates, 1 to 9 of them (8 and more take the expression itself)."""
-    from agents.tree.kernels import scaled_sq_dist
-    rng = np.random.default_rng(0)
-    for trial in range(120):
-        d = int(rng.integers(1, 10))
-        periodic = rng.uniform(size=d) < 0.4
-        step = rng.uniform(0.01, 0.5, d)
-        span = np.pi if trial % 4 else 3 * np.pi  # wrapped states, and (every 4th) wider ones: the modulo's path
-        states = rng.uniform(-span, span, (int(rng.integers(1, 400)), d))
-        x = rng.uniform(-span, span, (int(rng.integers(1, 20)), d))
-        x[0, :] = states[0]                       # a zero difference, and one of exactly pi below
-        v = states[None] - x[:, None]
-        diff = np.where(periodic, (v + np.pi) % (2 * np.pi) - np.pi, v) / step   # the float modulo itself
-        np.testing.assert_array_equal(scaled_sq_dist(states, x, periodic, step), np.add.reduce(diff * diff, -1))
-
-
 @pytest.mark.parametrize("name,task", [("cvae", "maze2d"), ("cvae", "arm"), ("gnn-cvae", "pendulum")])
 def test_decode_for_one_condition_equals_the_full_decoder(name, task):
     """The samplers' decode of many latents for one condition (the condition's first-layer share
@@ -241,3 +223,20 @@ def test_wrap_pi_is_the_float_modulo_bit_for_bit():
                 assert same(wrap_pi(arr), expected(arr)), trial
                 periodic = rng.uniform(size=arr.shape[-1]) < 0.5
                 assert same(wrap_periodic(arr, periodic), np.where(periodic, expected(arr), arr)), trial
+
+
+def test_compiled_angle_wrap_is_the_float_modulo_bit_for_bit():
+    """The compiled per-node loop's wrap of one difference equals ``(v + pi) % (2 pi) - pi`` bit for
+    bit (sign of zero included): its exact one-step path, its modulo fallback beyond ``[-2 pi, 4 pi)``,
+    the edges of that range, NaN and infinities; plain coordinates pass through."""
+    from agents.tree.compiled import _wrapped
+    rng = np.random.default_rng(1)
+    two_pi = 2 * np.pi
+    values = np.concatenate([rng.uniform(-20.0, 20.0, 3000), rng.uniform(-two_pi, two_pi, 3000),
+                             [0.0, -0.0, np.pi, -np.pi, two_pi, -two_pi, 3 * np.pi, -3 * np.pi, np.nextafter(3 * np.pi, 0),
+                              np.nextafter(-3 * np.pi, 0), np.nextafter(-np.pi, 0), -1e-300, 1e-17, np.inf, -np.inf, np.nan]])
+    with np.errstate(invalid="ignore"):
+        expected = (values + np.pi) % two_pi - np.pi
+    got = np.array([_wrapped(float(v), True) for v in values])
+    assert np.array_equal(got, expected, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(expected))
+    assert all(_wrapped(float(v), False) == v for v in values[:100])

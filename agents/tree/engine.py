@@ -1,4 +1,5 @@
-"""Incremental numpy inference of the causal tree models, one new tree node at a time.
+"""Incremental inference of the causal tree models (numpy, and a compiled per-node loop), one new
+tree node at a time.
 
 A causal GNN embeds a node from older nodes only, so a node's embedding is fixed the moment it
 is inserted. The engines keep per-episode caches: each new observation row is embedded once
@@ -10,7 +11,8 @@ earlier node is re-run. The math is the torch model's, in float64
 scores with the torch model's to 1e-5 on trees of a few hundred nodes).
 
 * :class:`IncrementalTreeGNN` mirrors :class:`agents.tree.models.TreeGNN` (the ``gnn``
-  node mixture and the GNN-CVAE's tree context);
+  node mixture and the GNN-CVAE's tree context); a new node's embedding is the compiled loop of
+  :mod:`agents.tree.compiled` (numba), its mixture and context numpy;
 * :class:`IncrementalTreeScorer` mirrors :class:`agents.tree.scorer.TreeGNNScorer`.
 """
 
@@ -21,12 +23,11 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.kernels import (gelu, layer_norm, linears, mlp, nearest_k, norms_of, scaled_sq_dist, vector,
-                                wrap_periodic)
+from agents.tree.compiled import embed_rows
+from agents.tree.kernels import layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 
-_add_reduce = np.add.reduce
 #: ``a @ b`` for 1-D and 2-D operands: the same BLAS call (bit for bit) with less overhead; 3-D products stay ``@``
 _dot = np.dot
 
@@ -100,21 +101,25 @@ class IncrementalTreeGNN(_Engine):
         self.center, self.scale = vector(m.state_center), vector(m.state_scale)
         self.feature_scale, self.step = vector(m.feature_scale), vector(m.step_scale)
         self.periodic = m.periodic.numpy().copy()
-        self.input = linears(m.input)
+        (iw1, ib1), (iw2, ib2) = linears(m.input)
+        self.input_weights = (iw1, ib1, iw2, ib2)
         H = self.H
-        # First message layer split into sender / receiver parts: W [h_j, (x_j - x_i)/s] + b.
-        self.messages = []
-        for conv_p, conv_k in zip(m.parent_convs, m.knn_convs):
-            split = []
-            for conv in (conv_p, conv_k):
-                (w1, b1), (w2, b2) = linears(conv.net)
-                split.append((w1[:H], w1[H:] / self.step[:, None], b1, w2, b2))
-            self.messages.append(split)
-        # both edge types' sender weights side by side: one product per layer for the two
-        self.sender_weights = [(np.concatenate([p[0], k[0]], 1), np.concatenate([p[1], k[1]], 1))
-                               for p, k in self.messages]
-        self.updates = [linears(u) for u in m.updates]
-        self.norms = norms_of(m.norms)
+        # Per layer, stacked for the compiled per-node loop: each message MLP's first layer split into its
+        # sender part W_h (cached per node: W_h h_j) and its relative-position part W_x / step, then the
+        # second layer; the update MLP; the LayerNorm.
+        first = [[linears(conv.net) for conv in (conv_p, conv_k)] for conv_p, conv_k in zip(m.parent_convs, m.knn_convs)]
+        stack = lambda pick: np.ascontiguousarray(np.stack([pick(layer) for layer in range(self.L)]))   # noqa: E731
+        self.w_sender = stack(lambda l: np.stack([first[l][0][0][0][:H], first[l][1][0][0][:H]]))
+        self.wpx, self.bp1 = stack(lambda l: first[l][0][0][0][H:] / self.step[:, None]), stack(lambda l: first[l][0][0][1])
+        self.wp2, self.bp2 = stack(lambda l: first[l][0][1][0]), stack(lambda l: first[l][0][1][1])
+        self.wkx, self.bk1 = stack(lambda l: first[l][1][0][0][H:] / self.step[:, None]), stack(lambda l: first[l][1][0][1])
+        self.wk2, self.bk2 = stack(lambda l: first[l][1][1][0]), stack(lambda l: first[l][1][1][1])
+        updates = [linears(u) for u in m.updates]
+        self.uw1, self.ub1 = stack(lambda l: updates[l][0][0]), stack(lambda l: updates[l][0][1])
+        self.uw2, self.ub2 = stack(lambda l: updates[l][1][0]), stack(lambda l: updates[l][1][1])
+        norms = norms_of(m.norms)
+        self.norm_g, self.norm_b = stack(lambda l: norms[l][0]), stack(lambda l: norms[l][1])
+        self.norm_eps = np.array([norms[l][2] for l in range(self.L)], dtype=np.float64)
         self.query = linears(m.query)
         self.key = linears(m.key)[0]
         self.node_head = linears(m.node_head)[0]
@@ -128,7 +133,7 @@ class IncrementalTreeGNN(_Engine):
         self.capacity = capacity
         self.states = np.zeros((capacity, d))
         self.tree_id = np.zeros(capacity, dtype=np.int64)
-        self.sender = np.zeros((L, 2, capacity, H))        # cached W_h h_j + W_x x_j / s per layer, edge type
+        self.sender = np.zeros((L, 2, capacity, H))        # cached W_h h_j per layer and edge type (parent, k-NN)
         self.keys = np.zeros((capacity, H))
         self.offsets = np.zeros((capacity, T, d))
         self.log_sigma = np.zeros((capacity, T, d))
@@ -149,64 +154,14 @@ class IncrementalTreeGNN(_Engine):
         tid = feats[:, 2 * d].astype(np.int64)
         parent = np.asarray(obs["parent"][i0:n]).astype(np.int64)
         self.states[i0:n], self.tree_id[i0:n] = x, tid
-        h = mlp(self.input, feats / self.feature_scale if self.relative_inputs else
-                np.concatenate([feats / self.feature_scale, (x - self.center) / self.scale], -1))
-        B = n - i0
-        # causal k-NN: earlier nodes of the same tree, distances in step units, angles wrapped
-        if self.k:
-            dist = scaled_sq_dist(self.states[:n], x, self.periodic, self.step)
-            later = np.arange(n)[None, :] >= np.arange(i0, n)[:, None]
-            dist[later | (self.tree_id[None, :n] != tid[:, None])] = np.inf
-            k = min(self.k, n)
-            near = nearest_k(dist, k)                                   # ties to the earlier node, as the model
-            near_ok = np.isfinite(dist[np.arange(B)[:, None], near])
-        has_parent = parent >= 0
-        all_parent = bool(has_parent.all())
-        par = parent if all_parent else np.where(has_parent, parent, 0)
-        any_parent = self.use_parent and (all_parent or bool(has_parent.any()))
-        if any_parent:
-            sp = self.states[par]                                                    # (B, d)
-            wrapped_p = wrap_periodic(sp - x, self.periodic)
-        if self.use_knn and self.k:
-            sj = self.states[near]                                                   # (B, k, d)
-            rel = sj - x[:, None]
-            wrapped_k = wrap_periodic(rel, self.periodic) - rel
-            count = _add_reduce(near_ok, 1, keepdims=True, dtype=np.int64)
-            ok = near_ok[..., None]
-            all_near = bool(near_ok.all())
-        # (each product below is computed once and reused: the same values as before, fewer calls)
-        for layer in range(self.L):
-            (_, wpx, bp1, wp2, bp2), (_, wkx, bk1, wk2, bk2) = self.messages[layer]   # sender parts: below
-            wh, wx = self.sender_weights[layer]
-            xs = _dot(x, wx)
-            xp, xk = xs[:, :H], xs[:, H:]
-            self.sender[layer, :, i0:n] = (_dot(h, wh) + xs).reshape(B, 2, H).transpose(1, 0, 2)
-            mp = np.zeros((B, H))
-            if any_parent:
-                rel_p = _dot(wrapped_p, wpx) - (_dot(sp, wpx) - xp)
-                pre = self.sender[layer, 0, par] - xp + rel_p + bp1
-                mp = _dot(gelu(pre), wp2) + bp2
-                if not all_parent:
-                    mp = np.where(has_parent[:, None], mp, 0.0)
-            mk = np.zeros((B, H))
-            if self.use_knn and self.k:
-                rel_k = wrapped_k @ wkx
-                pre = self.sender[layer, 1][near] - xk[:, None] + rel_k + bk1
-                g = gelu(pre)
-                if all_near:        # every neighbour real: the mask and the guards select everything
-                    mk = _dot(_add_reduce(g, 1) / count, wk2) + bk2
-                else:
-                    mk = np.where(count > 0, _dot(_add_reduce(g * ok, 1) / np.maximum(count, 1), wk2) + bk2, 0.0)
-            h = layer_norm(self.norms[layer], h + mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)))
-        w, b = self.key
-        self.keys[i0:n] = _dot(h, w) + b
-        w, b = self.node_head
-        o = (_dot(h, w) + b).reshape(B, self.trees, 2 * d)
-        self.offsets[i0:n] = o[..., :d] * self.step
-        self.log_sigma[i0:n] = np.minimum(np.maximum(o[..., d:], -4.0), 1.0)     # np.clip, without its wrapper
-        for t, row in zip(tid.tolist(), h):      # np.add.at(sums, tid, h), in the same order
-            self.sums[t] += row
-            self.counts[t] += 1.0
+        # everything per new node, one node after the other (compiled): input MLP, causal k-NN,
+        # message-passing layers, node heads, the per-tree embedding sums
+        embed_rows(i0, x, feats, tid, parent, self.states, self.tree_id, self.periodic, self.step, self.center,
+                   self.scale, self.feature_scale, bool(self.relative_inputs), int(self.k) if self.use_knn else 0,
+                   bool(self.use_parent), bool(self.use_knn), *self.input_weights, self.sender, self.w_sender,
+                   self.wpx, self.bp1, self.wp2, self.bp2, self.wkx, self.bk1, self.wk2, self.bk2, self.uw1, self.ub1,
+                   self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key, *self.node_head,
+                   self.keys, self.offsets, self.log_sigma, self.sums, self.counts)
         self.n = n
         return n
 

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from scipy.special import erf
 
-from agents.samplers.base import wrap_periodic, wrap_pi
+from agents.samplers.base import wrap_periodic
 
 Linear = tuple[np.ndarray, np.ndarray]
 _add_reduce = np.add.reduce      # ndarray.sum's reduction without its Python wrapper (the same values)
@@ -56,33 +56,6 @@ def layer_norm(norm: tuple[np.ndarray, np.ndarray, float], x: np.ndarray) -> np.
     centred = x - _add_reduce(x, -1, keepdims=True) / width          # x.mean's values, without its wrapper
     var = _add_reduce(centred * centred, -1, keepdims=True) / width
     return centred / np.sqrt(var + eps) * g + b
-
-
-def scaled_sq_dist(states: np.ndarray, x: np.ndarray, periodic: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """``(B, n)`` squared distances in step units from rows ``x`` ``(B, d)`` to ``states`` ``(n, d)``, the
-    periodic coordinates' differences wrapped: ``add.reduce((wrap_periodic(states[None] - x[:, None]) / step) ** 2, -1)``
-    bit for bit, a coordinate at a time (no ``(B, n, d)`` temporaries; only the periodic columns are wrapped,
-    by :func:`wrap_pi`). Below 8 coordinates numpy's reduction adds them left to right, as the loop does; wider states
-    take the expression itself (``tests/test_tree_engine.py`` compares both)."""
-    d = states.shape[1]
-    if d >= 8:
-        diff = wrap_periodic(states[None] - x[:, None], periodic) / step
-        return _add_reduce(diff * diff, -1)
-    out = None
-    for c in range(d):
-        column, xc = states[:, c], x[:, c]
-        dc = column[None] - xc[:, None]
-        if periodic[c]:                       # wrap_periodic's (v + pi) % (2 pi) - pi
-            # every difference lies between these two (rounding is monotonic): no scan of the (B, n) block
-            lowest, highest = column.min() - xc.max(), column.max() - xc.min()
-            dc = wrap_pi(dc, in_range=bool(-2.9 * np.pi < lowest and highest < 2.9 * np.pi and dc.size >= 64))
-        dc /= step[c]
-        dc *= dc
-        if out is None:
-            out = dc
-        else:
-            out += dc
-    return out
 
 
 def nearest_k(dist: np.ndarray, k: int) -> np.ndarray:
@@ -132,5 +105,4 @@ def vector(t: torch.Tensor) -> np.ndarray:
     return t.detach().numpy().astype(np.float64).copy()
 
 
-__all__ = ["gelu", "layer_norm", "linears", "mlp", "nearest_k", "norms_of", "scaled_sq_dist", "vector",
-           "wrap_periodic"]
+__all__ = ["gelu", "layer_norm", "linears", "mlp", "nearest_k", "norms_of", "vector", "wrap_periodic"]
