@@ -59,6 +59,17 @@ def _matvec_add(out, v, w, n_in, offset):
             out[c] += vq * w[offset + q, c]
 
 
+@njit(cache=True, inline="always")
+def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
+    """A message MLP's first layer for the edge ``j -> i`` (before its GELU): the sender's cached
+    ``W_h h_j``, the bias, and ``wrap(x_j - x_i)`` times ``W_x / step`` (``rel``: scratch)."""
+    for c in range(rel.shape[0]):
+        rel[c] = _wrapped(state_j[c] - x_i[c], periodic[c])
+    for c in range(pre.shape[0]):
+        pre[c] = sender_j[c] + bias[c]
+    _matvec_add(pre, rel, w_rel, rel.shape[0], 0)
+
+
 @njit(cache=True)
 def embed_rows(i0, x, feats, tid, parent, states, tree_id, periodic, step, center, scale, feature_scale,
                relative_inputs, knn, use_parent, use_knn, iw1, ib1, iw2, ib2,
@@ -136,11 +147,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, periodic, step, cente
             # parent message: MLP([h_p, wrap(x_p - x) / step]), the first layer's h_p part cached
             mp[:] = 0.0
             if use_parent and p >= 0:
-                for c in range(d):
-                    rel[c] = _wrapped(states[p, c] - x[r, c], periodic[c])
-                for c in range(H):
-                    pre[c] = sender[layer, 0, p, c] + bp1[layer, c]
-                _matvec_add(pre, rel, wpx[layer], d, 0)
+                _first_layer(pre, rel, sender[layer, 0, p], bp1[layer], states[p], x[r], periodic, wpx[layer])
                 for c in range(H):
                     pre[c] = _gelu(pre[c])
                 mp[:] = bp2[layer]
@@ -151,11 +158,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, periodic, step, cente
                 acc[:] = 0.0
                 for m in range(found):
                     j = best_j[m]
-                    for c in range(d):
-                        rel[c] = _wrapped(states[j, c] - x[r, c], periodic[c])
-                    for c in range(H):
-                        pre[c] = sender[layer, 1, j, c] + bk1[layer, c]
-                    _matvec_add(pre, rel, wkx[layer], d, 0)
+                    _first_layer(pre, rel, sender[layer, 1, j], bk1[layer], states[j], x[r], periodic, wkx[layer])
                     for c in range(H):
                         acc[c] += _gelu(pre[c])
                 for c in range(H):
