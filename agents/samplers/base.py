@@ -94,19 +94,17 @@ _TWO_PI = 2 * np.pi
 _WRAP_BY_PASSES = 64
 
 
-def wrap_pi(v: np.ndarray, in_range: bool = False) -> np.ndarray:
+def wrap_pi(v: np.ndarray) -> np.ndarray:
     """``(v + pi) % (2 pi) - pi``, bit for bit (signed zeros included), as a new array.
 
     numpy's float modulo costs about 16 ns per value (a branchy ``fmod``); for ``v + pi`` in
     ``[-2 pi, 4 pi)`` (differences of two wrapped angles, the engines' case) it is one exact
     step instead: minus ``2 pi`` from ``[2 pi, 4 pi)`` (exact, by Sterbenz's lemma, as ``fmod``
     is) and plus ``2 pi`` below 0 (the rounded addition numpy's modulo makes there). Other
-    values, NaN or infinite ones, float32 and small arrays take the modulo itself. ``in_range``:
-    the caller has bounded ``v`` within ``(-2.9 pi, 2.9 pi)`` (float64), so the range is not scanned.
+    values, NaN or infinite ones, float32 and small arrays take the modulo itself.
     """
     a = np.add(v, np.pi)
-    if not in_range and (a.size < _WRAP_BY_PASSES or a.dtype != np.float64
-                         or not (a.min() >= -_TWO_PI and a.max() < 2 * _TWO_PI)):
+    if a.size < _WRAP_BY_PASSES or a.dtype != np.float64 or not (a.min() >= -_TWO_PI and a.max() < 2 * _TWO_PI):
         a %= _TWO_PI
     else:
         a -= (a >= _TWO_PI) * _TWO_PI
