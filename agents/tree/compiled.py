@@ -71,16 +71,18 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
 
 
 @njit(cache=True)
-def embed_rows(i0, x, feats, tid, parent, states, tree_id, periodic, step, center, scale, feature_scale,
-               relative_inputs, knn, use_parent, use_knn, iw1, ib1, iw2, ib2,
-               sender, w_sender, wpx, bp1, wp2, bp2, wkx, bk1, wk2, bk2, uw1, ub1, uw2, ub2, norm_g, norm_b, norm_eps,
-               kw, kb, hw, hb, keys, offsets, log_sigma, sums, counts):
+def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets, log_sigma, sums, counts,
+               periodic, step, center, scale, feature_scale, relative_inputs, knn, use_parent, iw1, ib1, iw2, ib2,
+               w_sender, wpx, bp1, wp2, bp2, wkx, bk1, wk2, bk2, uw1, ub1, uw2, ub2, norm_g, norm_b, norm_eps,
+               kw, kb, hw, hb):
     """Embed rows ``i0..i0+B-1`` (their states ``x``, node features ``feats``, trees ``tid``, parents
     ``parent``), one after the other (a row's neighbours and parent are earlier rows, this batch's
-    included): the input MLP, the causal k-NN, the message-passing layers (each row's per-layer
-    sender terms ``W_h h`` cached in ``sender[layer, edge type, row]``), then the row's key, Gaussian
-    offsets and log-sigmas (clipped to [-4, 1]) and its tree's embedding sum and count, all written in
-    place. ``states``/``tree_id`` already hold the rows."""
+    included): the input MLP, the causal k-NN (``knn`` neighbours; 0: no k-NN messages), the
+    message-passing layers (each row's per-layer sender terms ``W_h h`` cached in
+    ``sender[layer, edge type, row]``), then the row's key, Gaussian offsets and log-sigmas (clipped to
+    [-4, 1]) and its tree's embedding sum and count, all written in place (the caches: ``states`` to
+    ``counts``; ``states``/``tree_id`` already hold the rows). The arguments after ``counts`` are the
+    model's fixed settings and weights (``IncrementalTreeGNN.weights``)."""
     B, d = x.shape
     L, H = bp1.shape
     T = offsets.shape[1]
@@ -116,7 +118,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, periodic, step, cente
         _matvec_add(h, hid, iw2, H, 0)
         # causal k-NN: earlier nodes of the same tree, squared distance in step units, ties to the earlier node
         found = 0
-        if use_knn and knn > 0:
+        if knn > 0:
             for j in range(i):
                 if tree_id[j] != t:
                     continue

@@ -102,7 +102,6 @@ class IncrementalTreeGNN(_Engine):
         self.feature_scale, self.step = vector(m.feature_scale), vector(m.step_scale)
         self.periodic = m.periodic.numpy().copy()
         (iw1, ib1), (iw2, ib2) = linears(m.input)
-        self.input_weights = (iw1, ib1, iw2, ib2)
         H = self.H
         # Per layer, stacked for the compiled per-node loop: each message MLP's first layer split into its
         # sender part W_h (cached per node: W_h h_j) and its relative-position part W_x / step, then the
@@ -126,6 +125,12 @@ class IncrementalTreeGNN(_Engine):
         self.query_shift = linears(m.query_shift)[0]
         self.use_parent, self.use_knn, self.use_context = m.use_parent, m.use_knn, m.use_context
         self.relative_inputs = m.relative_inputs
+        #: What the compiled per-node loop reads besides the caches, in its argument order (built once).
+        self.weights = (self.periodic, self.step, self.center, self.scale, self.feature_scale, bool(self.relative_inputs),
+                        int(self.k) if self.use_knn else 0, bool(self.use_parent), iw1, ib1, iw2, ib2, self.w_sender,
+                        self.wpx, self.bp1, self.wp2, self.bp2, self.wkx, self.bk1, self.wk2, self.bk2, self.uw1,
+                        self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
+                        *self.node_head)
         super().__init__(m.state_dim, capacity)
 
     def _allocate(self, capacity: int) -> None:
@@ -156,12 +161,8 @@ class IncrementalTreeGNN(_Engine):
         self.states[i0:n], self.tree_id[i0:n] = x, tid
         # everything per new node, one node after the other (compiled): input MLP, causal k-NN,
         # message-passing layers, node heads, the per-tree embedding sums
-        embed_rows(i0, x, feats, tid, parent, self.states, self.tree_id, self.periodic, self.step, self.center,
-                   self.scale, self.feature_scale, bool(self.relative_inputs), int(self.k) if self.use_knn else 0,
-                   bool(self.use_parent), bool(self.use_knn), *self.input_weights, self.sender, self.w_sender,
-                   self.wpx, self.bp1, self.wp2, self.bp2, self.wkx, self.bk1, self.wk2, self.bk2, self.uw1, self.ub1,
-                   self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key, *self.node_head,
-                   self.keys, self.offsets, self.log_sigma, self.sums, self.counts)
+        embed_rows(i0, x, feats, tid, parent, self.states, self.tree_id, self.sender, self.keys, self.offsets,
+                   self.log_sigma, self.sums, self.counts, *self.weights)
         self.n = n
         return n
 
