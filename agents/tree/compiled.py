@@ -72,8 +72,8 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
 
 @njit(cache=True)
 def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets, log_sigma, sums, counts,
-               periodic, step, center, scale, feature_scale, relative_inputs, knn, use_parent, iw1, ib1, iw2, ib2,
-               w_sender, wpx, bp1, wp2, bp2, wkx, bk1, wk2, bk2, uw1, ub1, uw2, ub2, norm_g, norm_b, norm_eps,
+               periodic, step, center, scale, feature_scale, relative_inputs, knn, use_parent, heads, iw1, ib1, iw2,
+               ib2, w_sender, wpx, bp1, wpu, bpu, wkx, bk1, wku, bku, uw1, ub1, uw2, ub2, norm_g, norm_b, norm_eps,
                kw, kb, hw, hb):
     """Embed rows ``i0..i0+B-1`` (their states ``x``, node features ``feats``, trees ``tid``, parents
     ``parent``), one after the other (a row's neighbours and parent are earlier rows, this batch's
@@ -81,8 +81,11 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
     message-passing layers (each row's per-layer sender terms ``W_h h`` cached in
     ``sender[layer, edge type, row]``), then the row's key, Gaussian offsets and log-sigmas (clipped to
     [-4, 1]) and its tree's embedding sum and count, all written in place (the caches: ``states`` to
-    ``counts``; ``states``/``tree_id`` already hold the rows). The arguments after ``counts`` are the
-    model's fixed settings and weights (``IncrementalTreeGNN.weights``)."""
+    ``counts``; ``states``/``tree_id`` already hold the rows; ``heads`` false: keys, offsets and
+    log-sigmas are not computed, for a sampler that reads only the tree sums). The arguments after
+    ``counts`` are the model's fixed settings and weights (``IncrementalTreeGNN.weights``); each
+    message's second layer comes fused with its block of the update MLP's first layer
+    (``wpu = W_2 U``, ``bpu = b_2 U``: the message itself is only ever used through that product)."""
     B, d = x.shape
     L, H = bp1.shape
     T = offsets.shape[1]
@@ -97,8 +100,6 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
     h = np.empty(H)
     pre = np.empty(H)
     acc = np.empty(H)
-    mp = np.empty(H)
-    mk = np.empty(H)
     hid = np.empty(H)
     upd = np.empty(H)
     for r in range(B):
@@ -146,16 +147,19 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
                 acc[:] = 0.0
                 _matvec_add(acc, h, w_sender[layer, e], H, 0)
                 sender[layer, e, i, :] = acc
+            # update MLP's first layer on [h, parent message, k-NN message]: its h block, then each
+            # message's second layer fused with its block (an absent message adds nothing)
+            hid[:] = ub1[layer]
+            _matvec_add(hid, h, uw1[layer], H, 0)
             # parent message: MLP([h_p, wrap(x_p - x) / step]), the first layer's h_p part cached
-            mp[:] = 0.0
             if use_parent and p >= 0:
                 _first_layer(pre, rel, sender[layer, 0, p], bp1[layer], states[p], x[r], periodic, wpx[layer])
                 for c in range(H):
                     pre[c] = _gelu(pre[c])
-                mp[:] = bp2[layer]
-                _matvec_add(mp, pre, wp2[layer], H, 0)
+                for c in range(H):
+                    hid[c] += bpu[layer, c]
+                _matvec_add(hid, pre, wpu[layer], H, 0)
             # k-NN messages: the mean of the first layer's GELU over the neighbours, then the second layer
-            mk[:] = 0.0
             if found > 0:
                 acc[:] = 0.0
                 for m in range(found):
@@ -165,13 +169,9 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
                         acc[c] += _gelu(pre[c])
                 for c in range(H):
                     acc[c] /= found
-                mk[:] = bk2[layer]
-                _matvec_add(mk, acc, wk2[layer], H, 0)
-            # update MLP on [h, mp, mk], residual, LayerNorm
-            hid[:] = ub1[layer]
-            _matvec_add(hid, h, uw1[layer], H, 0)
-            _matvec_add(hid, mp, uw1[layer], H, H)
-            _matvec_add(hid, mk, uw1[layer], H, 2 * H)
+                for c in range(H):
+                    hid[c] += bku[layer, c]
+                _matvec_add(hid, acc, wku[layer], H, 0)
             for c in range(H):
                 hid[c] = _gelu(hid[c])
             upd[:] = ub2[layer]
@@ -188,16 +188,17 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
             inv_std = 1.0 / math.sqrt(var / H + norm_eps[layer])
             for c in range(H):
                 h[c] = upd[c] * inv_std * norm_g[layer, c] + norm_b[layer, c]
-        # the node heads and the tree's embedding sum (the GNN sampler's mixture reads them)
-        key[:] = kb
-        _matvec_add(key, h, kw, H, 0)
-        keys[i, :] = key
-        head[:] = hb
-        _matvec_add(head, h, hw, H, 0)
-        for a in range(T):
-            for c in range(d):
-                offsets[i, a, c] = head[a * 2 * d + c] * step[c]
-                log_sigma[i, a, c] = min(max(head[a * 2 * d + d + c], -4.0), 1.0)
+        # the node heads (the GNN sampler's mixture reads them) and the tree's embedding sum
+        if heads:
+            key[:] = kb
+            _matvec_add(key, h, kw, H, 0)
+            keys[i, :] = key
+            head[:] = hb
+            _matvec_add(head, h, hw, H, 0)
+            for a in range(T):
+                for c in range(d):
+                    offsets[i, a, c] = head[a * 2 * d + c] * step[c]
+                    log_sigma[i, a, c] = min(max(head[a * 2 * d + d + c], -4.0), 1.0)
         for c in range(H):
             sums[t, c] += h[c]
         counts[t] += 1.0

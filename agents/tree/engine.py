@@ -94,9 +94,12 @@ class IncrementalTreeGNN(_Engine):
     node_arrays = ("states", "tree_id", "keys", "offsets", "log_sigma")
     layered_arrays = ("sender",)
 
-    def __init__(self, model: TreeGNN, capacity: int = 1024) -> None:
+    def __init__(self, model: TreeGNN, capacity: int = 1024, *, heads: bool = True) -> None:
+        """``heads`` false: the node keys, offsets and log-sigmas are not computed (a sampler that
+        reads only :meth:`context`, the GNN-CVAE), and :meth:`mixture` is unavailable."""
         m = model.eval()
         self.model = m
+        self.heads = bool(heads)
         self.H, self.L, self.k, self.trees = m.hidden_channels, m.num_layers, m.knn, m.num_trees
         self.center, self.scale = vector(m.state_center), vector(m.state_scale)
         self.feature_scale, self.step = vector(m.feature_scale), vector(m.step_scale)
@@ -115,6 +118,11 @@ class IncrementalTreeGNN(_Engine):
         self.wk2, self.bk2 = stack(lambda l: first[l][1][1][0]), stack(lambda l: first[l][1][1][1])
         updates = [linears(u) for u in m.updates]
         self.uw1, self.ub1 = stack(lambda l: updates[l][0][0]), stack(lambda l: updates[l][0][1])
+        # the messages enter the update MLP only through its first layer: their second layers fused with
+        # their blocks of it (U_p = uw1[H:2H], U_k = uw1[2H:]): m U = h' (W_2 U) + b_2 U
+        self.wpu, self.bpu = self.wp2 @ self.uw1[:, H:2 * H], self.bp2[:, None, :] @ self.uw1[:, H:2 * H]
+        self.wku, self.bku = self.wk2 @ self.uw1[:, 2 * H:], self.bk2[:, None, :] @ self.uw1[:, 2 * H:]
+        self.bpu, self.bku = np.ascontiguousarray(self.bpu[:, 0]), np.ascontiguousarray(self.bku[:, 0])
         self.uw2, self.ub2 = stack(lambda l: updates[l][1][0]), stack(lambda l: updates[l][1][1])
         norms = norms_of(m.norms)
         self.norm_g, self.norm_b = stack(lambda l: norms[l][0]), stack(lambda l: norms[l][1])
@@ -127,9 +135,9 @@ class IncrementalTreeGNN(_Engine):
         self.relative_inputs = m.relative_inputs
         #: What the compiled per-node loop reads besides the caches, in its argument order (built once).
         self.weights = (self.periodic, self.step, self.center, self.scale, self.feature_scale, bool(self.relative_inputs),
-                        int(self.k) if self.use_knn else 0, bool(self.use_parent), iw1, ib1, iw2, ib2, self.w_sender,
-                        self.wpx, self.bp1, self.wp2, self.bp2, self.wkx, self.bk1, self.wk2, self.bk2, self.uw1,
-                        self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
+                        int(self.k) if self.use_knn else 0, bool(self.use_parent), self.heads, iw1, ib1, iw2, ib2,
+                        self.w_sender, self.wpx, self.bp1, self.wpu, self.bpu, self.wkx, self.bk1, self.wku, self.bku,
+                        np.ascontiguousarray(self.uw1[:, :H]), self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
                         *self.node_head)
         super().__init__(m.state_dim, capacity)
 
@@ -178,6 +186,8 @@ class IncrementalTreeGNN(_Engine):
 
     def mixture(self, q: np.ndarray, active: int, temperature: float) -> tuple[np.ndarray, np.ndarray]:
         """Node probabilities ``(n,)`` and the component shift ``(d,)`` at the current tree."""
+        if not self.heads:
+            raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
         logits = _dot(self.keys[:self.n], q) / math.sqrt(self.H) / temperature
         p = np.exp(logits - logits.max())
         w, b = self.query_shift

@@ -180,7 +180,7 @@ class TreeGNNCVAESampler(_EngineSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.gnn.periodic.numpy(), proposals=proposals, adaptive=adaptive)
         self.model = model.eval()
-        self.engine = IncrementalTreeGNN(model.gnn)
+        self.engine = IncrementalTreeGNN(model.gnn, heads=False)     # it reads the tree sums only
 
     def decode(self, obs: Mapping) -> list[np.ndarray]:
         """The forward: the tree context, then ``proposals`` latent draws decoded at once."""
