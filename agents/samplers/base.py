@@ -268,7 +268,7 @@ class ModelSampler(Sampler):
             return (self.low + self._range * self.rng.random(self.state_dim)).astype(np.float32)
         if u < self.uniform_mix + self.goal_bias:
             return np.asarray(active_target(obs), dtype=np.float32).copy()   # a copy: obs may be live views
-        return self.finish(self.model_sample(obs))
+        return self.model_action(obs)
 
     def _act_adaptive(self, obs: Mapping, u: float) -> np.ndarray:
         """:meth:`act` with the model's share from :class:`AdaptiveShare` (the same draws)."""
@@ -281,7 +281,7 @@ class ModelSampler(Sampler):
             adaptive.chose(OTHER)
             return np.asarray(active_target(obs), dtype=np.float32).copy()
         adaptive.chose(MODEL)
-        return self.finish(self.model_sample(obs))
+        return self.model_action(obs)
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
@@ -328,8 +328,14 @@ class ModelSampler(Sampler):
         entry[1] -= 1
         return entry[0]
 
+    def model_action(self, obs: Mapping) -> np.ndarray:
+        """The model's next sample as an action: :meth:`finish` of :meth:`model_sample` (a sampler
+        that decodes a batch per forward finishes the batch at once and overrides this)."""
+        return self.finish(self.model_sample(obs))
+
     def finish(self, x: np.ndarray) -> np.ndarray:
-        """A model's state as an action: periodic coordinates wrapped, clipped to the bounds, float32."""
+        """A model's state as an action: periodic coordinates wrapped, clipped to the bounds, float32
+        (elementwise, so a batch ``(k, d)`` gives each row's own result)."""
         x = np.asarray(x, np.float64)
         if self._wraps:
             x = wrap_periodic(x, self.periodic)

@@ -156,15 +156,19 @@ class TreeCVAESampler(ModelSampler):
         return None        # the condition is the problem's, whichever tree is active
 
     def decode(self, obs: Mapping) -> list[np.ndarray]:
-        """The forward: ``proposals`` states for the problem."""
+        """The forward: ``proposals`` states for the problem, finished as actions (handed out last first)."""
         condition = cvae_condition(self.model, obs)
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
         with torch.inference_mode():
-            return list(self.model.decode_for_one(z, condition).double().numpy())
+            return list(self.finish(self.model.decode_for_one(z, condition).double().numpy()))
+
+    def model_action(self, obs: Mapping) -> np.ndarray:
+        return self.refreshed(obs, self.decode).pop()
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        return self.refreshed(obs, self.decode).pop()
+        """The next decoded state, already an action (wrapped, clipped, float32)."""
+        return self.model_action(obs)
 
 
 class TreeGNNCVAESampler(_EngineSampler):
@@ -183,15 +187,21 @@ class TreeGNNCVAESampler(_EngineSampler):
         self.engine = IncrementalTreeGNN(model.gnn, heads=False)     # it reads the tree sums only
 
     def decode(self, obs: Mapping) -> list[np.ndarray]:
-        """The forward: the tree context, then ``proposals`` latent draws decoded at once."""
+        """The forward: the tree context, then ``proposals`` latent draws decoded at once and
+        finished as actions (handed out last first)."""
         q, _ = self.tree_context(obs)
         z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
                             dtype=torch.float32)
         with torch.inference_mode():
-            return list(self.model.decode_for_one(z, torch.as_tensor(q, dtype=torch.float32)).double().numpy())
+            states = self.model.decode_for_one(z, torch.as_tensor(q, dtype=torch.float32)).double().numpy()
+        return list(self.finish(states))
+
+    def model_action(self, obs: Mapping) -> np.ndarray:
+        return self.refreshed(obs, self.decode).pop()
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
-        return self.refreshed(obs, self.decode).pop()
+        """The next decoded state, already an action (wrapped, clipped, float32)."""
+        return self.model_action(obs)
 
 
 def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
