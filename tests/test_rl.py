@@ -225,6 +225,42 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         load_sampler("rl-sac", task="arm", seed=0)
 
 
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_numpy_twin_of_the_tree_policy_matches_torch(task):
+    """The RL sampler's numpy forward (numpy_tree_params) against the torch policy on views of a grown
+    tree, a hand-made tree with an orphan row and a one-node tree; unsupported policies stay in torch."""
+    from agents.encoders import TreeEncoder
+    from agents.rl.policies import SB3PPOPolicy, SB3SACPolicy, encoder_config
+    from agents.rl.sampler import numpy_tree_params, numpy_tree_policy
+    view_space = make_rl_env(task, view_nodes=16).observation_space
+    env = gym.make({"maze2d": "GNNMP/Maze2DRRT-v0", "pendulum": "GNNMP/PendulumRRT-v0"}[task])
+    obs, _ = env.reset(seed=1)
+    views = [tree_view(obs, 16)]
+    for _ in range(60):
+        obs, *_ = env.step(env.action_space.sample())
+        views.append(tree_view(obs, 16))
+    hand = tree_obs([-1, 0, 0, 1, 12, -1, 3, 2, 7, 0, 0, 0, 0, 0, 0, 0], n_real=9)   # row 4: parent not a real row
+    views.append({k: v for k, v in hand.items() if k in views[0]})
+    for act, hidden in (("relu", [16, 8]), ("tanh", [])):
+        torch.manual_seed(0)
+        enc = encoder_config(TreeEncoder.from_space(view_space, hidden_channels=8, num_layers=2, out_channels=12,
+                                                    act=act))
+        policy = SB3PPOPolicy(enc, 2, hidden=hidden).eval()
+        twin = numpy_tree_policy(policy)
+        assert twin is not None
+        for view in views:
+            with torch.inference_mode():
+                loc, scale = policy({k: torch.as_tensor(v) for k, v in view.items()})
+            mine = numpy_tree_params(twin, view)
+            np.testing.assert_allclose(mine[0], loc.numpy(), rtol=1e-5, atol=1e-6)
+            np.testing.assert_array_equal(mine[1], scale.numpy())
+            assert mine[0].dtype == np.float32 and mine[0].shape == (2,)
+    knn = encoder_config(TreeEncoder.from_space(view_space, hidden_channels=8, num_layers=1, out_channels=8, knn=3))
+    assert numpy_tree_policy(SB3PPOPolicy(knn, 2, hidden=[8])) is None            # k-NN edges: torch
+    assert numpy_tree_policy(SB3SACPolicy(enc, 2, hidden=[8])) is None            # another actor: torch
+    env.close()
+
+
 def test_warm_start_copies_the_encoder(tmp_path):
     from agents.checkpoints import save_checkpoint
     from agents.encoders import TreeEncoder

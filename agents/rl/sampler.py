@@ -36,7 +36,8 @@ import torch
 from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
-from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy
+from agents.encoders import TreeEncoder, _plain_mean_sage
+from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy, SB3PPOPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
 from gnn_mp_envs.envs.candidates import CandidateSet
@@ -79,12 +80,16 @@ class RLSampler(ModelSampler):
         self.action_frame = action_frame
         self._mix32 = np.float32(self.uniform_mix)
         self._periodic_or_none = self.periodic if self._wraps else None
+        self._twin = numpy_tree_policy(self.policy)
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
 
     def params(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray]:
-        """The policy's ``(loc, scale)`` ``(d,)`` float32 for one full observation (through its view)."""
+        """The policy's ``(loc, scale)`` ``(d,)`` float32 for one full observation (through its view;
+        a policy :func:`numpy_tree_policy` supports runs as its numpy twin)."""
+        if self._twin is not None:
+            return numpy_tree_params(self._twin, tree_view(obs, self.view_nodes))
         view = {k: torch.as_tensor(v) for k, v in tree_view(obs, self.view_nodes).items()}
         with torch.inference_mode():
             loc, scale = self.policy(view)
@@ -122,34 +127,100 @@ class RLSampler(ModelSampler):
 _NUMPY_ACTS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0.0)}
 
 
+def _numpy_layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray, Any]]:
+    """An MLP's ``(W^T, b, activation or None)`` per linear layer, float32 arrays (ValueError: an
+    activation without a numpy twin)."""
+    out, mods = [], list(seq)
+    for i, m in enumerate(mods):
+        if isinstance(m, nn.Linear):
+            act = mods[i + 1] if i + 1 < len(mods) and not isinstance(mods[i + 1], nn.Linear) else None
+            if act is not None and type(act) not in _NUMPY_ACTS:
+                raise ValueError(f"no numpy twin for activation {type(act).__name__}")
+            out.append((*_numpy_linear(m)[:2], None if act is None else _NUMPY_ACTS[type(act)]))
+    return out
+
+
+def _numpy_linear(m: nn.Module) -> tuple[np.ndarray, np.ndarray, None]:
+    """``(W^T, b, None)`` of one linear layer (torch's or PyG's; no bias: zeros), float32."""
+    w = m.weight.detach().numpy()
+    bias = np.zeros(w.shape[0], np.float32) if m.bias is None else m.bias.detach().numpy().copy()
+    return w.T.copy(), bias, None
+
+
+def _numpy_mlp(layers: list[tuple[np.ndarray, np.ndarray, Any]], x: np.ndarray) -> np.ndarray:
+    for w, b, act in layers:
+        x = x @ w + b
+        x = act(x) if act is not None else x
+    return x
+
+
 def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
     """A :class:`PickPolicy` without a tree context as numpy arrays (float32): the per-candidate MLP,
     the body and the logits layer, for :func:`numpy_pick_logits` (a forward of ~10 us instead of
     torch's ~300 us of per-call overhead on one step's ``(K, F)`` features)."""
-    def layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray, Any]]:
-        out, mods = [], list(seq)
-        for i, m in enumerate(mods):
-            if isinstance(m, nn.Linear):
-                act = mods[i + 1] if i + 1 < len(mods) and not isinstance(mods[i + 1], nn.Linear) else None
-                if act is not None and type(act) not in _NUMPY_ACTS:
-                    raise ValueError(f"no numpy twin for activation {type(act).__name__}")
-                out.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy(),
-                            None if act is None else _NUMPY_ACTS[type(act)]))
-        return out
-    return {"candidate": layers(policy.encoder.net), "body": layers(policy.body),
-            "logits": layers(nn.Sequential(policy.logits))[0]}
+    return {"candidate": _numpy_layers(policy.encoder.net), "body": _numpy_layers(policy.body),
+            "logits": _numpy_layers(nn.Sequential(policy.logits))[0]}
+
+
+def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
+    """An SB3 PPO actor over a :class:`~agents.encoders.TreeEncoder` as numpy arrays (float32), for
+    :func:`numpy_tree_params`; ``None`` for any other policy (it runs in torch).
+
+    Supported: tree edges only (``knn=0``), plain mean-aggregation ``SAGEConv`` layers, ReLU/Tanh
+    (the shipped ``rl-ppo`` policies of maze2d and the pendulum). Torch spends ~0.5 ms of per-op
+    overhead on the ~100 operations of one forward over a 64-node view; the twin makes the same
+    products in a fraction of that. It is the torch model's math in float32, in another order of
+    summation (``tests/test_rl.py`` compares the two to 1e-5).
+    """
+    enc = policy.encoder
+    if type(policy) is not SB3PPOPolicy or type(enc) is not TreeEncoder or enc.knn or type(enc.act) not in _NUMPY_ACTS \
+            or not all(_plain_mean_sage(conv) for conv in enc.tree_convs):
+        return None
+    try:
+        return {"act": _NUMPY_ACTS[type(enc.act)], "feature_scale": enc.feature_scale.numpy().copy(),
+                "center": enc.state_center.numpy().copy(), "half_span": enc.state_half_span.numpy().copy(),
+                "input": _numpy_linear(enc.input),
+                "convs": [(_numpy_linear(c.lin_l), _numpy_linear(c.lin_r)) for c in enc.tree_convs],
+                "context": _numpy_layers(enc.context), "readout": _numpy_layers(enc.readout),
+                "body": _numpy_layers(nn.Sequential(*policy.body, policy.mu)),
+                "scale": policy.log_std.detach().exp().numpy().copy()}
+    except ValueError:
+        return None
+
+
+def numpy_tree_params(twin: Mapping[str, Any], view: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``policy(view)``'s ``(loc, scale)`` ``(d,)`` in numpy for one (unbatched) tree view: what
+    :class:`TreeEncoder` computes (input layer, residual mean-SAGE layers over the tree edges in
+    both directions, mean / max pooling, the start-goal context, the readout), then the actor."""
+    act = twin["act"]
+    n = int(np.asarray(view["num_nodes"]).reshape(-1)[0])
+    if n <= 0:
+        n = int(np.asarray(view["mask"]).sum())
+    w, b, _ = twin["input"]
+    h = act(np.asarray(view["node_features"][:n], np.float32) / twin["feature_scale"] @ w + b)
+    parent = np.asarray(view["parent"][:n]).astype(np.int64)
+    child = np.flatnonzero((parent >= 0) & (parent < n))
+    src = parent[child]
+    # each tree edge in both directions, the order of tree_edge_index: sender -> receiver
+    senders = np.stack([src, child], 1).reshape(-1)
+    receivers = np.stack([child, src], 1).reshape(-1)
+    count = np.maximum(np.bincount(receivers, minlength=n), 1).astype(np.float32)[:, None]
+    for (wl, bl, _), (wr, br, _) in twin["convs"]:
+        total = np.zeros_like(h)
+        np.add.at(total, receivers, h[senders])
+        h = h + act((total / count) @ wl + bl + (h @ wr + br))
+    center, half = twin["center"], twin["half_span"]
+    ends = [(np.asarray(view[k], np.float32).reshape(-1) - center) / half for k in ("start", "goal")]
+    active = np.asarray(view["active_tree"], np.float32).reshape(1)
+    ctx = _numpy_mlp(twin["context"], np.concatenate([*ends, active]))
+    embed = _numpy_mlp(twin["readout"], np.concatenate([h.sum(0) / np.float32(n), h.max(0), ctx]))
+    return _numpy_mlp(twin["body"], embed), twin["scale"]
 
 
 def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarray:
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
-    h = np.asarray(features, np.float32)
-    for w, b, act in twin["candidate"]:
-        h = h @ w + b
-        h = act(h) if act is not None else h
-    x = np.concatenate([h.reshape(-1), h.mean(0), h.max(0)])
-    for w, b, act in twin["body"]:
-        x = x @ w + b
-        x = act(x) if act is not None else x
+    h = _numpy_mlp(twin["candidate"], np.asarray(features, np.float32))
+    x = _numpy_mlp(twin["body"], np.concatenate([h.reshape(-1), h.mean(0), h.max(0)]))
     w, b, _ = twin["logits"]
     return x @ w + b
 
