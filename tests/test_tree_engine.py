@@ -102,12 +102,13 @@ def check_mixture_engine(gnn, snapshots, temperature=0.5, decoder=None):
         checked += 1
     assert checked == 3
     # the context-only engine (the GNN-CVAE's: no node heads) gives the same context, and no mixture
+    # (all rows in one batch here: the batch's BLAS products may round otherwise than the increments')
     context_only = IncrementalTreeGNN(gnn, capacity=16, heads=False)
     context_only.ingest(snapshots[-1])
     active = int(snapshots[-1]["active_tree"][0])
     q_only = context_only.context(snapshots[-1]["start"].astype(np.float64), snapshots[-1]["goal"].astype(np.float64),
                                   active)
-    np.testing.assert_array_equal(q_only, q)
+    np.testing.assert_allclose(q_only, q, rtol=0, atol=1e-12)
     assert not context_only.keys.any() and not context_only.offsets.any()
     with pytest.raises(RuntimeError, match="heads=False"):
         context_only.mixture(q_only, active, temperature)
