@@ -211,4 +211,55 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
         counts[t] += 1.0
 
 
-__all__ = ["embed_rows"]
+@njit(cache=True)
+def tree_context(ends, active, sums, counts, use_context, qw1, qb1, qw2, qb2):
+    """The tree context ``q`` ``(H,)``: the query MLP on ``[ends, one-hot of the active tree, each
+    tree's mean embedding (zeros without ``use_context``), log1p(node counts) / 5]`` (``ends``: the
+    start and goal part, computed by the caller)."""
+    T, H = sums.shape
+    E = ends.shape[0]
+    inp = np.zeros(E + T + T * H + T)
+    inp[:E] = ends
+    inp[E + active] = 1.0
+    for t in range(T):
+        inv = 1.0 / max(counts[t], 1.0)
+        for c in range(H):
+            inp[E + T + t * H + c] = sums[t, c] * inv if use_context else 0.0
+        inp[E + T + T * H + t] = math.log1p(counts[t]) / 5.0
+    hid = np.dot(inp, qw1) + qb1
+    for c in range(hid.shape[0]):
+        hid[c] = _gelu(hid[c])
+    return np.dot(hid, qw2) + qb2
+
+
+@njit(cache=True)
+def node_mixture(keys, q, active, inv_temperature, shift_w, shift_b, step):
+    """The GNN's node mixture at the ingested tree (``keys``: its rows): node probabilities
+    ``softmax(keys . q / sqrt(H) / temperature)``, their running sums, and the active tree's
+    component shift ``(d,)`` in state units."""
+    n, H = keys.shape
+    logits = np.dot(keys, q)
+    scale = inv_temperature / math.sqrt(H)
+    top = -np.inf
+    for i in range(n):
+        logits[i] *= scale
+        top = max(top, logits[i])
+    total = 0.0
+    for i in range(n):
+        logits[i] = math.exp(logits[i] - top)
+        total += logits[i]
+    cumulative = np.empty(n)
+    run = 0.0
+    for i in range(n):
+        logits[i] /= total
+        run += logits[i]
+        cumulative[i] = run
+    d = step.shape[0]
+    shift = np.dot(q, shift_w) + shift_b
+    out = np.empty(d)
+    for c in range(d):
+        out[c] = shift[active * d + c] * step[c]
+    return logits, cumulative, out
+
+
+__all__ = ["embed_rows", "node_mixture", "tree_context"]

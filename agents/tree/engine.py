@@ -1,5 +1,5 @@
-"""Incremental inference of the causal tree models (numpy, and a compiled per-node loop), one new
-tree node at a time.
+"""Incremental inference of the causal tree models (numpy, and compiled functions), one new tree
+node at a time.
 
 A causal GNN embeds a node from older nodes only, so a node's embedding is fixed the moment it
 is inserted. The engines keep per-episode caches: each new observation row is embedded once
@@ -11,25 +11,21 @@ earlier node is re-run. The math is the torch model's, in float64
 scores with the torch model's to 1e-5 on trees of a few hundred nodes).
 
 * :class:`IncrementalTreeGNN` mirrors :class:`agents.tree.models.TreeGNN` (the ``gnn``
-  node mixture and the GNN-CVAE's tree context); a new node's embedding is the compiled loop of
-  :mod:`agents.tree.compiled` (numba), its mixture and context numpy;
+  node mixture and the GNN-CVAE's tree context); the new nodes' embeddings, the context and the
+  mixture are compiled functions of :mod:`agents.tree.compiled` (numba);
 * :class:`IncrementalTreeScorer` mirrors :class:`agents.tree.scorer.TreeGNNScorer`.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import numpy as np
 
-from agents.tree.compiled import embed_rows
+from agents.tree.compiled import embed_rows, node_mixture, tree_context
 from agents.tree.kernels import layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
-
-#: ``a @ b`` for 1-D and 2-D operands: the same BLAS call (bit for bit) with less overhead; 3-D products stay ``@``
-_dot = np.dot
 
 
 class _Engine:
@@ -155,6 +151,7 @@ class IncrementalTreeGNN(_Engine):
         super().clear()
         self.sums = np.zeros((self.trees, self.H))
         self.counts = np.zeros(self.trees)
+        self._ends_key = None
 
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:
         """Embed the observation's rows not seen yet (a new episode restarts the cache)."""
@@ -175,24 +172,27 @@ class IncrementalTreeGNN(_Engine):
         return n
 
     def context(self, start: np.ndarray, goal: np.ndarray, active: int) -> np.ndarray:
-        """The tree context ``q`` ``(H,)`` of the ingested tree (``TreeGNN.context``)."""
-        means = self.sums / np.maximum(self.counts, 1.0)[:, None]
-        if not self.use_context:
-            means = means * 0.0
-        ends = ([wrap_periodic(goal - start, self.periodic) / self.scale] if self.relative_inputs
-                else [(start - self.center) / self.scale, (goal - self.center) / self.scale])
-        parts = [*ends, np.eye(self.trees)[active], means.reshape(-1), np.log1p(self.counts) / 5.0]
-        return mlp(self.query, np.concatenate(parts))
+        """The tree context ``q`` ``(H,)`` of the ingested tree (``TreeGNN.context``; compiled, its
+        start-and-goal inputs kept per problem)."""
+        key = start.tobytes() + goal.tobytes()
+        if key != self._ends_key:
+            ends = ([wrap_periodic(goal - start, self.periodic) / self.scale] if self.relative_inputs
+                    else [(start - self.center) / self.scale, (goal - self.center) / self.scale])
+            self._ends, self._ends_key = np.concatenate(ends).astype(np.float64), key
+        (w1, b1), (w2, b2) = self.query
+        return tree_context(self._ends, int(active), self.sums, self.counts, bool(self.use_context), w1, b1, w2, b2)
 
     def mixture(self, q: np.ndarray, active: int, temperature: float) -> tuple[np.ndarray, np.ndarray]:
         """Node probabilities ``(n,)`` and the component shift ``(d,)`` at the current tree."""
+        p, _, shift = self.node_mixture(q, active, temperature)
+        return p, shift
+
+    def node_mixture(self, q: np.ndarray, active: int, temperature: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`mixture`'s probabilities, their running sums (what a draw searches) and the shift."""
         if not self.heads:
             raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
-        logits = _dot(self.keys[:self.n], q) / math.sqrt(self.H) / temperature
-        p = np.exp(logits - logits.max())
         w, b = self.query_shift
-        shift = (_dot(q, w) + b).reshape(self.trees, self.d)[active] * self.step
-        return p / p.sum(), shift
+        return node_mixture(self.keys[:self.n], q, int(active), 1.0 / temperature, w, b, self.step)
 
 
 class IncrementalTreeScorer(_Engine):

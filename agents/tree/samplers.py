@@ -89,8 +89,8 @@ class TreeGNNSampler(_EngineSampler):
         tree = (self.engine.generation, self.engine.n, active)
         if tree != self._mixture_of:
             q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
-            p, shift = self.engine.mixture(q, active, self.temperature)
-            self._mixture, self._mixture_of = (active, np.cumsum(p), shift), tree
+            _, cumulative, shift = self.engine.node_mixture(q, active, self.temperature)
+            self._mixture, self._mixture_of = (active, cumulative, shift), tree
         return self._mixture
 
     def reset(self, seed: int | None = None) -> None:
