@@ -150,6 +150,27 @@ def test_resume_refuses_the_state_of_another_run_in_one_line(tmp_path, capsys):
     assert main(base + ["--resume"]) == 0
 
 
+def test_train_sampler_hidden_sets_the_width_and_is_recorded(tmp_path):
+    """`--hidden` builds the model at that width, the checkpoint holds it and the recorded command repeats it."""
+    from agents.tree.samplers import load_tree_sampler
+    from train.tree.cli import main
+    from train.tree.training import command_of
+    argv = ["--task", "maze2d", "--model", "cvae", "--hidden", "8", "--problems", "4", "--minutes", "0.005",
+            "--dagger-rounds", "0", "--eval-problems", "0", "--out", str(tmp_path / "run"), "--data-dir",
+            str(tmp_path / "data"), "--no-progress"]
+    assert main(argv) == 0
+    model, record = load_checkpoint(tmp_path / "run" / "model.pt")
+    assert record["ctor_args"]["hidden_channels"] == 8 and model.decoder[0].out_features == 8
+    env = gym.make("GNNMP/Maze2DRRT-v0", disable_env_checker=True)
+    sampler = load_tree_sampler("cvae", env.action_space.low, env.action_space.high, task="maze2d", seed=0,
+                                checkpoint=tmp_path / "run" / "model.pt", uniform_mix=0.0)
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(sampler.act(obs))
+    from train.tree.args import TrainArgs
+    assert " --hidden 8 " in command_of(TrainArgs(model="cvae", hidden=8)) + " "
+    assert "--hidden" not in command_of(TrainArgs(model="cvae"))
+
+
 @pytest.mark.parametrize("task, name, proposals", [("maze2d", "gnn", 1), ("maze2d", "gnn", 8),
                                                    ("maze2d", "gnn-cvae", 1), ("maze2d", "gnn-cvae", 4),
                                                    ("pendulum", "gnn", None), ("pendulum", "gnn-cvae", 4)])

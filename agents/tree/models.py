@@ -331,7 +331,7 @@ class TreeCVAE(_Gaussian):
         ls = self.log_scale.clamp(*LOG_SIGMA_RANGE)
         recon = (0.5 * (err / ls.exp()) ** 2 + ls).sum(-1).mean()
         kl = self.kl_loss(mu, logstd)
-        return recon + kl_weight * kl, {"recon": float(recon), "kl": float(kl)}
+        return recon + kl_weight * kl, {"recon": float(recon.detach()), "kl": float(kl.detach())}
 
     def sample(self, condition: Tensor, num_samples: int, generator: torch.Generator | None = None) -> Tensor:
         """``(num_samples, d)`` states for one condition ``(C,)``."""

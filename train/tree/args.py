@@ -28,6 +28,8 @@ class TrainArgs(RunFlags):
                         "maze2d's eight rotations/reflections, the pendulum's mirror)")
     relative_inputs: bool = arg(False, "gnn (node mixture) and gnn-cvae: read no absolute position, only the "
                                 "nodes' offsets to start and goal")
+    hidden: int | None = arg(None, "hidden width of the model's layers (default: the shipped architecture's: "
+                             "gnn and gnn-cvae 64, cvae 128)", parse=positive_int)
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
                     "start + path prefix)", choices=VIEWS)
     minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)

@@ -190,7 +190,9 @@ def train(args: TrainArgs) -> dict[str, Any]:
     if args.relative_inputs and adapter.kind not in ("tree/gnn", "tree/gnn-cvae"):
         raise TrainError(f"--relative-inputs applies to the node-mixture gnn and gnn-cvae, not {adapter.kind}")
     try:
-        model, ctor_args = adapter.build(scales, **({"relative_inputs": True} if args.relative_inputs else {}))
+        overrides = ({"relative_inputs": True} if args.relative_inputs else {}) | \
+            ({"hidden_channels": args.hidden} if args.hidden is not None else {})
+        model, ctor_args = adapter.build(scales, **overrides)
     except ValueError as exc:
         raise TrainError(f"--model {args.model} on task {args.task}: {exc}") from None
     started = time.perf_counter()
@@ -274,7 +276,8 @@ def command_of(args: TrainArgs) -> str:
     """The command line that reproduces the run (what a shipped sidecar records)."""
     imports = "".join(f" --import {m}" for m in args.modules)
     extra = ((f" --scene {args.scene}" if args.scene is not None else "") + (" --augment" if args.augment else "")
-             + (" --relative-inputs" if args.relative_inputs else ""))
+             + (" --relative-inputs" if args.relative_inputs else "")
+             + (f" --hidden {args.hidden}" if args.hidden is not None else ""))
     return (f"gnn-mp train sampler{imports} --task {args.task}{extra} --model {args.model} --problems {args.problems} "
             f"--view {args.view} --minutes {args.minutes} --dagger-rounds {args.dagger_rounds} --dagger-problems "
             f"{args.dagger_problems} --dagger-minutes {args.dagger_minutes} --eval-problems {args.eval_problems} "
