@@ -38,6 +38,7 @@ BUDGET: dict[str, list[str]] = {
                                       "--nodes", "40", "--trees", "2", "--conversions", "1"],
     "python -m tools.tune_proposals": ["--problems", "2", "--repeats", "1"],
     "python -m tools.rl_tree_swap": ["--problems", "2", "--max-steps", "200"],
+    "python -m tools.compare_on_kinds": ["--problems", "2", "--workers", "1"],
     "python -m pytest": ["tests/test_architecture.py"],
 }
 

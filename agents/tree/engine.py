@@ -192,7 +192,8 @@ class IncrementalTreeGNN(_Engine):
         if not self.heads:
             raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
         w, b = self.query_shift
-        return node_mixture(self.keys[:self.n], q, int(active), 1.0 / temperature, w, b, self.step)
+        q = np.ascontiguousarray(q, dtype=np.float64)     # the compiled product takes float64 rows only
+        return node_mixture(self.keys[:self.n], q, int(active), 1.0 / float(temperature), w, b, self.step)
 
 
 class IncrementalTreeScorer(_Engine):
