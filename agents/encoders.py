@@ -162,7 +162,7 @@ class MeanEdges:
         self._scatter_index: torch.Tensor | None = None
 
     def conv(self, conv: nn.Module, h: torch.Tensor) -> torch.Tensor:
-        if not _plain_mean_sage(conv):
+        if not plain_mean_sage(conv):
             return conv(h, self.edge_index)
         x_j = h.index_select(0, self.src)
         if self._scatter_index is None or self._scatter_index.shape != x_j.shape:
@@ -171,7 +171,7 @@ class MeanEdges:
         return conv.lin_l(mean) + conv.lin_r(h)
 
 
-def _plain_mean_sage(conv: nn.Module) -> bool:
+def plain_mean_sage(conv: nn.Module) -> bool:
     """A ``SAGEConv`` as :data:`CONVS` builds it: mean aggregation, no projection, no
     normalisation, root weight on."""
     return (type(conv) is SAGEConv and isinstance(conv.aggr, str) and conv.aggr == "mean" and not conv.project
@@ -241,4 +241,4 @@ class CandidateEncoder(nn.Module):
         return torch.cat([per.flatten(-2), summary], -1)
 
 
-__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder"]
+__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder", "plain_mean_sage"]

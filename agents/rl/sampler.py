@@ -36,7 +36,7 @@ import torch
 from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
-from agents.encoders import TreeEncoder, _plain_mean_sage
+from agents.encoders import TreeEncoder, plain_mean_sage
 from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy, SB3PPOPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
@@ -174,7 +174,7 @@ def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
     """
     enc = policy.encoder
     if type(policy) is not SB3PPOPolicy or type(enc) is not TreeEncoder or enc.knn or type(enc.act) not in _NUMPY_ACTS \
-            or not all(_plain_mean_sage(conv) for conv in enc.tree_convs):
+            or not all(plain_mean_sage(conv) for conv in enc.tree_convs):
         return None
     try:
         return {"act": _NUMPY_ACTS[type(enc.act)], "feature_scale": enc.feature_scale.numpy().copy(),

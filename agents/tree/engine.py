@@ -102,23 +102,23 @@ class IncrementalTreeGNN(_Engine):
         self.periodic = m.periodic.numpy().copy()
         (iw1, ib1), (iw2, ib2) = linears(m.input)
         H = self.H
-        # Per layer, stacked for the compiled per-node loop: each message MLP's first layer split into its
-        # sender part W_h (cached per node: W_h h_j) and its relative-position part W_x / step, then the
-        # second layer; the update MLP; the LayerNorm.
+        # Per layer, stacked for the compiled embedding: each message MLP's first layer split into its
+        # sender part W_h (cached per node: W_h h_j) and its relative-position part W_x / step; its second
+        # layer enters the update MLP only through the update's first layer, so the two are fused per
+        # message (U_p = uw1[H:2H], U_k = uw1[2H:]: m U = h' (W_2 U) + b_2 U); the update MLP's h block
+        # and second layer; the LayerNorm.
         first = [[linears(conv.net) for conv in (conv_p, conv_k)] for conv_p, conv_k in zip(m.parent_convs, m.knn_convs)]
+        updates = [linears(u) for u in m.updates]
         stack = lambda pick: np.ascontiguousarray(np.stack([pick(layer) for layer in range(self.L)]))   # noqa: E731
         self.w_sender = stack(lambda l: np.stack([first[l][0][0][0][:H], first[l][1][0][0][:H]]))
         self.wpx, self.bp1 = stack(lambda l: first[l][0][0][0][H:] / self.step[:, None]), stack(lambda l: first[l][0][0][1])
-        self.wp2, self.bp2 = stack(lambda l: first[l][0][1][0]), stack(lambda l: first[l][0][1][1])
         self.wkx, self.bk1 = stack(lambda l: first[l][1][0][0][H:] / self.step[:, None]), stack(lambda l: first[l][1][0][1])
-        self.wk2, self.bk2 = stack(lambda l: first[l][1][1][0]), stack(lambda l: first[l][1][1][1])
-        updates = [linears(u) for u in m.updates]
-        self.uw1, self.ub1 = stack(lambda l: updates[l][0][0]), stack(lambda l: updates[l][0][1])
-        # the messages enter the update MLP only through its first layer: their second layers fused with
-        # their blocks of it (U_p = uw1[H:2H], U_k = uw1[2H:]): m U = h' (W_2 U) + b_2 U
-        self.wpu, self.bpu = self.wp2 @ self.uw1[:, H:2 * H], self.bp2[:, None, :] @ self.uw1[:, H:2 * H]
-        self.wku, self.bku = self.wk2 @ self.uw1[:, 2 * H:], self.bk2[:, None, :] @ self.uw1[:, 2 * H:]
-        self.bpu, self.bku = np.ascontiguousarray(self.bpu[:, 0]), np.ascontiguousarray(self.bku[:, 0])
+        block = lambda l, e: updates[l][0][0][(1 + e) * H:(2 + e) * H]      # noqa: E731  (e: 0 parent, 1 k-NN)
+        self.wpu = stack(lambda l: first[l][0][1][0] @ block(l, 0))
+        self.bpu = stack(lambda l: first[l][0][1][1] @ block(l, 0))
+        self.wku = stack(lambda l: first[l][1][1][0] @ block(l, 1))
+        self.bku = stack(lambda l: first[l][1][1][1] @ block(l, 1))
+        self.uw1, self.ub1 = stack(lambda l: updates[l][0][0][:H]), stack(lambda l: updates[l][0][1])
         self.uw2, self.ub2 = stack(lambda l: updates[l][1][0]), stack(lambda l: updates[l][1][1])
         norms = norms_of(m.norms)
         self.norm_g, self.norm_b = stack(lambda l: norms[l][0]), stack(lambda l: norms[l][1])
@@ -133,7 +133,7 @@ class IncrementalTreeGNN(_Engine):
         self.weights = (self.periodic, self.step, self.center, self.scale, self.feature_scale, bool(self.relative_inputs),
                         int(self.k) if self.use_knn else 0, bool(self.use_parent), self.heads, iw1, ib1, iw2, ib2,
                         self.w_sender, self.wpx, self.bp1, self.wpu, self.bpu, self.wkx, self.bk1, self.wku, self.bku,
-                        np.ascontiguousarray(self.uw1[:, :H]), self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
+                        self.uw1, self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
                         *self.node_head)
         super().__init__(m.state_dim, capacity)
 
