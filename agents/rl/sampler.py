@@ -221,8 +221,7 @@ def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarr
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
     h = _numpy_mlp(twin["candidate"], np.asarray(features, np.float32))
     x = _numpy_mlp(twin["body"], np.concatenate([h.reshape(-1), h.mean(0), h.max(0)]))
-    w, b, _ = twin["logits"]
-    return x @ w + b
+    return _numpy_mlp([twin["logits"]], x)
 
 
 class PickSampler(ModelSampler):

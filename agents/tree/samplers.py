@@ -61,6 +61,29 @@ class _EngineSampler(ModelSampler):
         return q, active
 
 
+class _BatchDecoder:
+    """A CVAE-style sampler's decoding: ``proposals`` latent draws decoded at once for one condition,
+    finished as actions (wrapped, clipped, float32) and handed out one per model sample, last first."""
+
+    def decode(self, obs: Mapping) -> list[np.ndarray]:
+        raise NotImplementedError
+
+    def decode_batch(self, condition: torch.Tensor) -> list[np.ndarray]:
+        """``proposals`` finished actions for ``condition`` (the latent draws from the sampler's stream)."""
+        z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
+                            dtype=torch.float32)
+        with torch.inference_mode():
+            states = self.model.decode_for_one(z, condition).double().numpy()
+        return list(self.finish(states))
+
+    def model_action(self, obs: Mapping) -> np.ndarray:
+        return self.refreshed(obs, self.decode).pop()
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        """The next decoded state, already an action (wrapped, clipped, float32)."""
+        return self.model_action(obs)
+
+
 class TreeGNNSampler(_EngineSampler):
     """The GNN sampler (Algorithm 1): a node ~ softmax(key . q / temperature), then a Gaussian
     around its learned offset (scale times ``sigma_scale``). With ``proposals`` > 1 the tree is
@@ -139,7 +162,7 @@ class TreeScorerSampler(_EngineSampler):
         return cands[i]
 
 
-class TreeCVAESampler(ModelSampler):
+class TreeCVAESampler(_BatchDecoder, ModelSampler):
     """Ichter et al.'s CVAE: decodes ``proposals`` states per forward pass for the problem
     (start, goal, obstacles) and spends them over the next steps; it does not read the tree."""
 
@@ -156,22 +179,11 @@ class TreeCVAESampler(ModelSampler):
         return None        # the condition is the problem's, whichever tree is active
 
     def decode(self, obs: Mapping) -> list[np.ndarray]:
-        """The forward: ``proposals`` states for the problem, finished as actions (handed out last first)."""
-        condition = cvae_condition(self.model, obs)
-        z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
-                            dtype=torch.float32)
-        with torch.inference_mode():
-            return list(self.finish(self.model.decode_for_one(z, condition).double().numpy()))
-
-    def model_action(self, obs: Mapping) -> np.ndarray:
-        return self.refreshed(obs, self.decode).pop()
-
-    def model_sample(self, obs: Mapping) -> np.ndarray:
-        """The next decoded state, already an action (wrapped, clipped, float32)."""
-        return self.model_action(obs)
+        """The forward: ``proposals`` actions for the problem."""
+        return self.decode_batch(cvae_condition(self.model, obs))
 
 
-class TreeGNNCVAESampler(_EngineSampler):
+class TreeGNNCVAESampler(_BatchDecoder, _EngineSampler):
     """The GNN-CVAE: the causal GNN summarises the tree (incrementally, as the GNN sampler),
     the decoder turns latent draws and that context into the next samples: ``proposals`` of
     them per forward, handed out one per step."""
@@ -187,21 +199,9 @@ class TreeGNNCVAESampler(_EngineSampler):
         self.engine = IncrementalTreeGNN(model.gnn, heads=False)     # it reads the tree sums only
 
     def decode(self, obs: Mapping) -> list[np.ndarray]:
-        """The forward: the tree context, then ``proposals`` latent draws decoded at once and
-        finished as actions (handed out last first)."""
+        """The forward: the tree context, then ``proposals`` actions for it."""
         q, _ = self.tree_context(obs)
-        z = torch.as_tensor(self.rng.standard_normal((self.proposals, self.model.latent_channels)),
-                            dtype=torch.float32)
-        with torch.inference_mode():
-            states = self.model.decode_for_one(z, torch.as_tensor(q, dtype=torch.float32)).double().numpy()
-        return list(self.finish(states))
-
-    def model_action(self, obs: Mapping) -> np.ndarray:
-        return self.refreshed(obs, self.decode).pop()
-
-    def model_sample(self, obs: Mapping) -> np.ndarray:
-        """The next decoded state, already an action (wrapped, clipped, float32)."""
-        return self.model_action(obs)
+        return self.decode_batch(torch.as_tensor(q, dtype=torch.float32))
 
 
 def cvae_condition(model: TreeCVAE, obs: Mapping) -> torch.Tensor:
