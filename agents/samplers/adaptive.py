@@ -124,21 +124,19 @@ class AdaptiveShare:
         """Mark the cells of rows ``seen..n-1``; whether any was new."""
         if n <= self.seen:
             return False
-        rows = np.asarray(obs["nodes"][self.seen:n], np.float64).tolist()
+        # float32 rows as Python floats: the same values as a float64 copy, without the copy
+        rows = np.asarray(obs["nodes"][self.seen:n]).tolist()
         trees = np.asarray(obs["node_features"][self.seen:n, -1]).tolist()
-        top, floor = self.cells - 1, math.floor
-        new = False
+        cells, top, floor, visited = self.cells, self.cells - 1, math.floor, self.visited
+        size = len(visited)
         for tree, row in zip(trees, rows):
             key = [tree]
             for x, (low, scale, periodic) in zip(row, self.axes):
                 i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
-                key.append(i % self.cells if periodic else min(max(i, 0), top))
-            key = tuple(key)
-            if key not in self.visited:
-                self.visited.add(key)
-                new = True
+                key.append(i % cells if periodic else (0 if i < 0 else top if i > top else i))
+            visited.add(tuple(key))
         self.seen = n
-        return new
+        return len(visited) > size
 
 
 __all__ = ["DEFAULTS", "GUARANTEE_FACTOR", "MODEL", "OTHER", "UNIFORM", "AdaptiveShare"]
