@@ -180,6 +180,15 @@ def test_a_setting_overrides_the_one_stored_with_the_weights(tmp_path):
     assert exc.value.code == 2
 
 
+@pytest.mark.parametrize("flag", [["--out", "elsewhere"], ["--no-ompl"], ["--no-render"]])
+def test_suite_only_flags_without_a_suite_are_refused_in_one_line(flag, capsys):
+    """A one-task run writes only --json/--plot/--render: a suite's --out (or --no-ompl, --no-render)
+    given without --suite is refused in one line before anything runs, not silently ignored."""
+    code = cli.main(["benchmark", "--samplers", "uniform", "--problems", "1", "--no-progress", *flag])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--suite only" in err[0] and "--json" in err[0], err
+
+
 def test_every_returned_path_is_rechecked_and_failures_are_named():
     """The benchmark re-checks each solved run's path edge by edge (problem.path_valid) and the
     table says how many passed; a failing row is named (issue #21, item 12)."""
