@@ -148,14 +148,15 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         return fail(f"benchmark: {exc}")
     terminate_as_interrupt()
     suite = from_namespace(SuiteOptions, ns)
-    if suite.suite is None and (suite.out != SuiteOptions.out or not suite.ompl or not suite.render_images):
+    if suite.suite is None and (suite.out is not None or not suite.ompl or not suite.render_images):
         # a one-task run writes only what --json / --plot / --render ask for: refuse rather than write nothing
         return fail("benchmark: --out, --no-ompl and --no-render apply to --suite only; for one task give "
                     "--json FILE, --plot FILE or --render DIR (OMPL rows: --samplers ompl-rrt,...)")
     try:
         if suite.suite is not None:
-            renders = (args.render or suite.out / "renders") if suite.render_images else None
-            bm.run_suite(suite.suite, suite.out, seed=args.seed, workers=args.workers, progress=args.progress,
+            out = suite.out or SuiteOptions.DEFAULT_OUT
+            renders = (args.render or out / "renders") if suite.render_images else None
+            bm.run_suite(suite.suite, out, seed=args.seed, workers=args.workers, progress=args.progress,
                          with_ompl=None if suite.ompl else False, render=renders)
             return 0
         bm.benchmark(args)

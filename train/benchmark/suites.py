@@ -36,10 +36,13 @@ class SuiteOptions:
 
     suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm); writes "
                             "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
-    out: Path = arg(Path("results"), "output directory of --suite")
+    out: Path | None = arg(None, "output directory of --suite (default: results)")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
     render_images: bool = arg(True, "--suite: skip tree-growth images (else written to --render DIR, default "
                               "OUT/renders)", flag="--no-render")
+
+    #: Where a suite writes when ``--out`` is not given.
+    DEFAULT_OUT = Path("results")
 
 
 @dataclass
