@@ -76,17 +76,22 @@ def torch_mixture(model, obs, temperature):
 
 def check_mixture_engine(gnn, snapshots, temperature=0.5, decoder=None):
     engine = IncrementalTreeGNN(gnn, capacity=16)           # grows its caches on the way
+    fused = IncrementalTreeGNN(gnn, capacity=16)            # the sampler's one call per step
     checked = 0
     for i, obs in enumerate(snapshots):
         engine.ingest(obs)
         n = int(obs["num_nodes"][0])
+        fused_p, _, fused_shift = fused.grown_mixture(obs, fused.new_rows(obs), int(obs["active_tree"][0]), temperature)
         if i not in (len(snapshots) // 3, 2 * len(snapshots) // 3, len(snapshots) - 1):
             continue
         ref = torch_mixture(gnn, obs, temperature)
         active = int(obs["active_tree"][0])
         q = engine.context(obs["start"].astype(np.float64), obs["goal"].astype(np.float64), active)
         p, shift = engine.mixture(q, active, temperature)
-        assert engine.n == n
+        assert engine.n == n == fused.n
+        # the one compiled call runs the same compiled functions: the same floats, bit for bit
+        assert np.array_equal(fused_p, p) and np.array_equal(fused_shift, shift)
+        assert np.array_equal(fused.keys[:n], engine.keys[:n]) and np.array_equal(fused.sums, engine.sums)
         np.testing.assert_allclose(engine.keys[:n], ref["key"], atol=TOL)
         np.testing.assert_allclose(engine.offsets[:n], ref["offset"], atol=TOL)
         np.testing.assert_allclose(engine.log_sigma[:n], ref["log_sigma"], atol=TOL)

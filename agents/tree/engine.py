@@ -22,7 +22,7 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.compiled import embed_rows, node_mixture, tree_context
+from agents.tree.compiled import embed_rows, mixture_after_rows, node_mixture, pack_weights, tree_context
 from agents.tree.kernels import layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
@@ -135,6 +135,16 @@ class IncrementalTreeGNN(_Engine):
                         self.w_sender, self.wpx, self.bp1, self.wpu, self.bpu, self.wkx, self.bk1, self.wku, self.bku,
                         self.uw1, self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
                         *self.node_head)
+        #: The same weights packed for :meth:`grown_mixture`'s one compiled call (a short dispatch).
+        names = ("step", "center", "scale", "feature_scale", "iw1", "ib1", "iw2", "ib2", "w_sender", "wpx", "bp1",
+                 "wpu", "bpu", "wkx", "bk1", "wku", "bku", "uw1", "ub1", "uw2", "ub2", "norm_g", "norm_b", "norm_eps")
+        (qw1, qb1), (qw2, qb2) = self.query
+        packed = dict(zip(names, self.weights[1:5] + self.weights[9:29]), kw=self.key[0], kb=self.key[1],
+                      hw=self.node_head[0], hb=self.node_head[1], qw1=qw1, qb1=qb1, qw2=qw2, qb2=qb2,
+                      shift_w=self.query_shift[0], shift_b=self.query_shift[1])
+        self._flat, self._layout = pack_weights(packed)
+        self._flags = np.array([bool(self.relative_inputs), int(self.k) if self.use_knn else 0, bool(self.use_parent),
+                                self.heads, bool(self.use_context)], dtype=np.int64)
         super().__init__(m.state_dim, capacity)
 
     def _allocate(self, capacity: int) -> None:
@@ -171,16 +181,38 @@ class IncrementalTreeGNN(_Engine):
         self.n = n
         return n
 
-    def context(self, start: np.ndarray, goal: np.ndarray, active: int) -> np.ndarray:
-        """The tree context ``q`` ``(H,)`` of the ingested tree (``TreeGNN.context``; compiled, its
-        start-and-goal inputs kept per problem)."""
-        key = start.tobytes() + goal.tobytes()
+    def _ends_of(self, start: np.ndarray, goal: np.ndarray, key: bytes) -> np.ndarray:
+        """The context's start-and-goal inputs, kept per problem (``key``: its start and goal bytes)."""
         if key != self._ends_key:
+            start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
             ends = ([wrap_periodic(goal - start, self.periodic) / self.scale] if self.relative_inputs
                     else [(start - self.center) / self.scale, (goal - self.center) / self.scale])
             self._ends, self._ends_key = np.concatenate(ends).astype(np.float64), key
+        return self._ends
+
+    def context(self, start: np.ndarray, goal: np.ndarray, active: int) -> np.ndarray:
+        """The tree context ``q`` ``(H,)`` of the ingested tree (``TreeGNN.context``; compiled, its
+        start-and-goal inputs kept per problem)."""
+        ends = self._ends_of(start, goal, start.tobytes() + goal.tobytes())
         (w1, b1), (w2, b2) = self.query
-        return tree_context(self._ends, int(active), self.sums, self.counts, bool(self.use_context), w1, b1, w2, b2)
+        return tree_context(ends, int(active), self.sums, self.counts, bool(self.use_context), w1, b1, w2, b2)
+
+    def grown_mixture(self, obs: Mapping[str, np.ndarray], rows: tuple[int, int], active: int,
+                      temperature: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`ingest`, :meth:`context` and :meth:`node_mixture` in one compiled call (the GNN
+        sampler's forward; the same floats): probabilities, their running sums and the shift.
+        ``rows`` is what :meth:`new_rows` just returned for ``obs``."""
+        if not self.heads:
+            raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
+        i0, n = rows
+        start, goal = obs["start"], obs["goal"]
+        ends = self._ends_of(start, goal, self._problem_key)
+        out = mixture_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
+                                 self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                                 self.periodic, self._flags, self._flat, self._layout, ends, int(active),
+                                 1.0 / float(temperature))
+        self.n = n
+        return out
 
     def mixture(self, q: np.ndarray, active: int, temperature: float) -> tuple[np.ndarray, np.ndarray]:
         """Node probabilities ``(n,)`` and the component shift ``(d,)`` at the current tree."""

@@ -107,12 +107,13 @@ class TreeGNNSampler(_EngineSampler):
         It draws nothing, so while the tree is the one of the last forward (the extensions since were
         blocked: about half of them on maze2d) its result is that forward's, returned as it is.
         """
-        self.engine.ingest(obs)
+        e = self.engine
+        rows = e.new_rows(obs)
         active = self.active(obs)
-        tree = (self.engine.generation, self.engine.n, active)
+        tree = (e.generation, rows[1], active)
         if tree != self._mixture_of:
-            q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
-            _, cumulative, shift = self.engine.node_mixture(q, active, self.temperature)
+            # the new rows' embeddings, the context and the mixture: one compiled call
+            _, cumulative, shift = e.grown_mixture(obs, rows, active, self.temperature)
             self._mixture, self._mixture_of = (active, cumulative, shift), tree
         return self._mixture
 
