@@ -256,3 +256,21 @@ def test_compiled_angle_wrap_is_the_float_modulo_bit_for_bit():
     got = np.array([_wrapped(float(v), True) for v in values])
     assert np.array_equal(got, expected, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(expected))
     assert all(_wrapped(float(v), False) == v for v in values[:100])
+
+
+def test_a_one_tree_gnn_refuses_a_birrt_observation():
+    """An RRT-trained GNN (one tree slot) fed a BiRRT observation: a one-line error, not a write
+    past its caches (unchecked, the compiled loop wrote tree 1's sums out of bounds)."""
+    from agents.samplers import load_sampler
+    sampler = load_sampler("gnn", task="maze2d", seed=0)
+    assert sampler.engine.trees == 1
+    env = gym.make("GNNMP/Maze2DBiRRT-v0", split="val", disable_env_checker=True)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    with pytest.raises(ValueError, match="no slot"):
+        for _ in range(50):
+            obs, *_ = env.step(sampler.act(obs))
+    engine = IncrementalTreeGNN(sampler.model)
+    with pytest.raises(ValueError, match="no slot"):
+        engine.ingest(obs)
+    with pytest.raises(ValueError, match="no slot"):
+        engine.context(obs["start"].astype(np.float64), obs["goal"].astype(np.float64), 1)

@@ -22,6 +22,9 @@ import numpy as np
 from numba import njit
 
 _SQRT_HALF = 1.0 / math.sqrt(2.0)
+#: The one-line refusal of a tree id the model has no slot for (unchecked, it would write past the caches).
+_UNTRAINED_TREE = ("the observation holds a tree this GNN has no slot for (tree id >= its num_trees): a model "
+                   "trained on RRT (one tree) cannot read a BiRRT observation; use a checkpoint trained for this env")
 _TWO_PI = 2.0 * math.pi
 
 
@@ -103,6 +106,9 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
     B, d = x.shape
     L, H = bp1.shape
     T = offsets.shape[1]
+    for r in range(B):
+        if tid[r] < 0 or tid[r] >= counts.shape[0]:
+            raise ValueError(_UNTRAINED_TREE)
     F = feats.shape[1]
     n_in = iw1.shape[0]
     best_d = np.empty(max(knn, 1))
@@ -217,6 +223,8 @@ def tree_context(ends, active, sums, counts, use_context, qw1, qb1, qw2, qb2):
     tree's mean embedding (zeros without ``use_context``), log1p(node counts) / 5]`` (``ends``: the
     start and goal part, computed by the caller)."""
     T, H = sums.shape
+    if active < 0 or active >= T:
+        raise ValueError(_UNTRAINED_TREE)
     E = ends.shape[0]
     inp = np.zeros(E + T + T * H + T)
     inp[:E] = ends
