@@ -77,11 +77,13 @@ def torch_mixture(model, obs, temperature):
 def check_mixture_engine(gnn, snapshots, temperature=0.5, decoder=None):
     engine = IncrementalTreeGNN(gnn, capacity=16)           # grows its caches on the way
     fused = IncrementalTreeGNN(gnn, capacity=16)            # the sampler's one call per step
+    fused_context = IncrementalTreeGNN(gnn, capacity=16, heads=False)    # the GNN-CVAE's
     checked = 0
     for i, obs in enumerate(snapshots):
         engine.ingest(obs)
         n = int(obs["num_nodes"][0])
         fused_p, _, fused_shift = fused.grown_mixture(obs, fused.new_rows(obs), int(obs["active_tree"][0]), temperature)
+        fused_q = fused_context.grown_context(obs, fused_context.new_rows(obs), int(obs["active_tree"][0]))
         if i not in (len(snapshots) // 3, 2 * len(snapshots) // 3, len(snapshots) - 1):
             continue
         ref = torch_mixture(gnn, obs, temperature)
@@ -92,6 +94,7 @@ def check_mixture_engine(gnn, snapshots, temperature=0.5, decoder=None):
         # the one compiled call runs the same compiled functions: the same floats, bit for bit
         assert np.array_equal(fused_p, p) and np.array_equal(fused_shift, shift)
         assert np.array_equal(fused.keys[:n], engine.keys[:n]) and np.array_equal(fused.sums, engine.sums)
+        assert np.array_equal(fused_q, q)
         np.testing.assert_allclose(engine.keys[:n], ref["key"], atol=TOL)
         np.testing.assert_allclose(engine.offsets[:n], ref["offset"], atol=TOL)
         np.testing.assert_allclose(engine.log_sigma[:n], ref["log_sigma"], atol=TOL)

@@ -317,45 +317,61 @@ def _w4(flat, layout, i):
     return flat[o:o + a * b * c * e].reshape((a, b, c, e))
 
 
-@njit(cache=True)
-def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
-                       counts, periodic, flags, flat, layout, ends, active, inv_temperature):
-    """One GNN sampler step in one compiled call: embed the observation's rows ``i0..n-1`` (its
-    ``nodes``, ``node_features`` and ``parents`` arrays as the observation holds them; nothing when
-    ``n == i0``) into the caches (:func:`embed_rows`), then the tree context (:func:`tree_context`)
-    and the node mixture (:func:`node_mixture`) of the grown tree. The same compiled functions, so the
-    same floats as calling them one by one; ``flags`` are ``(relative_inputs, knn, use_parent, heads,
-    use_context)`` and ``flat``/``layout`` the weights of :func:`pack_weights`."""
+@njit(cache=True, inline="always")
+def _embed_new_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                    counts, periodic, flags, flat, layout):
+    """:func:`embed_rows` of the observation's rows ``i0..n-1``, read from its arrays as they are
+    (float32 states and features, integer parents), with the packed weights."""
     d = states.shape[1]
     F = node_features.shape[1]
     B = n - i0
-    if B > 0:
-        x = np.empty((B, d))
-        feats = np.empty((B, F))
-        tid = np.empty(B, dtype=np.int64)
-        parent = np.empty(B, dtype=np.int64)
-        for r in range(B):
-            for c in range(d):
-                x[r, c] = nodes[i0 + r, c]
-                states[i0 + r, c] = x[r, c]
-            for c in range(F):
-                feats[r, c] = node_features[i0 + r, c]
-            tid[r] = np.int64(feats[r, 2 * d])
-            tree_id[i0 + r] = tid[r]
-            parent[r] = parents[i0 + r]
-        embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets, log_sigma, sums, counts,
-                   periodic, _w1(flat, layout, 0), _w1(flat, layout, 1), _w1(flat, layout, 2), _w1(flat, layout, 3),
-                   flags[0] != 0, flags[1], flags[2] != 0, flags[3] != 0,
-                   _w2(flat, layout, 4), _w1(flat, layout, 5), _w2(flat, layout, 6), _w1(flat, layout, 7),
-                   _w4(flat, layout, 8), _w3(flat, layout, 9), _w2(flat, layout, 10), _w3(flat, layout, 11),
-                   _w2(flat, layout, 12), _w3(flat, layout, 13), _w2(flat, layout, 14), _w3(flat, layout, 15),
-                   _w2(flat, layout, 16), _w3(flat, layout, 17), _w2(flat, layout, 18), _w3(flat, layout, 19),
-                   _w2(flat, layout, 20), _w2(flat, layout, 21), _w2(flat, layout, 22), _w1(flat, layout, 23),
-                   _w2(flat, layout, 24), _w1(flat, layout, 25), _w2(flat, layout, 26), _w1(flat, layout, 27))
-    q = tree_context(ends, active, sums, counts, flags[4] != 0, _w2(flat, layout, 28), _w1(flat, layout, 29),
-                     _w2(flat, layout, 30), _w1(flat, layout, 31))
+    if B <= 0:
+        return
+    x = np.empty((B, d))
+    feats = np.empty((B, F))
+    tid = np.empty(B, dtype=np.int64)
+    parent = np.empty(B, dtype=np.int64)
+    for r in range(B):
+        for c in range(d):
+            x[r, c] = nodes[i0 + r, c]
+            states[i0 + r, c] = x[r, c]
+        for c in range(F):
+            feats[r, c] = node_features[i0 + r, c]
+        tid[r] = np.int64(feats[r, 2 * d])
+        tree_id[i0 + r] = tid[r]
+        parent[r] = parents[i0 + r]
+    embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets, log_sigma, sums, counts,
+               periodic, _w1(flat, layout, 0), _w1(flat, layout, 1), _w1(flat, layout, 2), _w1(flat, layout, 3),
+               flags[0] != 0, flags[1], flags[2] != 0, flags[3] != 0,
+               _w2(flat, layout, 4), _w1(flat, layout, 5), _w2(flat, layout, 6), _w1(flat, layout, 7),
+               _w4(flat, layout, 8), _w3(flat, layout, 9), _w2(flat, layout, 10), _w3(flat, layout, 11),
+               _w2(flat, layout, 12), _w3(flat, layout, 13), _w2(flat, layout, 14), _w3(flat, layout, 15),
+               _w2(flat, layout, 16), _w3(flat, layout, 17), _w2(flat, layout, 18), _w3(flat, layout, 19),
+               _w2(flat, layout, 20), _w2(flat, layout, 21), _w2(flat, layout, 22), _w1(flat, layout, 23),
+               _w2(flat, layout, 24), _w1(flat, layout, 25), _w2(flat, layout, 26), _w1(flat, layout, 27))
+
+
+@njit(cache=True)
+def context_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                       counts, periodic, flags, flat, layout, ends, active):
+    """The GNN-CVAE's forward up to its decoder in one compiled call: embed the observation's rows
+    ``i0..n-1`` (nothing when ``n == i0``), then the tree context (:func:`tree_context`). ``flags``
+    are ``(relative_inputs, knn, use_parent, heads, use_context)``, ``flat``/``layout`` the weights of
+    :func:`pack_weights`; the same compiled functions, so the same floats as calling them one by one."""
+    _embed_new_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                    counts, periodic, flags, flat, layout)
+    return tree_context(ends, active, sums, counts, flags[4] != 0, _w2(flat, layout, 28), _w1(flat, layout, 29),
+                        _w2(flat, layout, 30), _w1(flat, layout, 31))
+
+
+@njit(cache=True)
+def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                       counts, periodic, flags, flat, layout, ends, active, inv_temperature):
+    """One GNN sampler step in one compiled call: :func:`context_after_rows`, then the node mixture
+    (:func:`node_mixture`) of the grown tree: probabilities, their running sums and the shift."""
+    q = context_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma,
+                           sums, counts, periodic, flags, flat, layout, ends, active)
     return node_mixture(keys[:n], q, active, inv_temperature, _w2(flat, layout, 32), _w1(flat, layout, 33),
                         _w1(flat, layout, 0))
 
-
-__all__ = ["PACKED_WEIGHTS", "embed_rows", "mixture_after_rows", "node_mixture", "pack_weights", "tree_context"]
+__all__ = ["PACKED_WEIGHTS", "context_after_rows", "embed_rows", "mixture_after_rows", "node_mixture", "pack_weights", "tree_context"]

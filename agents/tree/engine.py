@@ -22,7 +22,7 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.compiled import embed_rows, mixture_after_rows, node_mixture, pack_weights, tree_context
+from agents.tree.compiled import context_after_rows, embed_rows, mixture_after_rows, node_mixture, pack_weights, tree_context
 from agents.tree.kernels import layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
@@ -196,6 +196,17 @@ class IncrementalTreeGNN(_Engine):
         ends = self._ends_of(start, goal, start.tobytes() + goal.tobytes())
         (w1, b1), (w2, b2) = self.query
         return tree_context(ends, int(active), self.sums, self.counts, bool(self.use_context), w1, b1, w2, b2)
+
+    def grown_context(self, obs: Mapping[str, np.ndarray], rows: tuple[int, int], active: int) -> np.ndarray:
+        """:meth:`ingest` and :meth:`context` in one compiled call (the GNN-CVAE's forward up to its
+        decoder; the same floats). ``rows`` is what :meth:`new_rows` just returned for ``obs``."""
+        i0, n = rows
+        ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
+        q = context_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
+                               self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                               self.periodic, self._flags, self._flat, self._layout, ends, int(active))
+        self.n = n
+        return q
 
     def grown_mixture(self, obs: Mapping[str, np.ndarray], rows: tuple[int, int], active: int,
                       temperature: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -54,11 +54,9 @@ class _EngineSampler(ModelSampler):
         return int(np.asarray(obs["active_tree"]).reshape(-1)[0])
 
     def tree_context(self, obs: Mapping) -> tuple[np.ndarray, int]:
-        """Ingest the observation's new nodes; the tree context ``q`` and the active tree."""
-        self.engine.ingest(obs)
+        """Ingest the observation's new nodes; the tree context ``q`` and the active tree (one compiled call)."""
         active = self.active(obs)
-        q = self.engine.context(np.asarray(obs["start"], np.float64), np.asarray(obs["goal"], np.float64), active)
-        return q, active
+        return self.engine.grown_context(obs, self.engine.new_rows(obs), active), active
 
 
 class _BatchDecoder:
