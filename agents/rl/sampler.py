@@ -294,7 +294,7 @@ class PickSampler(ModelSampler):
         else:
             p = np.exp(logits - logits.max())
             cumulative = np.cumsum(p)
-            k = min(int(np.searchsorted(cumulative, self.rng.random() * cumulative[-1], side="right")), len(p) - 1)
+            k = min(int(cumulative.searchsorted(self.rng.random() * cumulative[-1], "right")), len(p) - 1)
         self._picked = k
         return cands[k]
 

@@ -122,7 +122,8 @@ class TreeGNNSampler(_EngineSampler):
     def model_sample(self, obs: Mapping) -> np.ndarray:
         active, cumulative, shift = self.refreshed(obs, self.mixture)
         e = self.engine
-        m = min(int(np.searchsorted(cumulative, self.rng.random() * (1 - 1e-12), side="right")), len(cumulative) - 1)
+        # the method, not np.searchsorted: the same search without the dispatcher's ~1.5 us
+        m = min(int(cumulative.searchsorted(self.rng.random() * (1 - 1e-12), "right")), len(cumulative) - 1)
         sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
         return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
 
@@ -157,7 +158,7 @@ class TreeScorerSampler(_EngineSampler):
         logits = e.logits(cands, e.nearest(cands, self.active(obs))) / self.temperature
         p = np.exp(logits - logits.max())
         c = np.cumsum(p)
-        i = min(int(np.searchsorted(c, self.rng.random() * c[-1], side="right")), self.candidates - 1)
+        i = min(int(c.searchsorted(self.rng.random() * c[-1], "right")), self.candidates - 1)
         return cands[i]
 
 
