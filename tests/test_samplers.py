@@ -460,3 +460,14 @@ def test_the_mixture_uniform_draw_is_generator_uniform():
             want = ref.random()                                   # the mixture's choice
             assert want < 1.0
             np.testing.assert_array_equal(sampler.act(obs), ref.uniform(sampler.low, sampler.high).astype(np.float32))
+
+
+@pytest.mark.parametrize("task,setting", [("maze2d", {"temperature": -1.0}), ("maze2d", {"temperature": 0.0}),
+                                          ("maze2d", {"sigma_scale": float("nan")}), ("maze2d", {"sigma_scale": -0.5}),
+                                          ("pendulum", {"temperature": float("inf")})])
+def test_a_gnn_sampler_refuses_a_temperature_or_scale_out_of_range(task, setting):
+    """A negative temperature would invert the node mixture (the least likely node drawn most):
+    a bad ``--setting`` is a one-line error, not a silently different sampler."""
+    from agents.samplers import load_sampler
+    with pytest.raises(ValueError, match="finite and > 0"):
+        load_sampler("gnn", task=task, seed=0, **setting)

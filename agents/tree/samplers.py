@@ -93,6 +93,8 @@ class TreeGNNSampler(_EngineSampler):
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNN,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, temperature: float = 1.0,
                  sigma_scale: float = 1.0, proposals: int = 1, adaptive: bool | Mapping = False) -> None:
+        if not (np.isfinite(temperature) and temperature > 0 and np.isfinite(sigma_scale) and sigma_scale > 0):
+            raise ValueError(f"temperature and sigma_scale must be finite and > 0, got {temperature}, {sigma_scale}")
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive)
         self.model = model.eval()
@@ -138,8 +140,8 @@ class TreeScorerSampler(_EngineSampler):
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNScorer,
                  uniform_mix: float = 0.2, goal_bias: float = 0.05, candidates: int = 16,
                  temperature: float = 1.0, adaptive: bool | Mapping = False) -> None:
-        if int(candidates) < 1 or not temperature > 0:
-            raise ValueError(f"candidates must be >= 1 and temperature > 0, got {candidates}, {temperature}")
+        if int(candidates) < 1 or not (np.isfinite(temperature) and temperature > 0):
+            raise ValueError(f"candidates must be >= 1 and temperature finite and > 0, got {candidates}, {temperature}")
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.periodic.numpy(), adaptive=adaptive)
         self.model = model.eval()
