@@ -471,3 +471,15 @@ def test_a_gnn_sampler_refuses_a_temperature_or_scale_out_of_range(task, setting
     from agents.samplers import load_sampler
     with pytest.raises(ValueError, match="finite and > 0"):
         load_sampler("gnn", task=task, seed=0, **setting)
+
+
+@pytest.mark.parametrize("name,setting,match", [("gnn", {"uniform_mix": "nan"}, "must be numbers"),
+                                                ("cvae", {"goal_bias": True}, "must be numbers"),
+                                                ("rl-ppo", {"deterministic": 3}, "true or false")])
+def test_a_setting_of_the_wrong_type_is_refused(name, setting, match):
+    """``--setting`` values that are not JSON arrive as strings (``gnn.uniform_mix=nan``): a
+    one-line ValueError, not a TypeError from a comparison deep in the constructor; a flag takes
+    a boolean, not any truthy value."""
+    from agents.samplers import load_sampler
+    with pytest.raises(ValueError, match=match):
+        load_sampler(name, task="maze2d", seed=0, **setting)

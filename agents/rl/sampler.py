@@ -76,6 +76,8 @@ class RLSampler(ModelSampler):
             raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
         self.policy = policy.eval()
         self.view_nodes = int(view_nodes)
+        if not isinstance(deterministic, (bool, np.bool_)):
+            raise ValueError(f"deterministic must be true or false, got {deterministic!r}")
         self.deterministic = bool(deterministic)
         self.action_frame = action_frame
         self._mix32 = np.float32(self.uniform_mix)
@@ -256,6 +258,8 @@ class PickSampler(ModelSampler):
                              f"{self.candidate_set.count}")
         self.policy = policy.eval()
         self.view_nodes = int(view_nodes)
+        if not isinstance(deterministic, (bool, np.bool_)):
+            raise ValueError(f"deterministic must be true or false, got {deterministic!r}")
         self.deterministic = bool(deterministic)
         self._picked: int | None = None
         self._twin = None if policy.reads_tree else numpy_pick_layers(policy)

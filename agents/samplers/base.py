@@ -33,6 +33,7 @@ A new learned sampler implements :meth:`ModelSampler.model_sample`.
 from __future__ import annotations
 
 import contextlib
+import numbers
 import time
 from typing import TYPE_CHECKING, Mapping
 
@@ -230,6 +231,8 @@ class ModelSampler(Sampler):
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, uniform_mix: float = 0.25,
                  goal_bias: float = 0.0, periodic: np.ndarray | None = None, proposals: int = 1,
                  adaptive: bool | Mapping = False) -> None:
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in (uniform_mix, goal_bias)):
+            raise ValueError(f"uniform_mix and goal_bias must be numbers, got {uniform_mix!r}, {goal_bias!r}")
         if not (0.0 <= uniform_mix <= 1.0 and 0.0 <= goal_bias <= 1.0 and uniform_mix + goal_bias <= 1.0):
             raise ValueError(f"uniform_mix and goal_bias must be in [0, 1] with a sum <= 1, got {uniform_mix}, "
                              f"{goal_bias}")

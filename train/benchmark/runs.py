@@ -187,7 +187,7 @@ def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list
             cached_sampler(name, task, checkpoint, env, settings)
         except FileNotFoundError as exc:
             raise BenchmarkError(f"sampler {name!r}: missing checkpoint ({exc})") from None
-        except (ValueError, OSError, RuntimeError, KeyError) as exc:
+        except (ValueError, TypeError, OSError, RuntimeError, KeyError) as exc:
             raise BenchmarkError(f"sampler {name!r} cannot be loaded for task {task!r}: {exc}") from None
 
 
