@@ -179,19 +179,6 @@ def test_scorer_engine_equals_the_torch_model():
     assert checked == 3 and engine.n >= 300
 
 
-def test_nearest_k_is_the_stable_argsort():
-    """The engines' k-NN: argpartition, then the chosen k ordered by (distance, index), equals a full stable
-    argsort's first k (ties, many of them with integer distances, go to the lower index)."""
-    from agents.tree.kernels import nearest_k
-    rng = np.random.default_rng(0)
-    for trial in range(2000):
-        n, rows, k = int(rng.integers(1, 400)), int(rng.integers(1, 4)), int(rng.integers(1, 8))
-        dist = rng.integers(0, 20, (rows, n)).astype(float) if trial % 2 else rng.uniform(0, 1, (rows, n))
-        dist[rng.uniform(size=(rows, n)) < 0.3] = np.inf
-        k = min(k, n)
-        np.testing.assert_array_equal(nearest_k(dist, k), np.argsort(dist, axis=1, kind="stable")[:, :k])
-
-
 @pytest.mark.parametrize("name,task", [("cvae", "maze2d"), ("cvae", "arm"), ("gnn-cvae", "pendulum")])
 def test_decode_for_one_condition_equals_the_full_decoder(name, task):
     """The samplers' decode of many latents for one condition (the condition's first-layer share

@@ -1,2 +1,2 @@
-"""Tree samplers of Algorithm 1: torch models (``models``, ``scorer``), their incremental numpy engines
-(``engine`` on ``kernels``) and the samplers built on them (``samplers``)."""
+"""Tree samplers of Algorithm 1: torch models (``models``, ``scorer``), their incremental engines
+(``engine`` on ``compiled`` and ``kernels``) and the samplers built on them (``samplers``)."""

@@ -13,7 +13,9 @@ scores with the torch model's to 1e-5 on trees of a few hundred nodes).
 * :class:`IncrementalTreeGNN` mirrors :class:`agents.tree.models.TreeGNN` (the ``gnn``
   node mixture and the GNN-CVAE's tree context); the new nodes' embeddings, the context and the
   mixture are compiled functions of :mod:`agents.tree.compiled` (numba);
-* :class:`IncrementalTreeScorer` mirrors :class:`agents.tree.scorer.TreeGNNScorer`.
+* :class:`IncrementalTreeScorer` mirrors :class:`agents.tree.scorer.TreeGNNScorer`; its
+  per-node work (depth, input MLP, causal k-NN, message passing, frontier sums) is one compiled
+  call too (:func:`agents.tree.compiled.scorer_embed_rows`), its candidate head numpy.
 """
 
 from __future__ import annotations
@@ -22,8 +24,16 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.tree.compiled import context_after_rows, embed_rows, mixture_after_rows, node_mixture, pack_weights, tree_context
-from agents.tree.kernels import layer_norm, linears, mlp, nearest_k, norms_of, vector, wrap_periodic
+from agents.tree.compiled import (
+    context_after_rows,
+    embed_rows,
+    mixture_after_rows,
+    node_mixture,
+    pack_weights,
+    scorer_embed_rows,
+    tree_context,
+)
+from agents.tree.kernels import linears, mlp, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 
@@ -240,7 +250,7 @@ class IncrementalTreeGNN(_Engine):
 
 
 class IncrementalTreeScorer(_Engine):
-    """Numpy inference of a :class:`TreeGNNScorer` that embeds each new tree node once and keeps
+    """Inference of a :class:`TreeGNNScorer` that embeds each new tree node once (compiled) and keeps
     every node's frontier sum and counts up to date (``O(knn)`` per insertion)."""
 
     node_arrays = ("states", "tree_id", "depth", "front")
@@ -263,6 +273,17 @@ class IncrementalTreeScorer(_Engine):
         self.norms = norms_of(m.norms)
         self.frontier_net = linears(m.frontier.net)
         self.head = linears(m.head)
+        stack = lambda layers, i, j: np.ascontiguousarray(np.stack([mlp_[i][j] for mlp_ in layers]))   # noqa: E731
+        (iw1, ib1), (iw2, ib2) = self.input
+        (fw1, fb1), (fw2, fb2) = self.frontier_net
+        #: What the compiled per-node call reads besides the caches, in its argument order (built once).
+        self._compiled_weights = (
+            self.periodic.astype(bool), self.weights, self.angle_cols.astype(np.int64), self.center, self.scale,
+            self.feature_scale, self.step, float(self.depth_scale), int(self.k), iw1, ib1, iw2, ib2,
+            *(stack(convs, i, j) for convs in (self.parent_convs, self.knn_convs, self.updates)
+              for i, j in ((0, 0), (0, 1), (1, 0), (1, 1))),
+            np.stack([g for g, _, _ in self.norms]), np.stack([b for _, b, _ in self.norms]),
+            np.array([eps for _, _, eps in self.norms], dtype=np.float64), fw1, fb1, fw2, fb2)
         super().__init__(m.state_dim, capacity)
 
     def _allocate(self, capacity: int) -> None:
@@ -309,45 +330,10 @@ class IncrementalTreeScorer(_Engine):
         parent = np.asarray(obs["parent"][i0:n]).astype(np.int64)
         self.states[i0:n], self.tree_id[i0:n] = x, tid
         self.multi_tree = self.multi_tree or bool((tid != 0).any())
-        for r, p in enumerate(parent):      # a parent may be a row of this batch
-            self.depth[i0 + r] = self.depth[p] + 1.0 if p >= 0 else 0.0
-        B = n - i0
-        goal = np.broadcast_to(self.goal, (B, d))
-        inputs = np.concatenate([feats / self.feature_scale, (x - self.center) / self.scale,
-                                 (goal - self.center) / self.scale, *self._angles(x), *self._angles(feats[:, d:2 * d]),
-                                 *self._angles(goal), (self.depth[i0:n] / self.depth_scale)[:, None]], -1)
-        h = mlp(self.input, inputs)
-        self.h[0, i0:n] = h
-        # causal k-NN under the planner's metric: earlier nodes of the same tree, ties to the earlier node
-        rows = np.arange(i0, n)
-        if self.k:
-            dist = self._sq_dist(x, self.states[:n])
-            dist[(np.arange(n)[None, :] >= rows[:, None]) | (self.tree_id[None, :n] != tid[:, None])] = np.inf
-            near = nearest_k(dist, min(self.k, n))
-            near_ok = np.isfinite(dist[np.arange(B)[:, None], near])
-        else:
-            near, near_ok = np.zeros((B, 0), np.int64), np.zeros((B, 0), bool)
-        has_parent = parent >= 0
-        par = np.where(has_parent, parent, 0)
-        rel_p = wrap_periodic(self.states[par] - x, self.periodic) / self.step                   # (B, d)
-        rel_k = wrap_periodic(self.states[near] - x[:, None], self.periodic) / self.step          # (B, k, d)
-        count = near_ok.sum(1, keepdims=True)
-        for layer in range(self.L):
-            mp = mlp(self.parent_convs[layer], np.concatenate([self.h[layer, par], rel_p], -1))
-            mp = np.where(has_parent[:, None], mp, 0.0)
-            msg = mlp(self.knn_convs[layer], np.concatenate([self.h[layer][near], rel_k], -1))
-            mk = np.where(count > 0, (msg * near_ok[..., None]).sum(1) / np.maximum(count, 1), 0.0)
-            h = layer_norm(self.norms[layer], h + mlp(self.updates[layer], np.concatenate([h, mp, mk], -1)))
-            self.h[layer + 1, i0:n] = h
-        # frontier: every new row is a newer node pointing at its parent (type 0) and its nearest (type 1)
-        receivers = np.concatenate([par[has_parent], near[near_ok]])
-        senders = np.concatenate([np.flatnonzero(has_parent), np.nonzero(near_ok)[0]])
-        etype = np.concatenate([np.zeros(int(has_parent.sum()), np.int64), np.ones(int(near_ok.sum()), np.int64)])
-        if len(receivers):
-            onehot = np.eye(EDGE_TYPES)[etype]
-            rel = wrap_periodic(x[senders] - self.states[receivers], self.periodic) / self.step
-            phi = mlp(self.frontier_net, np.concatenate([h[senders], rel, onehot], -1))
-            np.add.at(self.front, receivers, np.concatenate([phi, onehot], -1))
+        # everything per new node in one compiled call: depth, input MLP, causal k-NN, message passing,
+        # the frontier sums of the new edges
+        scorer_embed_rows(i0, x, feats, tid, parent, self.goal, self.states, self.tree_id, self.depth, self.h, self.front,
+                          *self._compiled_weights)
         self.n = n
         return n
 
