@@ -77,6 +77,27 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
 
 
 @njit(cache=True, inline="always")
+def _keep_nearest(best_d, best_j, n_found, knn, dist, j):
+    """Offer node ``j`` at squared distance ``dist`` to a row's ``knn`` nearest so far (``best_d`` /
+    ``best_j``, ``n_found`` of them, in ascending order): inserted where it belongs, the earlier
+    node first on ties (a stable sort's order, as the torch model's k-NN). The new count."""
+    if n_found < knn:
+        pos = n_found
+        n_found += 1
+    elif dist < best_d[knn - 1]:
+        pos = knn - 1
+    else:
+        return n_found
+    while pos > 0 and best_d[pos - 1] > dist:
+        best_d[pos] = best_d[pos - 1]
+        best_j[pos] = best_j[pos - 1]
+        pos -= 1
+    best_d[pos] = dist
+    best_j[pos] = j
+    return n_found
+
+
+@njit(cache=True, inline="always")
 def _gelu_rows(a):
     for b in range(a.shape[0]):
         for c in range(a.shape[1]):
@@ -141,19 +162,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
                 for c in range(d):
                     v = _wrapped(states[j, c] - x[r, c], periodic[c]) / step[c]
                     dist += v * v
-                if n_found < knn:
-                    pos = n_found
-                    n_found += 1
-                elif dist < best_d[knn - 1]:
-                    pos = knn - 1
-                else:
-                    continue
-                while pos > 0 and best_d[pos - 1] > dist:
-                    best_d[pos] = best_d[pos - 1]
-                    best_j[r, pos] = best_j[r, pos - 1]
-                    pos -= 1
-                best_d[pos] = dist
-                best_j[r, pos] = j
+                n_found = _keep_nearest(best_d, best_j[r], n_found, knn, dist, j)
             found[r] = n_found
     msg = np.zeros((B, H))
     for layer in range(L):
@@ -453,19 +462,7 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
                         diff = min(diff, two_pi - diff)
                     diff *= metric[c]
                     dist += diff * diff
-                if n_found < knn:
-                    pos = n_found
-                    n_found += 1
-                elif dist < best_d[knn - 1]:
-                    pos = knn - 1
-                else:
-                    continue
-                while pos > 0 and best_d[pos - 1] > dist:
-                    best_d[pos] = best_d[pos - 1]
-                    near[r, pos] = near[r, pos - 1]
-                    pos -= 1
-                best_d[pos] = dist
-                near[r, pos] = j
+                n_found = _keep_nearest(best_d, near[r], n_found, knn, dist, j)
             found[r] = n_found
     # relative positions of parents and neighbours, in step units
     rel_p = np.zeros((B, d))
