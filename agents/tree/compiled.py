@@ -77,24 +77,69 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
 
 
 @njit(cache=True, inline="always")
-def _keep_nearest(best_d, best_j, n_found, knn, dist, j):
-    """Offer node ``j`` at squared distance ``dist`` to a row's ``knn`` nearest so far (``best_d`` /
-    ``best_j``, ``n_found`` of them, in ascending order): inserted where it belongs, the earlier
-    node first on ties (a stable sort's order, as the torch model's k-NN). The new count."""
-    if n_found < knn:
-        pos = n_found
-        n_found += 1
-    elif dist < best_d[knn - 1]:
-        pos = knn - 1
-    else:
-        return n_found
-    while pos > 0 and best_d[pos - 1] > dist:
-        best_d[pos] = best_d[pos - 1]
-        best_j[pos] = best_j[pos - 1]
-        pos -= 1
-    best_d[pos] = dist
-    best_j[pos] = j
-    return n_found
+def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric):
+    """Each row's ``knn`` nearest earlier nodes of its own tree (row ``r`` is node ``i0 + r``; the
+    batch's own earlier rows included), nearest first, the earlier node first on ties (a stable
+    sort's order, as the torch models' k-NN): ``(nodes (B, max(knn, 1)), how many were found (B,))``.
+    Squared distances: ``sum((wrap(x_j - x_i) / unit) ** 2)`` (the GNN's step units), or with
+    ``planner_metric`` ``sum((min(|d|, 2 pi - |d|) * unit) ** 2)`` (the planner's weighted metric,
+    the scorer's)."""
+    B, d = x.shape
+    kk = max(knn, 1)
+    best_d = np.empty(kk)
+    near = np.zeros((B, kk), dtype=np.int64)
+    found = np.zeros(B, dtype=np.int64)
+    two_pi = 2.0 * math.pi
+    for r in range(B):
+        t = tid[r]
+        n_found = 0
+        for j in range(i0 + r if knn > 0 else 0):
+            if tree_id[j] != t:
+                continue
+            dist = 0.0
+            for c in range(d):
+                if planner_metric:
+                    v = abs(x[r, c] - states[j, c])
+                    if periodic[c]:
+                        v = min(v, two_pi - v)
+                    v *= unit[c]
+                else:
+                    v = _wrapped(states[j, c] - x[r, c], periodic[c]) / unit[c]
+                dist += v * v
+            if n_found < knn:
+                pos = n_found
+                n_found += 1
+            elif dist < best_d[knn - 1]:
+                pos = knn - 1
+            else:
+                continue
+            while pos > 0 and best_d[pos - 1] > dist:
+                best_d[pos] = best_d[pos - 1]
+                near[r, pos] = near[r, pos - 1]
+                pos -= 1
+            best_d[pos] = dist
+            near[r, pos] = j
+        found[r] = n_found
+    return near, found
+
+
+@njit(cache=True, inline="always")
+def _residual_layer_norm(upd, h, g, b, eps):
+    """``h = LayerNorm(h + upd)`` row by row, in place (``upd`` is overwritten)."""
+    B, H = h.shape
+    for r in range(B):
+        mean = 0.0
+        for c in range(H):
+            upd[r, c] += h[r, c]
+            mean += upd[r, c]
+        mean /= H
+        var = 0.0
+        for c in range(H):
+            upd[r, c] -= mean
+            var += upd[r, c] * upd[r, c]
+        inv_std = 1.0 / math.sqrt(var / H + eps)
+        for c in range(H):
+            h[r, c] = upd[r, c] * inv_std * g[c] + b[c]
 
 
 @njit(cache=True, inline="always")
@@ -133,9 +178,6 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
             raise ValueError(_UNTRAINED_TREE)
     F = feats.shape[1]
     n_in = iw1.shape[0]
-    best_d = np.empty(max(knn, 1))
-    best_j = np.empty((B, max(knn, 1)), dtype=np.int64)
-    found = np.zeros(B, dtype=np.int64)
     rel = np.empty(d)
     pre = np.empty(H)
     # input MLP on [features / feature scale, (x - centre) / scale] (relative inputs: the features only)
@@ -150,20 +192,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
     _gelu_rows(hid)
     h = np.dot(hid, iw2) + ib2
     # causal k-NN: earlier nodes of the same tree, squared distance in step units, ties to the earlier node
-    if knn > 0:
-        for r in range(B):
-            i = i0 + r
-            t = tid[r]
-            n_found = 0
-            for j in range(i):
-                if tree_id[j] != t:
-                    continue
-                dist = 0.0
-                for c in range(d):
-                    v = _wrapped(states[j, c] - x[r, c], periodic[c]) / step[c]
-                    dist += v * v
-                n_found = _keep_nearest(best_d, best_j[r], n_found, knn, dist, j)
-            found[r] = n_found
+    best_j, found = _causal_knn(i0, x, tid, states, tree_id, knn, periodic, step, False)
     msg = np.zeros((B, H))
     for layer in range(L):
         # the rows' sender terms W_h h at this layer, for themselves and the rows after them
@@ -197,20 +226,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
         hid += np.dot(msg, wku[layer])
         _gelu_rows(hid)
         upd = np.dot(hid, uw2[layer]) + ub2[layer]
-        # residual, LayerNorm
-        for r in range(B):
-            mean = 0.0
-            for c in range(H):
-                upd[r, c] += h[r, c]
-                mean += upd[r, c]
-            mean /= H
-            var = 0.0
-            for c in range(H):
-                upd[r, c] -= mean
-                var += upd[r, c] * upd[r, c]
-            inv_std = 1.0 / math.sqrt(var / H + norm_eps[layer])
-            for c in range(H):
-                h[r, c] = upd[r, c] * inv_std * norm_g[layer, c] + norm_b[layer, c]
+        _residual_layer_norm(upd, h, norm_g[layer], norm_b[layer], norm_eps[layer])
     # the node heads (the GNN sampler's mixture reads them) and the trees' embedding sums
     if heads:
         keys[i0:i0 + B, :] = np.dot(h, kw) + kb
@@ -409,7 +425,6 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
     H = in_w2.shape[1]
     F = feats.shape[1]
     A = angle_cols.shape[0]
-    two_pi = 2.0 * math.pi
     for r in range(B):
         p = parent[r]
         depth[i0 + r] = depth[p] + 1.0 if p >= 0 else 0.0
@@ -442,28 +457,8 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
         inp[r, c0] = depth[i0 + r] / depth_scale
     hb = _mlp2(inp, in_w1, in_b1, in_w2, in_b2)
     h[0, i0:i0 + B, :] = hb
-    # causal k-NN: squared weighted distances, periodic differences as min(|d|, 2 pi - |d|)
-    kk = max(knn, 1)
-    best_d = np.empty(kk)
-    near = np.zeros((B, kk), dtype=np.int64)
-    found = np.zeros(B, dtype=np.int64)
-    if knn > 0:
-        for r in range(B):
-            i = i0 + r
-            t = tid[r]
-            n_found = 0
-            for j in range(i):
-                if tree_id[j] != t:
-                    continue
-                dist = 0.0
-                for c in range(d):
-                    diff = abs(x[r, c] - states[j, c])
-                    if periodic[c]:
-                        diff = min(diff, two_pi - diff)
-                    diff *= metric[c]
-                    dist += diff * diff
-                n_found = _keep_nearest(best_d, near[r], n_found, knn, dist, j)
-            found[r] = n_found
+    # causal k-NN under the planner's metric
+    near, found = _causal_knn(i0, x, tid, states, tree_id, knn, periodic, metric, True)
     # relative positions of parents and neighbours, in step units
     rel_p = np.zeros((B, d))
     for r in range(B):
@@ -518,20 +513,7 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
                 uin[r, H + c] = mp[r, c]
                 uin[r, 2 * H + c] = mk[r, c]
         upd = _mlp2(uin, up_w1[layer], up_b1[layer], up_w2[layer], up_b2[layer])
-        for r in range(B):
-            mean = 0.0
-            for c in range(H):
-                upd[r, c] += hb[r, c]
-                mean += upd[r, c]
-            mean /= H
-            var = 0.0
-            for c in range(H):
-                upd[r, c] -= mean
-                var += upd[r, c] * upd[r, c]
-            var /= H
-            inv = math.sqrt(var + norm_eps[layer])
-            for c in range(H):
-                hb[r, c] = upd[r, c] / inv * norm_g[layer, c] + norm_b[layer, c]
+        _residual_layer_norm(upd, hb, norm_g[layer], norm_b[layer], norm_eps[layer])
         h[layer + 1, i0:i0 + B, :] = hb
     # frontier: each new row is a newer node pointing at its parent (type 0), then at its neighbours (type 1)
     n_par = 0
