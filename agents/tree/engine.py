@@ -25,6 +25,7 @@ from typing import Mapping
 import numpy as np
 
 from agents.tree.compiled import (
+    PACKED_WEIGHTS,
     context_after_rows,
     embed_rows,
     mixture_after_rows,
@@ -145,13 +146,13 @@ class IncrementalTreeGNN(_Engine):
                         self.w_sender, self.wpx, self.bp1, self.wpu, self.bpu, self.wkx, self.bk1, self.wku, self.bku,
                         self.uw1, self.ub1, self.uw2, self.ub2, self.norm_g, self.norm_b, self.norm_eps, *self.key,
                         *self.node_head)
-        #: The same weights packed for :meth:`grown_mixture`'s one compiled call (a short dispatch).
-        names = ("step", "center", "scale", "feature_scale", "iw1", "ib1", "iw2", "ib2", "w_sender", "wpx", "bp1",
-                 "wpu", "bpu", "wkx", "bk1", "wku", "bku", "uw1", "ub1", "uw2", "ub2", "norm_g", "norm_b", "norm_eps")
+        #: The same weights packed for :meth:`grown_mixture`'s one compiled call (a short dispatch): the
+        #: embedding's arrays in their argument order (without its flags), then the heads', the
+        #: query's and the shift's (``PACKED_WEIGHTS``).
+        embedding = self.weights[1:5] + self.weights[9:29]
         (qw1, qb1), (qw2, qb2) = self.query
-        packed = dict(zip(names, self.weights[1:5] + self.weights[9:29]), kw=self.key[0], kb=self.key[1],
-                      hw=self.node_head[0], hb=self.node_head[1], qw1=qw1, qb1=qb1, qw2=qw2, qb2=qb2,
-                      shift_w=self.query_shift[0], shift_b=self.query_shift[1])
+        packed = dict(zip(PACKED_WEIGHTS, (*embedding, *self.key, *self.node_head, qw1, qb1, qw2, qb2,
+                                           *self.query_shift), strict=True))
         self._flat, self._layout = pack_weights(packed)
         self._flags = np.array([bool(self.relative_inputs), int(self.k) if self.use_knn else 0, bool(self.use_parent),
                                 self.heads, bool(self.use_context)], dtype=np.int64)
