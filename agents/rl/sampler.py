@@ -76,9 +76,7 @@ class RLSampler(ModelSampler):
             raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
         self.policy = policy.eval()
         self.view_nodes = int(view_nodes)
-        if not isinstance(deterministic, (bool, np.bool_)):
-            raise ValueError(f"deterministic must be true or false, got {deterministic!r}")
-        self.deterministic = bool(deterministic)
+        self.deterministic = boolean_setting("deterministic", deterministic)
         self.action_frame = action_frame
         self._mix32 = np.float32(self.uniform_mix)
         self._periodic_or_none = self.periodic if self._wraps else None
@@ -124,6 +122,13 @@ class RLSampler(ModelSampler):
             x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
                                        np.asarray(active_target(obs), np.float32), self._periodic_or_none)
         return np.minimum(np.maximum(x, self.low32), self.high32)
+
+
+def boolean_setting(name: str, value) -> bool:
+    """A sampler flag as given: true or false (``--setting rl-ppo.deterministic=3`` is refused, not taken as true)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+    return bool(value)
 
 
 _NUMPY_ACTS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0.0)}
@@ -258,9 +263,7 @@ class PickSampler(ModelSampler):
                              f"{self.candidate_set.count}")
         self.policy = policy.eval()
         self.view_nodes = int(view_nodes)
-        if not isinstance(deterministic, (bool, np.bool_)):
-            raise ValueError(f"deterministic must be true or false, got {deterministic!r}")
-        self.deterministic = bool(deterministic)
+        self.deterministic = boolean_setting("deterministic", deterministic)
         self._picked: int | None = None
         self._twin = None if policy.reads_tree else numpy_pick_layers(policy)
 
