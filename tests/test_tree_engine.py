@@ -9,6 +9,9 @@ candidate scores must equal the torch model's forward pass over the whole prefix
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -20,6 +23,8 @@ from agents.checkpoints import load_checkpoint, shipped_checkpoint
 from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
 from agents.tree.models import causal_knn
 from tests.helpers import uniform_policy
+
+ROOT = Path(__file__).resolve().parents[1]
 
 TOL = 1e-5
 
@@ -264,3 +269,21 @@ def test_a_one_tree_gnn_refuses_a_birrt_observation():
         engine.ingest(obs)
     with pytest.raises(ValueError, match="no slot"):
         engine.context(obs["start"].astype(np.float64), obs["goal"].astype(np.float64), 1)
+
+
+def test_a_compilation_is_announced_once_and_never_when_cached(tmp_path):
+    """The ~40 s first compile prints one line (not a silent hang); a process that finds numba's cache
+    for the current source prints nothing. node_mixture stands in for the big loops (it compiles fast)."""
+    import subprocess
+    import sys
+    script = ("import numpy as np\n"
+              "from agents.tree.compiled import announce_compilation as a, node_mixture as f\n"
+              "first, again = a(f, 'x'), a(f, 'x')\n"
+              "f(np.ones((3, 2)), np.ones(2), 0, 1.0, np.ones((2, 2)), np.zeros(2), np.ones(2))\n"
+              "print(first, again)\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT))
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, cwd=tmp_path)
+            for _ in range(2)]
+    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr[-2000:]
+    assert [r.stdout.split() for r in runs] == [["True", "False"], ["False", "False"]]
+    assert runs[0].stderr.count("gnn-mp: compiling x (numba; first use") == 1 and "compiling" not in runs[1].stderr

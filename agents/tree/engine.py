@@ -26,6 +26,7 @@ import numpy as np
 
 from agents.tree.compiled import (
     PACKED_WEIGHTS,
+    announce_compilation,
     context_after_rows,
     embed_rows,
     mixture_after_rows,
@@ -157,6 +158,7 @@ class IncrementalTreeGNN(_Engine):
         self._flags = np.array([bool(self.relative_inputs), int(self.k) if self.use_knn else 0, bool(self.use_parent),
                                 self.heads, bool(self.use_context)], dtype=np.int64)
         super().__init__(m.state_dim, capacity)
+        announce_compilation(mixture_after_rows if self.heads else context_after_rows, "the tree GNN's per-node loop")
 
     def _allocate(self, capacity: int) -> None:
         d, H, L, T = self.d, self.H, self.L, self.trees
@@ -286,6 +288,7 @@ class IncrementalTreeScorer(_Engine):
             np.stack([g for g, _, _ in self.norms]), np.stack([b for _, b, _ in self.norms]),
             np.array([eps for _, _, eps in self.norms], dtype=np.float64), fw1, fb1, fw2, fb2)
         super().__init__(m.state_dim, capacity)
+        announce_compilation(scorer_embed_rows, "the tree scorer's per-node loop")
 
     def _allocate(self, capacity: int) -> None:
         self.capacity = capacity
