@@ -92,6 +92,8 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["benchmark", "--problems", "1", "--checkpoint", "gnn=/no/such/file.pt", "--samplers", "gnn"],
      ["missing checkpoint"]),
     (["benchmark", "--problems", "1", "--checkpoint", "uniform=agents/checkpoints/gnn_maze2d.pt"], ["no weights"]),
+    (["benchmark", "--problems", "1", "--samplers", "rl-ppo-torchrl"],     # nothing shipped for maze2d
+     ["missing checkpoint", "gnn-mp train rl --lib torchrl --task maze2d", "--checkpoint rl-ppo-torchrl=PATH"]),
     (["benchmark", "--samplers", "gnn", "--checkpoint", "gnn=a.pt", "--checkpoint", "gnn=b.pt"],
      ["--checkpoint given twice", "'gnn'"]),
     (["benchmark", "--samplers", "ompl-kpiece", "--task", "maze2d"], ["ompl-kpiece"]),

@@ -82,7 +82,8 @@ def resolve_checkpoint(name: str, task: str | None, checkpoint: str | Path | Non
         return shipped_checkpoint(name, source)        # a task that borrows another's weights
     if not shipped.is_file():
         raise FileNotFoundError(f"no shipped {name} weights for task {task!r} ({shipped.name}); "
-                                f"train them with `{train_command}` and pass checkpoint=")
+                                f"train them with `{train_command}` and pass checkpoint=PATH (gnn-mp benchmark: "
+                                f"--checkpoint {name}=PATH)")
     return shipped
 
 

@@ -47,6 +47,8 @@ from gnn_mp_envs.registration import same_bounds
 #: sampler name -> the checkpoint kinds it loads (continuous actions; candidate selection)
 RL_SAMPLERS: dict[str, tuple[str, ...]] = {"rl-ppo": ("rl/sb3-ppo", "rl/sb3-ppo-pick"), "rl-sac": ("rl/sb3-sac",),
                                            "rl-ppo-torchrl": ("rl/torchrl-ppo", "rl/torchrl-ppo-pick")}
+#: sampler name -> the ``gnn-mp train rl`` flags that train its kind (what a missing checkpoint's error names)
+TRAIN_FLAGS: dict[str, str] = {"rl-ppo": "", "rl-sac": " --algo sac --action box", "rl-ppo-torchrl": " --lib torchrl"}
 #: checkpoint kind -> sampler name
 SAMPLER_OF_KIND = {kind: name for name, kinds in RL_SAMPLERS.items() for kind in kinds}
 
@@ -365,7 +367,7 @@ def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | No
                     goal_bias: float | None = None) -> RLSampler | PickSampler:
     """The registry factory of ``rl-ppo``, ``rl-sac`` and ``rl-ppo-torchrl`` (the registry applies the
     thread policy: measured 0.8 ms per ``act`` with 1 thread against 12 ms with 2)."""
-    path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train rl --task {task}")
+    path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train rl{TRAIN_FLAGS[name]} --task {task}")
     return sampler_from_checkpoint(path, low, high, seed=seed, kind=RL_SAMPLERS[name], task=task,
                                    uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
                                    goal_bias=goal_bias)
