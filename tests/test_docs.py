@@ -131,7 +131,7 @@ def copy_compiled_cache(target: Path) -> None:
     """The numba caches this checkout has compiled so far (``agents/tree/compiled.py``, ~45 s of
     compilation per fresh copy). numba keys a cache on the source's mtime and size, which ``copy2``
     keeps, so the copy loads them; a cache not yet written is compiled there as in a fresh clone."""
-    for cache in ROOT.glob("agents/**/__pycache__/*.nb[ic]"):
+    for cache in [*ROOT.glob("agents/**/__pycache__/*.nb[ic]"), *ROOT.glob("gnn_mp_envs/**/__pycache__/*.nb[ic]")]:
         destination = target / cache.relative_to(ROOT)
         destination.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(cache, destination)

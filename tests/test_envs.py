@@ -234,3 +234,35 @@ def test_a_typo_in_a_problem_dict_is_refused(env_id, problem):
     env = gym.make(env_id, disable_env_checker=True)
     with pytest.raises(InvalidProblemError, match="unknown key"):
         env.reset(options={"problem": problem})
+
+
+def test_compiled_pendulum_steer_is_the_python_steer_bit_for_bit():
+    """The numba steer (what the env runs when numba is installed, as in this test environment) gives
+    the Python steer's edge, control and collision-check count exactly: random and wrapped states,
+    targets far outside the box, speeds at the validity bound, two torque limits (non-finite samples
+    never reach the steer: the env refuses them)."""
+    from gnn_mp_envs.tasks.pendulum import MAX_SPEED, PendulumProblem, compiled_steer_loop
+    assert compiled_steer_loop() is not None
+    rng = np.random.default_rng(7)
+    special = [0.0, np.pi, -np.pi, np.nextafter(np.pi, 0), MAX_SPEED, -MAX_SPEED, np.nextafter(MAX_SPEED, 9)]
+    outcomes = set()
+    for torque in (1.962, 2.943):
+        problem = PendulumProblem(np.zeros(2), np.array([np.pi, 0.0]), torque)
+        for k in range(3000):
+            if k % 3 == 0:
+                a, b = rng.uniform([-np.pi, -8], [np.pi, 8]), rng.uniform([-np.pi, -8], [np.pi, 8])
+            elif k % 3 == 1:
+                a, b = rng.uniform([-12, -9], [12, 9]), rng.uniform([-20, -30], [20, 30])
+            else:
+                a, b = rng.choice(special, 2), rng.choice(special, 2)
+            before = problem.collision_checks
+            fast = problem.steer(a, b)
+            fast_checks = problem.collision_checks - before
+            slow = problem.steer_python(a, b)
+            assert problem.collision_checks - before - fast_checks == fast_checks
+            assert (fast is None) == (slow is None), (a, b)
+            outcomes.add(fast is None)
+            if fast is not None:
+                assert fast.state.tobytes() == slow.state.tobytes() and fast.cost == slow.cost
+                assert fast.control.tobytes() == slow.control.tobytes(), (a, b)
+    assert outcomes == {True, False}      # both valid and blocked edges were compared
