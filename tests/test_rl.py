@@ -600,3 +600,33 @@ def test_rerunning_train_rl_into_a_finished_run_is_refused_and_keeps_it(lib, tmp
     assert (out / "config.json").read_text() == '{"finished": true}\n'
     assert (out / "policy.pt").read_bytes() == b"the finished run's weights"
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "policy.pt"]
+
+
+def test_rl_sampler_target_map_is_policy_action_to_state_bit_for_bit():
+    """The RL sampler's inlined target map (pendulum: the angle wrapped in place) gives exactly what the
+    one action map, policy_action_to_state, gives for the same draws: the oracle recomputed step by
+    step from a second sampler with the same seed, along a real planning run."""
+    from agents.registry import load_sampler
+    from agents.samplers import active_target
+    from gnn_mp_envs.envs.wrappers import policy_action_to_state
+    from gnn_mp_envs.evaluation import evaluation_env
+    torch.set_num_threads(1)
+    env = evaluation_env("pendulum", "val")
+    mine, oracle = (load_sampler("rl-ppo", task="pendulum", seed=5, proposals=1) for _ in range(2))
+    obs, _ = env.reset(seed=5, options={"index": 2})
+    wrapped = 0
+    for _ in range(300):
+        x = mine.model_sample(obs)
+        loc, scale = oracle.params(obs)
+        u = np.minimum(np.maximum(loc + scale * oracle.rng.normal(2), -1.0), 1.0).astype(np.float32)
+        raw = np.asarray(active_target(obs), np.float32) + u * oracle.span32
+        wrapped += not -np.pi <= raw[0] < np.pi
+        expected = policy_action_to_state(u, "target", oracle.low32, oracle.high32,
+                                          np.asarray(active_target(obs), np.float32), oracle.periodic)
+        expected = np.minimum(np.maximum(expected, oracle.low32), oracle.high32)
+        assert x.dtype == np.float32 and x.tobytes() == expected.tobytes()
+        obs, _, terminated, truncated, _ = env.step(x)
+        if terminated or truncated:
+            break
+    assert wrapped > 10         # the wrap was exercised
+    env.close()

@@ -117,9 +117,15 @@ class RLSampler(ModelSampler):
         z = loc if self.deterministic else loc + scale * self.rng.normal(self.state_dim)
         u = np.minimum(np.maximum(z, ACTION_LOW), ACTION_HIGH) if self.policy.squash == "clip" else \
             self.policy.squash_action(torch.from_numpy(z)).numpy()
-        if self.action_frame == "target" and self._periodic_or_none is None:
+        if self.action_frame == "target":
             # policy_action_to_state's target map, in float32: u is already in [-1, 1]
             x = np.asarray(active_target(obs), np.float32) + u * self.span32
+            if self._periodic_or_none is not None:
+                # ... and its wrap into [low, high) where periodic, without its checks and copies
+                wrapped = x - self.low32
+                np.remainder(wrapped, self.span32, out=wrapped)
+                wrapped += self.low32
+                x = np.where(self._periodic_or_none, wrapped, x)
         else:
             x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
                                        np.asarray(active_target(obs), np.float32), self._periodic_or_none)
