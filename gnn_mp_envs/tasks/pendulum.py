@@ -99,17 +99,19 @@ def _steer_loop(th0: float, om0: float, tth: float, tom: float, controls: np.nda
     half, sixth = 0.5 * h, h / 6.0
     a = GRAVITY / LENGTH
     inertia = 1.0 / (MASS * LENGTH ** 2)
+    thetas, omegas = np.empty((controls.shape[0], steps)), np.empty((controls.shape[0], steps))
     best, best_d, nan_seen = -1, 0.0, False
     for c in range(controls.shape[0]):
         bu = inertia * controls[c]
         th, om = th0, om0
-        for _ in range(steps):
+        for i in range(steps):
             k1t, k1w = om, bu - a * math.sin(th)
             k2t, k2w = om + half * k1w, bu - a * math.sin(th + half * k1t)
             k3t, k3w = om + half * k2w, bu - a * math.sin(th + half * k2t)
             k4t, k4w = om + h * k3w, bu - a * math.sin(th + h * k3t)
             th = th + sixth * (k1t + 2 * k2t + 2 * k3t + k4t)
             om = om + sixth * (k1w + 2 * k2w + 2 * k3w + k4w)
+            thetas[c, i], omegas[c, i] = th, om
         dth = ((th - tth + math.pi) % (2 * math.pi) - math.pi) * 1.0
         dom = (om - tom) * VELOCITY_WEIGHT
         d = math.sqrt(dth * dth + dom * dom)
@@ -118,15 +120,8 @@ def _steer_loop(th0: float, om0: float, tth: float, tom: float, controls: np.nda
                 nan_seen, best = True, c
         elif not nan_seen and (best < 0 or d < best_d):
             best, best_d = c, d
-    bu = inertia * controls[best]
-    th, om = th0, om0
-    for i in range(steps):                # the kept edge again, its states checked in order
-        k1t, k1w = om, bu - a * math.sin(th)
-        k2t, k2w = om + half * k1w, bu - a * math.sin(th + half * k1t)
-        k3t, k3w = om + half * k2w, bu - a * math.sin(th + half * k2t)
-        k4t, k4w = om + h * k3w, bu - a * math.sin(th + h * k3t)
-        th = th + sixth * (k1t + 2 * k2t + 2 * k3t + k4t)
-        om = om + sixth * (k1w + 2 * k2w + 2 * k3w + k4w)
+    for i in range(steps):                # the kept edge's states, checked in order
+        th, om = thetas[best, i], omegas[best, i]
         if not (math.isfinite(th) and math.isfinite(om) and abs(om) <= MAX_SPEED):
             return best, i + 1, False, 0.0, 0.0
     return best, steps, True, (th + math.pi) % (2 * math.pi) - math.pi, om
