@@ -11,8 +11,9 @@ float64, the math of :class:`agents.tree.models.TreeGNN` (``tests/test_tree_engi
 the engine's outputs with the torch model's to 1e-5): the k-NN and the messages row by row, the
 products with the weight matrices one BLAS call per layer for the whole batch. Compiled once
 per checkout and cached next to this file (``cache=True``); the first call in a fresh checkout
-compiles for about 40 s (maze2d's GNN and GNN-CVAE together; the pendulum scorer ~10 s). :func:`scorer_embed_rows` does the same for the pendulum's sample scorer
-(:class:`~agents.tree.engine.IncrementalTreeScorer`).
+compiles for about 40 s (maze2d's GNN and GNN-CVAE together; the pendulum scorer ~10 s), which
+:func:`announce_compilation` says in one line. :func:`scorer_embed_rows` does the same for the
+pendulum's sample scorer (:class:`~agents.tree.engine.IncrementalTreeScorer`).
 """
 
 from __future__ import annotations
