@@ -40,7 +40,7 @@ from agents.encoders import TreeEncoder, plain_mean_sage
 from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy, SB3PPOPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
-from gnn_mp_envs.envs.candidates import CandidateSet
+from gnn_mp_envs.envs.candidates import CandidateSet, wrap_into_box
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
 from gnn_mp_envs.registration import same_bounds
 
@@ -120,12 +120,8 @@ class RLSampler(ModelSampler):
         if self.action_frame == "target":
             # policy_action_to_state's target map, in float32: u is already in [-1, 1]
             x = np.asarray(active_target(obs), np.float32) + u * self.span32
-            if self._periodic_or_none is not None:
-                # ... and its wrap into [low, high) where periodic, without its checks and copies
-                wrapped = x - self.low32
-                np.remainder(wrapped, self.span32, out=wrapped)
-                wrapped += self.low32
-                x = np.where(self._periodic_or_none, wrapped, x)
+            if self._periodic_or_none is not None:    # ... and its wrap, without its checks and copies
+                x = wrap_into_box(x, self.low32, self.span32, self._periodic_or_none)
         else:
             x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
                                        np.asarray(active_target(obs), np.float32), self._periodic_or_none)

@@ -65,6 +65,17 @@ DEFAULT_TARGET_SCALE = 0.1
 SCALAR_FEATURES = len(CANDIDATE_KINDS) + 8
 
 
+def wrap_into_box(x: np.ndarray, low: np.ndarray, span: np.ndarray, periodic: np.ndarray) -> np.ndarray:
+    """``x`` (rows of states, any float dtype) with its ``periodic`` coordinates wrapped into
+    ``[low, low + span)``: ``low + (x - low) mod span`` (numpy's floored modulo), the others as they
+    are. The one wrap of a drawn state: candidate sets, :func:`~gnn_mp_envs.envs.wrappers.policy_action_to_state`
+    and the RL sampler's inlined copy of its target map."""
+    wrapped = x - low
+    np.remainder(wrapped, span, out=wrapped)
+    wrapped += low
+    return np.where(periodic, wrapped, x)
+
+
 def feature_width(state_dim: int) -> int:
     """``F``: columns of the candidate features for ``state_dim``-D states."""
     return SCALAR_FEATURES + 4 * int(state_dim)
@@ -249,7 +260,7 @@ class CandidateSet:
         cands[3] += np.asarray(obs["nodes"][best], np.float64) if best >= 0 else target
         cands[4:] = self.low + self.span * rng.random((K - 4, d))
         if self._wraps:
-            cands = np.where(self.periodic, self.low + np.remainder(cands - self.low, self.span), cands)
+            cands = wrap_into_box(cands, self.low, self.span, self.periodic)
         cands32 = np.minimum(np.maximum(cands, self.low), self.high).astype(np.float32)
         return cands32, self.features(cands32.astype(np.float64), n, active, target)
 
@@ -363,4 +374,4 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
 __all__ = ["CANDIDATE_KINDS", "CandidatePickWrapper", "CandidateSet", "DEFAULT_CANDIDATES", "DEFAULT_LOCAL_SCALE",
            "DEFAULT_TARGET_SCALE",
-           "candidate_space", "feature_width"]
+           "candidate_space", "feature_width", "wrap_into_box"]

@@ -37,7 +37,7 @@ from gymnasium.wrappers import RescaleAction, TimeLimit, TransformReward
 
 from gnn_mp_envs.registration import ACTIONS, RL_MAX_EPISODE_STEPS, rl_env_id
 from gnn_mp_envs.envs.candidates import (DEFAULT_CANDIDATES, DEFAULT_LOCAL_SCALE, DEFAULT_TARGET_SCALE,
-                                         CandidatePickWrapper)
+                                         CandidatePickWrapper, wrap_into_box)
 
 #: Default number of rows of the view (roots + most recent nodes).
 DEFAULT_VIEW_NODES = 64
@@ -250,7 +250,7 @@ def policy_action_to_state(action: np.ndarray, frame: str, low: np.ndarray, high
     else:
         raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {frame!r}")
     if periodic is not None and np.any(periodic):
-        x = np.where(periodic, low + np.remainder(x - low, span), x)
+        x = wrap_into_box(x, low, span, periodic)
     return x
 
 
