@@ -15,6 +15,10 @@ class _Euclid:
     def distance(self, s, x):
         return np.linalg.norm(s - x, axis=-1)
 
+    def nearest_row(self, s, x):
+        d = self.distance(s, x)
+        return int(d.argmin()), float(d.min())
+
     def nn_embed(self, s):
         return s
 
@@ -49,6 +53,36 @@ def test_nearest_respects_pendulum_angle_wrap():
         x[0] = rng.choice([-np.pi + 1e-3, np.pi - 1e-3, x[0]])
         d = problem.distance(store.states[:3000], x)
         assert d[store.nearest(x, 0, problem)] == pytest.approx(d.min())
+
+
+@pytest.mark.parametrize("task", [PendulumTask(), Maze2DTask()], ids=["pendulum", "maze2d"])
+def test_nearest_row_is_numpy_argmin_of_distance_bit_for_bit(task):
+    """The planner's nearest scan (``Problem.nearest_row``: compiled where the problem names its metric,
+    as for these two; the same loop in Python without numba) returns numpy's first argmin of
+    ``distance`` and that distance exactly: ties (repeated rows), float32 queries as samplers send,
+    queries on a row, and angle differences on the wrap's edges (0, +-pi, +-2 pi)."""
+    from gnn_mp_envs.core.problem import compiled_nearest_row
+    problem = task.problem("val", 0)
+    assert problem.nearest_metric is not None and compiled_nearest_row() is not None
+    python_loop = compiled_nearest_row.__wrapped__
+    rng = np.random.default_rng(3)
+    for trial in range(3000):
+        n = int(rng.integers(1, 300))
+        states = rng.uniform(problem.low, problem.high, (n, problem.state_dim))
+        if trial % 3 == 0:
+            states[rng.integers(n, size=n // 2)] = states[0]
+        x = rng.uniform(problem.low, problem.high)
+        if trial % 4 == 0:
+            x = states[int(rng.integers(n))].copy()
+        if trial % 7 == 0 and task.name == "pendulum":      # differences of exactly 0, +-pi, +-2 pi
+            x[0] = rng.choice([-np.pi, 0.0, np.pi])
+            states[:, 0] = rng.choice([-np.pi, 0.0, np.pi, np.nextafter(np.pi, 0)], n)
+        if trial % 2:
+            x = x.astype(np.float32)
+        d = problem.distance(states, x)
+        expected = (int(d.argmin()), float(d[d.argmin()]))
+        assert problem.nearest_row(states, x) == expected, trial
+        assert python_loop(states, x, *problem.nearest_metric) == expected, trial
 
 
 def test_cost_to_come_accumulates_along_parents():

@@ -3,8 +3,8 @@
 All trees of a planner share one node store (global indices are what the observation
 shows), and each tree keeps a contiguous copy of its own states.
 
-Nearest-neighbour queries are a hybrid: small trees are scanned with one vectorised
-numpy pass; once a tree has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its
+Nearest-neighbour queries are a hybrid: small trees are scanned in one pass (the problem's
+``nearest_row``: a compiled loop where the problem names its metric, else numpy); once a tree has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its
 older nodes and only the nodes added since the last rebuild are scanned. The k-d tree
 is rebuilt when that recent buffer outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the
 rebuild cost is amortised and a query stays roughly flat as the tree grows (measured by
@@ -27,6 +27,7 @@ class Metric(Protocol):
     """What a nearest query needs from a problem."""
 
     def distance(self, states: np.ndarray, x: np.ndarray) -> np.ndarray: ...
+    def nearest_row(self, states: np.ndarray, x: np.ndarray) -> tuple[int, float]: ...
     def nn_embed(self, states: np.ndarray) -> np.ndarray: ...
     nn_boxsize: np.ndarray | None
 
@@ -96,9 +97,8 @@ class TreeStore:
             start = indexed
         if start == k:
             return int(self._tree_index[tree][kd_idx])
-        d = metric.distance(states[start:k], x)
-        j = int(d.argmin())
-        if start and kd_dist <= d[j]:
+        j, d_j = metric.nearest_row(states[start:k], x)
+        if start and kd_dist <= d_j:
             return int(self._tree_index[tree][kd_idx])
         return int(self._tree_index[tree][start + j])
 

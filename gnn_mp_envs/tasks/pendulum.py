@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
+from gnn_mp_envs.utils.compiled import lazy_njit
 from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task, check_keys
 
@@ -127,22 +128,9 @@ def _steer_loop(th0: float, om0: float, tth: float, tom: float, controls: np.nda
     return best, steps, True, (th + math.pi) % (2 * math.pi) - math.pi, om
 
 
-#: ``_steer_loop`` compiled (numba, cached next to this file), built on first use; False: numba is
-#: not installed (the core install), and the steer runs in Python floats.
-_compiled_steer_loop = None
-
-
-def compiled_steer_loop():
-    """The compiled :func:`_steer_loop`, or None without numba."""
-    global _compiled_steer_loop
-    if _compiled_steer_loop is None:
-        try:
-            from numba import njit
-        except ImportError:
-            _compiled_steer_loop = False
-        else:
-            _compiled_steer_loop = njit(cache=True)(_steer_loop)
-    return _compiled_steer_loop or None
+#: ``_steer_loop`` compiled (numba), or None without numba (the core install: the steer runs in
+#: Python floats).
+compiled_steer_loop = lazy_njit(_steer_loop)
 
 
 class PendulumProblem(Problem):
@@ -166,6 +154,7 @@ class PendulumProblem(Problem):
         self._control_list = self._controls.tolist()
         self._goal_floats = self.goal.tolist()
         self._weights = np.array([1.0, VELOCITY_WEIGHT])
+        self.nearest_metric = (self._weights, np.array([True, False]))   # distance's metric, for nearest_row
         # theta is periodic; omega's box is far larger than its range, i.e. not periodic.
         self.nn_boxsize = np.array([2 * np.pi, 1e6])
 
