@@ -301,8 +301,6 @@ class Maze2DProblem(Problem):
     """A point robot in the unit square among the walls of a :class:`MazeMap`."""
 
     task = "maze2d"
-    #: :meth:`distance`'s metric (unweighted, no wrapped coordinate), for the compiled nearest scan.
-    nearest_metric = (np.ones(2), np.zeros(2, dtype=bool))
 
     def __init__(self, maze: MazeMap, start: np.ndarray, goal: np.ndarray,
                  step_size: float = STEP_SIZE) -> None:
