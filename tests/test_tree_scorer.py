@@ -97,6 +97,8 @@ def test_incremental_engine_equals_the_torch_model(adapter_and_space, grown_obs)
         ours = engine.logits(cands, engine.nearest(cands))
         ref = reference_logits(model, obs, cands).double().numpy()
         np.testing.assert_allclose(ours, ref, atol=2e-5, rtol=1e-4)
+        # the compiled head (what the sampler runs) is the numpy head up to the last bits of erf and BLAS
+        np.testing.assert_allclose(engine.candidate_logits(cands), ours, atol=1e-12, rtol=1e-12)
     assert np.std(ours) > 1e-2
     # every node's frontier (sum, counts) equals the torch layer at the final tree
     nodes = torch.as_tensor(grown_obs["nodes"][:n_final])
@@ -127,6 +129,23 @@ def hand_made() -> TreeDataset:
         path_ptr=np.array([0, 3]), path_nodes=np.array([0, 2, 4], np.int32), start=states[:1], goal=states[4:5],
         obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]), iter_ptr=np.array([0, 6]),
         iter_nodes=sizes, iter_active=np.zeros(6, np.int8), iter_sample=samples, iter_created=created)
+
+
+def test_compiled_candidate_head_reads_only_the_active_tree(adapter_and_space, grown_obs):
+    """With two trees in the caches, each candidate is scored at its nearest node of the active tree:
+    the compiled head equals the numpy head with the numpy nearest (brute force over that tree)."""
+    engine = IncrementalTreeScorer(random_scorer(adapter_and_space), capacity=64)
+    engine.ingest(grown_obs)
+    n = engine.n
+    engine.tree_id[:n] = np.arange(n) % 2             # every other node in tree 1
+    engine.multi_tree = True
+    cands = np.random.default_rng(4).uniform(LOW, HIGH, (32, 2))
+    for active in (0, 1):
+        near = engine.nearest(cands, active)
+        assert (engine.tree_id[near] == active).all()
+        np.testing.assert_allclose(engine.candidate_logits(cands, active), engine.logits(cands, near),
+                                   atol=1e-12, rtol=1e-12)
+    assert not np.allclose(engine.candidate_logits(cands, 0), engine.candidate_logits(cands, 1))
 
 
 def test_labels_mark_the_samples_that_created_path_nodes(adapter_and_space):

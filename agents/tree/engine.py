@@ -15,7 +15,9 @@ scores with the torch model's to 1e-5 on trees of a few hundred nodes).
   mixture are compiled functions of :mod:`agents.tree.compiled` (numba);
 * :class:`IncrementalTreeScorer` mirrors :class:`agents.tree.scorer.TreeGNNScorer`; its
   per-node work (depth, input MLP, causal k-NN, message passing, frontier sums) is one compiled
-  call too (:func:`agents.tree.compiled.scorer_embed_rows`), its candidate head numpy.
+  call too (:func:`agents.tree.compiled.scorer_embed_rows`), and so is its candidate head
+  (:meth:`~IncrementalTreeScorer.candidate_logits`; :meth:`~IncrementalTreeScorer.logits` and
+  :meth:`~IncrementalTreeScorer.nearest` are its numpy oracle).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from agents.tree.compiled import (
     mixture_after_rows,
     node_mixture,
     pack_weights,
+    scorer_candidate_logits,
     scorer_embed_rows,
     tree_context,
 )
@@ -350,6 +353,18 @@ class IncrementalTreeScorer(_Engine):
             S = S[idx]
         j = np.argmin(self._sq_dist(samples, S), axis=1)
         return j if idx is None else idx[j]
+
+    def candidate_logits(self, samples: np.ndarray, active: int = 0) -> np.ndarray:
+        """:meth:`logits` of ``samples`` at their :meth:`nearest` nodes of tree ``active``, in one
+        compiled call (:func:`~agents.tree.compiled.scorer_candidate_logits`; a head of another depth
+        than the trained scorers' three layers takes the numpy path)."""
+        if len(self.head) != 3:
+            return self.logits(samples, self.nearest(samples, active))
+        (w1, b1), (w2, b2), (w3, b3) = self.head
+        return scorer_candidate_logits(np.ascontiguousarray(samples, dtype=np.float64), self.n, int(active),
+                                       self.multi_tree, self.states, self.tree_id, self.h[self.L], self.front,
+                                       self.goal, self._compiled_weights[0], self.weights, self.unit, self.scale,
+                                       self.center, self._compiled_weights[2], w1, b1, w2, b2, w3, b3)
 
     def logits(self, samples: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Scores ``(M,)`` of candidate ``samples`` ``(M, d)`` whose nearest nodes are ``near``."""

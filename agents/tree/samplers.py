@@ -157,7 +157,7 @@ class TreeScorerSampler(_EngineSampler):
         e.ingest(obs)
         # rng.uniform(low, high, (M, d))'s values, without its broadcasting cost
         cands = self.low + (self.high - self.low) * self.rng.random((self.candidates, e.d))
-        logits = e.logits(cands, e.nearest(cands, self.active(obs))) / self.temperature
+        logits = e.candidate_logits(cands, self.active(obs)) / self.temperature
         p = np.exp(logits - logits.max())
         c = np.cumsum(p)
         i = min(int(c.searchsorted(self.rng.random() * c[-1], "right")), self.candidates - 1)
