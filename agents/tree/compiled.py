@@ -424,6 +424,15 @@ def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, se
 
 # ---------------------------------------------------------------------------- the pendulum's scorer
 @njit(cache=True, inline="always")
+def _sin_cos_into(out, r, o, v, cols):
+    """``out[r, o:o+A]`` = ``sin(v[cols])`` and ``out[r, o+A:o+2A]`` = ``cos(v[cols])``: the angle features."""
+    A = cols.shape[0]
+    for a in range(A):
+        out[r, o + a] = math.sin(v[cols[a]])
+        out[r, o + A + a] = math.cos(v[cols[a]])
+
+
+@njit(cache=True, inline="always")
 def _mlp2(x, w1, b1, w2, b2):
     """``Linear -> GELU -> Linear`` on rows ``x`` (``agents.tree.kernels.mlp`` of two layers)."""
     hid = np.dot(x, w1) + b1
@@ -464,17 +473,11 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
         for c in range(d):
             inp[r, c0 + c] = (goal[c] - center[c]) / scale[c]
         c0 += d
-        for a in range(A):
-            inp[r, c0 + a] = math.sin(x[r, angle_cols[a]])
-            inp[r, c0 + A + a] = math.cos(x[r, angle_cols[a]])
+        _sin_cos_into(inp, r, c0, x[r], angle_cols)
         c0 += 2 * A
-        for a in range(A):
-            inp[r, c0 + a] = math.sin(feats[r, d + angle_cols[a]])
-            inp[r, c0 + A + a] = math.cos(feats[r, d + angle_cols[a]])
+        _sin_cos_into(inp, r, c0, feats[r, d:], angle_cols)
         c0 += 2 * A
-        for a in range(A):
-            inp[r, c0 + a] = math.sin(goal[angle_cols[a]])
-            inp[r, c0 + A + a] = math.cos(goal[angle_cols[a]])
+        _sin_cos_into(inp, r, c0, goal, angle_cols)
         c0 += 2 * A
         inp[r, c0] = depth[i0 + r] / depth_scale
     hb = _mlp2(inp, in_w1, in_b1, in_w2, in_b2)
@@ -639,13 +642,9 @@ def scorer_candidate_logits(cands, n, active, multi_tree, states, tree_id, h_las
         for c in range(d):
             z[i, o + c] = (cands[i, c] - center[c]) / scale[c]
         o += d
-        for a in range(A):
-            z[i, o + a] = math.sin(cands[i, angle_cols[a]])
-            z[i, o + A + a] = math.cos(cands[i, angle_cols[a]])
+        _sin_cos_into(z, i, o, cands[i], angle_cols)
         o += 2 * A
-        for a in range(A):
-            z[i, o + a] = math.sin(to_goal[angle_cols[a]])
-            z[i, o + A + a] = math.cos(to_goal[angle_cols[a]])
+        _sin_cos_into(z, i, o, to_goal, angle_cols)
     hid = np.dot(z, w1) + b1
     _gelu_rows(hid)
     hid = np.dot(hid, w2) + b2
