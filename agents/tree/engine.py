@@ -283,8 +283,9 @@ class IncrementalTreeScorer(_Engine):
         (iw1, ib1), (iw2, ib2) = self.input
         (fw1, fb1), (fw2, fb2) = self.frontier_net
         #: What the compiled per-node call reads besides the caches, in its argument order (built once).
+        self._periodic_mask, self._angle_cols = self.periodic.astype(bool), self.angle_cols.astype(np.int64)
         self._compiled_weights = (
-            self.periodic.astype(bool), self.weights, self.angle_cols.astype(np.int64), self.center, self.scale,
+            self._periodic_mask, self.weights, self._angle_cols, self.center, self.scale,
             self.feature_scale, self.step, float(self.depth_scale), int(self.k), iw1, ib1, iw2, ib2,
             *(stack(convs, i, j) for convs in (self.parent_convs, self.knn_convs, self.updates)
               for i, j in ((0, 0), (0, 1), (1, 0), (1, 1))),
@@ -363,8 +364,8 @@ class IncrementalTreeScorer(_Engine):
         (w1, b1), (w2, b2), (w3, b3) = self.head
         return scorer_candidate_logits(np.ascontiguousarray(samples, dtype=np.float64), self.n, int(active),
                                        self.multi_tree, self.states, self.tree_id, self.h[self.L], self.front,
-                                       self.goal, self._compiled_weights[0], self.weights, self.unit, self.scale,
-                                       self.center, self._compiled_weights[2], w1, b1, w2, b2, w3, b3)
+                                       self.goal, self._periodic_mask, self.weights, self.unit, self.scale,
+                                       self.center, self._angle_cols, w1, b1, w2, b2, w3, b3)
 
     def logits(self, samples: np.ndarray, near: np.ndarray) -> np.ndarray:
         """Scores ``(M,)`` of candidate ``samples`` ``(M, d)`` whose nearest nodes are ``near``."""

@@ -4,10 +4,10 @@ All trees of a planner share one node store (global indices are what the observa
 shows), and each tree keeps a contiguous copy of its own states.
 
 Nearest-neighbour queries are a hybrid: small trees are scanned in one pass (the problem's
-``nearest_row``: a compiled loop where the problem names its metric, else numpy); once a tree has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its
-older nodes and only the nodes added since the last rebuild are scanned. The k-d tree
-is rebuilt when that recent buffer outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the
-rebuild cost is amortised and a query stays roughly flat as the tree grows (measured by
+``nearest_row``: a compiled loop where the problem names its metric, else numpy); once a tree
+has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its older nodes and only the nodes
+added since the last rebuild are scanned. The k-d tree is rebuilt when that recent buffer
+outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is amortised and a query stays roughly flat as the tree grows (measured by
 ``python -m tools.bench_env``). The k-d tree works in the problem's ``nn_embed`` coordinates,
 where Euclidean distance (with ``nn_boxsize`` periodic axes) equals ``problem.distance``.
 """
