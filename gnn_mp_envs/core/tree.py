@@ -7,9 +7,9 @@ Nearest-neighbour queries are a hybrid: small trees are scanned in one pass (the
 ``nearest_row``: a compiled loop where the problem names its metric, else numpy); once a tree
 has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its older nodes and only the nodes
 added since the last rebuild are scanned. The k-d tree is rebuilt when that recent buffer
-outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is amortised and a query stays roughly flat as the tree grows (measured by
-``python -m tools.bench_env``). The k-d tree works in the problem's ``nn_embed`` coordinates,
-where Euclidean distance (with ``nn_boxsize`` periodic axes) equals ``problem.distance``.
+outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is amortised and a query
+stays roughly flat as the tree grows (measured by ``python -m tools.bench_env``). The k-d tree
+works in the problem's ``nn_embed`` coordinates, where Euclidean distance (with ``nn_boxsize`` periodic axes) equals ``problem.distance``.
 """
 
 from __future__ import annotations
