@@ -9,7 +9,8 @@ has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its older nodes and only
 added since the last rebuild are scanned. The k-d tree is rebuilt when that recent buffer
 outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is amortised and a query
 stays roughly flat as the tree grows (measured by ``python -m tools.bench_env``). The k-d tree
-works in the problem's ``nn_embed`` coordinates, where Euclidean distance (with ``nn_boxsize`` periodic axes) equals ``problem.distance``.
+works in the problem's ``nn_embed`` coordinates, where Euclidean distance (with ``nn_boxsize``
+periodic axes) equals ``problem.distance``.
 """
 
 from __future__ import annotations
