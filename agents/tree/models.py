@@ -281,9 +281,12 @@ class _Gaussian(nn.Module):
         context), its share of the decoder's first layer computed once instead of once per latent
         row: a sampler decodes hundreds of proposals per condition, and the CVAE's 516 condition
         columns were 99% of its first layer (equal to ``decode`` up to float32 rounding)."""
-        first, L = self.decoder[0], self.latent_channels
-        shared = F.linear(condition, first.weight[:, L:], first.bias)
-        return self.to_state(self.decoder[1:](F.linear(z, first.weight[:, :L]) + shared))
+        layers = iter(self.decoder)              # its layers in turn (``decoder[1:]`` would build a new Sequential)
+        first, L = next(layers), self.latent_channels
+        h = F.linear(z, first.weight[:, :L]) + F.linear(condition, first.weight[:, L:], first.bias)
+        for layer in layers:
+            h = layer(h)
+        return self.to_state(h)
 
 
 class TreeCVAE(_Gaussian):
