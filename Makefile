@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 	@echo "make: installed into $(VENV)"
 
 test: install
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 benchmark: install
 	$(BIN)/gnn-mp benchmark --suite default --out results --workers 2
