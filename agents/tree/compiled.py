@@ -43,12 +43,15 @@ def _gelu(v: float) -> float:
 
 
 def _load_vector_erf() -> bool:
-    """Whether glibc's vector math library (libmvec, glibc 2.35+) and AVX2 are here: then the
-    GELUs take its ``erf`` of four doubles at a time (~5 ns a value against libm's 15-25 ns on this
-    project's 2-core Xeon; the same values to a few ulp, see ``tests/test_tree_engine.py``). Else
-    libm's scalar ``erf``, four calls per group."""
+    """Whether glibc's vector math library (libmvec, glibc 2.35+) and AVX2 are here, and numba builds
+    for this CPU: then the GELUs take its ``erf`` of four doubles at a time (~5 ns a value against
+    libm's 15-25 ns on this project's 2-core Xeon; the same values to a few ulp, see
+    ``tests/test_tree_engine.py``). Else libm's scalar ``erf``, four calls per group."""
     try:
         import llvmlite.binding as llvm
+        from numba.core import config
+        if config.CPU_NAME or config.CPU_FEATURES:      # kernels built for another CPU (NUMBA_CPU_NAME):
+            return False                                # AVX2's register convention is not guaranteed
         if not llvm.get_host_cpu_features().get("avx2", False):
             return False
         path = ctypes.util.find_library("mvec")
