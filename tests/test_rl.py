@@ -225,6 +225,63 @@ def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
         load_sampler("rl-sac", task="arm", seed=0)
 
 
+def test_compiled_target_map_is_the_numpy_expressions_bit_for_bit():
+    """The RL sampler's compiled state map (clipped policy, target frame) against the numpy
+    expressions it replaces, bit for bit: random float32 draws well inside, at and beyond the action
+    box, targets at the bounds, states that wrap by one period or land on its edges, and signed zeros."""
+    from agents.rl.sampler import _ACTION_HIGH32, _ACTION_LOW32, _clipped_target_map
+    from gnn_mp_envs.envs.candidates import wrap_into_box
+    rng = np.random.default_rng(0)
+    low = np.array([-np.pi, -8.0], np.float32)
+    high = np.array([np.pi, 8.0], np.float32)
+    span = high - low
+    for periodic in (np.array([True, False]), np.array([False, False]), np.array([True, True])):
+        for trial in range(3000):
+            loc = rng.normal(0.0, [0.3, 1.5][trial % 2], 2).astype(np.float32)
+            scale = np.abs(rng.normal(0.0, 0.5, 2)).astype(np.float32)
+            noise = rng.normal(0.0, 1.0, 2).astype(np.float32)
+            target = rng.uniform(low, high).astype(np.float32)
+            if trial % 10 == 0:
+                target = np.where(rng.random(2) < 0.5, low, high).astype(np.float32)
+            if trial % 17 == 0:
+                loc, scale = np.array([-0.0, 0.5], np.float32), np.array([0.0, 0.0], np.float32)
+            z = loc + scale * noise
+            u = np.minimum(np.maximum(z, -1.0), 1.0)
+            x = target + u * span
+            x = wrap_into_box(x, low, span, periodic)
+            expected = np.minimum(np.maximum(x, low), high)
+            got = _clipped_target_map(loc, scale, noise, target, span, low, high, periodic, _ACTION_LOW32,
+                                      _ACTION_HIGH32)
+            assert got.dtype == expected.dtype == np.float32
+            assert np.array_equal(got, expected) and np.array_equal(np.signbit(got), np.signbit(expected)), trial
+
+
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_the_shipped_policy_acts_alike_with_and_without_the_compiled_map(task):
+    """The shipped ``rl-ppo`` sampler plans a validation problem with the same actions, bit for bit,
+    whether its state map is the compiled call or the numpy expressions."""
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env
+    runs = []
+    for compiled in (True, False):
+        sampler = load_sampler("rl-ppo", task, seed=0)
+        assert sampler._compiled_map
+        sampler._compiled_map = compiled
+        sampler.reset(5)
+        env = evaluation_env(task, "val")
+        obs, _ = env.reset(seed=5, options={"index": 3})
+        actions = []
+        for _ in range(300):
+            action = sampler.act(obs)
+            actions.append(action.copy())
+            obs, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                break
+        runs.append(np.array(actions))
+    assert runs[0].dtype == np.float32 and len(runs[0]) > 20
+    assert np.array_equal(runs[0], runs[1])
+
+
 @pytest.mark.parametrize("task", ["maze2d", "pendulum"])
 def test_numpy_twin_of_the_tree_policy_matches_torch(task):
     """The RL sampler's numpy forward (numpy_tree_params) against the torch policy on views of a grown

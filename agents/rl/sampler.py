@@ -33,6 +33,7 @@ from typing import Any, Mapping
 
 import numpy as np
 import torch
+from numba import njit
 from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
@@ -83,6 +84,8 @@ class RLSampler(ModelSampler):
         self._mix32 = np.float32(self.uniform_mix)
         self._periodic_or_none = self.periodic if self._wraps else None
         self._twin = numpy_tree_policy(self.policy)
+        #: A clipped policy in the target frame that draws: its state comes from one compiled call.
+        self._compiled_map = self.policy.squash == "clip" and action_frame == "target" and not self.deterministic
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
@@ -113,6 +116,10 @@ class RLSampler(ModelSampler):
         """The policy's state for one observation (float32, in the bounds); the policy's forward runs
         once per ``proposals`` samples (its Gaussian is reused in between)."""
         loc, scale = self.refreshed(obs, self.params)
+        if self._compiled_map and loc.dtype == scale.dtype == np.float32:
+            return _clipped_target_map(loc, scale, self.rng.normal(self.state_dim),
+                                       np.asarray(active_target(obs), np.float32), self.span32, self.low32,
+                                       self.high32, self.periodic, _ACTION_LOW32, _ACTION_HIGH32)
         # float32 elementwise, as torch computed it; tanh through torch (numpy's differs in the last bit)
         z = loc if self.deterministic else loc + scale * self.rng.normal(self.state_dim)
         u = np.minimum(np.maximum(z, ACTION_LOW), ACTION_HIGH) if self.policy.squash == "clip" else \
@@ -126,6 +133,28 @@ class RLSampler(ModelSampler):
             x = policy_action_to_state(u, self.action_frame, self.low32, self.high32,
                                        np.asarray(active_target(obs), np.float32), self._periodic_or_none)
         return np.minimum(np.maximum(x, self.low32), self.high32)
+
+
+_ACTION_LOW32, _ACTION_HIGH32 = np.float32(ACTION_LOW), np.float32(ACTION_HIGH)
+
+
+@njit(cache=True)
+def _clipped_target_map(loc, scale, noise, target, span, low, high, periodic, action_low, action_high):
+    """:meth:`RLSampler.model_sample`'s state for a clipped policy in the target frame, in one
+    compiled call instead of about a dozen numpy operations on ``(d,)`` float32 vectors (~15 us of a
+    pendulum step): ``loc + scale * noise`` clipped to the action box, ``target + u * span``, the
+    periodic coordinates wrapped into ``[low, low + span)`` (:func:`wrap_into_box`), then clipped to
+    ``[low, high]``. The same float32 operations in the same order, so the same values
+    (``tests/test_rl.py`` holds the two paths bit for bit)."""
+    d = loc.shape[0]
+    out = np.empty(d, dtype=np.float32)
+    for c in range(d):
+        u = np.minimum(np.maximum(loc[c] + scale[c] * noise[c], action_low), action_high)
+        x = target[c] + u * span[c]
+        if periodic[c]:
+            x = np.remainder(x - low[c], span[c]) + low[c]
+        out[c] = np.minimum(np.maximum(x, low[c]), high[c])
+    return out
 
 
 def boolean_setting(name: str, value) -> bool:
