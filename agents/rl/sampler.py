@@ -84,8 +84,8 @@ class RLSampler(ModelSampler):
         self._mix32 = np.float32(self.uniform_mix)
         self._periodic_or_none = self.periodic if self._wraps else None
         self._twin = numpy_tree_policy(self.policy)
-        #: A clipped policy in the target frame that draws: its state comes from one compiled call.
-        self._compiled_map = self.policy.squash == "clip" and action_frame == "target" and not self.deterministic
+        #: A clipped policy in the target frame: its drawn state comes from one compiled call.
+        self._compiled_map = self.policy.squash == "clip" and action_frame == "target"
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
         return TorchCompatibleStream(seed)
@@ -116,7 +116,7 @@ class RLSampler(ModelSampler):
         """The policy's state for one observation (float32, in the bounds); the policy's forward runs
         once per ``proposals`` samples (its Gaussian is reused in between)."""
         loc, scale = self.refreshed(obs, self.params)
-        if self._compiled_map and loc.dtype == scale.dtype == np.float32:
+        if self._compiled_map and not self.deterministic and loc.dtype == scale.dtype == np.float32:
             return _clipped_target_map(loc, scale, self.rng.normal(self.state_dim),
                                        np.asarray(active_target(obs), np.float32), self.span32, self.low32,
                                        self.high32, self.periodic, _ACTION_LOW32, _ACTION_HIGH32)
