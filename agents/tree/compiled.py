@@ -36,12 +36,6 @@ _UNTRAINED_TREE = ("the observation holds a tree this GNN has no slot for (tree 
 _TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True, inline="always")
-def _gelu(v: float) -> float:
-    """The GELU of one value with libm's ``erf``: the reference :func:`_gelu_into` keeps the order of."""
-    return 0.5 * v * (1.0 + math.erf(v * _SQRT_HALF))
-
-
 def _load_vector_erf() -> bool:
     """Whether glibc's vector math library (libmvec, glibc 2.35+) and AVX2 are here, and numba builds
     for this CPU: then the GELUs take its ``erf`` of four doubles at a time (~5 ns a value against
@@ -96,7 +90,7 @@ def _erf4_inplace(typingctx, a, i):
 @njit(cache=True, inline="always")
 def _gelu_into(v):
     """``v = GELU(v)`` for a 1-D contiguous array: the ``erf``s four at a time (:func:`_erf4_inplace`),
-    then ``0.5 v (1 + erf(v / sqrt 2))`` in :func:`_gelu`'s order."""
+    then ``0.5 * v * (1 + erf(v * _SQRT_HALF))`` in that order (the scalar GELU's, with libm's ``erf``)."""
     n = v.shape[0]
     u = np.zeros(n + (-n) % 4)
     for i in range(n):
