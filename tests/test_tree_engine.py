@@ -355,3 +355,87 @@ def test_a_compilation_is_announced_once_and_never_when_cached(tmp_path):
     assert [r.returncode for r in runs] == [0, 0], runs[0].stderr[-2000:]
     assert [r.stdout.split() for r in runs] == [["True", "False"], ["False", "False"]]
     assert runs[0].stderr.count("gnn-mp: compiling x (numba; first use") == 1 and "compiling" not in runs[1].stderr
+
+
+def _knn_oracle(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric):
+    """The causal k-NN by brute force in Python floats: every earlier node of the row's tree, its
+    distance by the documented formula, sorted by (distance, index)."""
+    import math
+    B, d = x.shape
+    near = np.zeros((B, max(knn, 1)), np.int64)
+    found = np.zeros(B, np.int64)
+    for r in range(B):
+        scored = []
+        for j in range(i0 + r):
+            if tree_id[j] != tid[r]:
+                continue
+            total = 0.0
+            for c in range(d):
+                if planner_metric:
+                    v = abs(float(x[r, c]) - float(states[j, c]))
+                    if periodic[c]:
+                        v = min(v, 2.0 * math.pi - v)
+                    v *= float(unit[c])
+                else:
+                    v = float(states[j, c]) - float(x[r, c])
+                    if periodic[c]:
+                        v = (v + math.pi) % (2.0 * math.pi) - math.pi
+                    v /= float(unit[c])
+                total += v * v
+            scored.append((total, j))
+        best = sorted(scored)[:knn]
+        found[r] = len(best)
+        near[r, :len(best)] = [j for _, j in best]
+    return near, found
+
+
+@pytest.mark.parametrize("planner_metric", [False, True])
+def test_compiled_causal_knn_is_the_brute_force_answer(planner_metric):
+    """The kernels' causal k-NN (two passes over a column copy of the states) returns, row by row,
+    the ``knn`` earlier nodes of the row's tree with the smallest distance, the earlier node first
+    on ties, as a brute-force sort: wrapped angles, angles outside [-pi, pi) (the wrap's modulo
+    fallback), exact ties from repeated states, two trees, fewer earlier nodes than ``knn``."""
+    from agents.tree.compiled import _causal_knn
+    rng = np.random.default_rng(3)
+    n = 400
+    states = np.stack([rng.uniform(-np.pi, np.pi, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-1.0, 1.0, n)], 1)
+    states[::7] = states[3]                                  # exact ties
+    states[5::50, 0] += 4 * np.pi                            # not wrapped: the modulo path
+    states = np.round(states, 3)
+    tree_id = rng.integers(0, 2, n)
+    periodic = np.array([True, False, False])
+    unit = np.array([0.4, 0.4, 0.25])
+    for i0, B in ((0, 40), (150, 120), (399, 1)):
+        x, tid = states[i0:i0 + B].copy(), tree_id[i0:i0 + B].copy()
+        for knn in (0, 1, 6):
+            got = _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric)
+            want = _knn_oracle(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric)
+            np.testing.assert_array_equal(got[1], want[1])
+            for r in range(B):
+                np.testing.assert_array_equal(got[0][r, :got[1][r]], want[0][r, :want[1][r]])
+
+
+def test_compiled_gelu_over_many_rows_equals_one_call_per_row():
+    """The kernels take a batch's message GELUs in one call (:func:`_gelu_with` with a shared
+    scratch): each value's result depends on that value only, so it is bit for bit one call per
+    64-value row, whatever the length and the scratch's previous contents."""
+    from numba import njit
+
+    from agents.tree.compiled import _gelu_into, _gelu_with
+
+    @njit(cache=False)
+    def whole(v, u):
+        _gelu_with(v, u)
+
+    @njit(cache=False)
+    def per_row(a):
+        for r in range(a.shape[0]):
+            _gelu_into(a[r])
+
+    values = _gelu_values()
+    for rows in (1, 3, 7):
+        a = values[:rows * 64].reshape(rows, 64).copy()
+        flat = a.reshape(-1).copy()
+        whole(flat[:rows * 64 - 3], np.full(rows * 64 + 4, np.nan))     # a length not a multiple of 4, dirty scratch
+        per_row(a)
+        assert np.array_equal(flat[:rows * 64 - 3], a.reshape(-1)[:rows * 64 - 3])
