@@ -415,6 +415,28 @@ def test_the_proposals_tuning_rule():
     assert choose(rows, [1, 8], inference_share=0.1) == 8
 
 
+def test_the_mixture_tuning_tool_reads_its_candidates_and_its_rule(capsys):
+    """tools/tune_adaptive: ``--setting adaptive`` takes true or dicts, a share (``uniform_mix``,
+    ``goal_bias``) numbers in [0, 1); anything else is a one-line usage error before any planning.
+    Chosen: the smallest geometric mean among the candidates whose worst kind is within ``--worst``."""
+    from tools.tune_adaptive import choose, main, parse_candidates
+    assert parse_candidates("adaptive", '[true, {"cells": 40}]') == [True, {"cells": 40}]
+    assert parse_candidates("uniform_mix", "[0.5, 0, 0.75]") == [0.5, 0, 0.75]
+    for setting, bad in [("adaptive", "[0.5]"), ("adaptive", "[false]"), ("uniform_mix", "[1.0]"),
+                         ("uniform_mix", "[-0.1]"), ("goal_bias", "[true]"), ("uniform_mix", "[]"),
+                         ("uniform_mix", "0.5"), ("uniform_mix", "[0.5")]:
+        assert parse_candidates(setting, bad) is None, (setting, bad)
+    with pytest.raises(SystemExit):
+        main(["--setting", "uniform_mix", "--candidates", "[0.5, 1.5]"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "numbers in [0, 1) for --setting uniform_mix" in err[-1]
+    summary = {"0.5": {"geometric_mean": 0.64, "worst": 1.02}, "0.7": {"geometric_mean": 0.60, "worst": 1.17},
+               "0.8": {"geometric_mean": 0.66, "worst": 0.90}}
+    assert choose(summary, worst=1.1) == "0.5"       # 0.7 is best on average but too bad on one kind
+    assert choose(summary, worst=1.2) == "0.7"
+    assert choose(summary, worst=0.5) == "0.7"       # none within the bound: all compete
+
+
 def test_a_tuned_setting_is_stored_in_the_weights_and_the_sidecar(tmp_path, monkeypatch):
     """tools.shipped_settings (the --write of tune_proposals and tune_adaptive): the chosen value joins
     meta["sampler"], which load_sampler applies; the tuning table and the command go beside it in the
