@@ -211,8 +211,10 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         if is_ompl(name):
             runs[name] = run_ompl_rows(args, name, indices)
 
+    # problem-major: a problem's samplers run one after the other, so every row's runs spread over the
+    # whole run and meet the same load and host drift (wall-time ratios); the counters do not depend on it
     jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings)
-            for name, checkpoint, settings in learned for i in indices]
+            for i in indices for name, checkpoint, settings in learned]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
 
     def finished(record: dict[str, Any]) -> None:
