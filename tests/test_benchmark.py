@@ -54,22 +54,6 @@ def test_samplers_see_the_same_problems_and_seeds():
     assert "uniform" in table and "goal-bias" in table
 
 
-def test_a_problems_samplers_run_one_after_the_other(monkeypatch):
-    """Jobs are problem-major (problem 0 with every sampler, then problem 1, ...): each row's runs
-    spread over the whole run, so load and host drift reach every row alike (wall-time ratios)."""
-    from train.benchmark import runs as runs_module
-    order = []
-    real = runs_module._run_episode_job
-
-    def recording(job):
-        order.append((job[3], job[2]))                  # (problem, sampler)
-        return real(job)
-
-    monkeypatch.setattr(runs_module, "_run_episode_job", recording)
-    bm.run_benchmark(tiny_args(workers=1, problems=3, samplers=["uniform", "goal-bias"]))
-    assert order == [(i, name) for i in range(3) for name in ("uniform", "goal-bias")]
-
-
 def test_two_workers_match_a_serial_run():
     serial = bm.run_benchmark(tiny_args(workers=1, problems=2))
     parallel = bm.run_benchmark(tiny_args(workers=2, problems=2))

@@ -58,9 +58,9 @@ def measure(task: str, sampler: str, kinds: list[str | None], problems: int, see
     jobs = []
     for kind in kinds:
         env_kwargs = {"split": "val", **({"scene": kind} if kind else {})}
-        for i in range(problems):          # problem-major, as the benchmark: rows meet the same load
-            jobs.append((task, env_kwargs, "uniform", i, seed, None, ()))
-            jobs += [(task, env_kwargs, sampler, i, seed, None, ((setting, value),)) for value in candidates]
+        jobs += [(task, env_kwargs, "uniform", i, seed, None, ()) for i in range(problems)]
+        for value in candidates:
+            jobs += [(task, env_kwargs, sampler, i, seed, None, ((setting, value),)) for i in range(problems)]
     results: list = []
     with WorkerPool(workers) as pool:
         pool.run(jobs, results.append, _keyed_job)
