@@ -188,10 +188,18 @@ class CandidateEncoder(nn.Module):
     candidate's input. ``forward(obs)`` returns ``(per_candidate (*S, K, embed), summary (*S,
     2 * embed))``: the mean and max over the candidates. :meth:`flat` is what a library head
     reads: ``[per_candidate.flatten(), summary]``, :attr:`out_channels` wide.
+
+    With ``prior`` (``{"scorer": TreeGNNScorer constructor arguments, "temperature": T}``) the
+    features' last column is a candidate prior's logit (the supervised GNN sample scorer over the
+    whole tree, computed incrementally by the env and the sampler: ``agents.rl.prior``), and
+    :meth:`flat` ends with those ``K`` logits as they are, so that a linear head can start as
+    exactly the prior (:func:`prior_head_init`) and training learns what to add. The scorer's
+    weights are a frozen submodule (:attr:`prior_model`): they travel with the policy's, and the
+    sampler rebuilds the same prior from them.
     """
 
     def __init__(self, feature_dim: int, count: int, hidden: int = 64, embed: int = 32, act: str = "tanh",
-                 tree: Mapping | None = None) -> None:
+                 tree: Mapping | None = None, prior: Mapping | None = None) -> None:
         super().__init__()
         if act not in ACTIVATIONS:
             raise ValueError(f"unknown act {act!r}; known: {', '.join(sorted(ACTIVATIONS))}")
@@ -199,16 +207,32 @@ class CandidateEncoder(nn.Module):
                                                                                  int(hidden), int(embed), act)
         self.tree_config = None if tree is None else dict(tree)
         self.tree = None if tree is None else TreeEncoder(**self.tree_config)
+        self.prior_config = None if prior is None else {"scorer": dict(prior["scorer"]),
+                                                        "temperature": float(prior.get("temperature", 1.0))}
+        #: The candidate prior's model (frozen; None without a prior).
+        self.prior_model = None
+        if self.prior_config is not None:
+            from agents.tree.scorer import TreeGNNScorer
+            self.prior_model = TreeGNNScorer(**self.prior_config["scorer"]).eval().requires_grad_(False)
         extra = 0 if self.tree is None else self.tree.out_channels
         self.net = nn.Sequential(nn.Linear(self.feature_dim + extra, self.hidden), ACTIVATIONS[act](),
                                  nn.Linear(self.hidden, self.embed), ACTIVATIONS[act]())
-        self.out_channels = self.count * self.embed + 2 * self.embed
+        self.out_channels = self.count * self.embed + 2 * self.embed + (self.count if self.prior_model is not None
+                                                                        else 0)
 
     @classmethod
-    def from_space(cls, observation_space: spaces.Dict, tree_context: bool = False, **kwargs) -> "CandidateEncoder":
+    def from_space(cls, observation_space: spaces.Dict, tree_context: bool = False,
+                   prior_checkpoint: str | None = None, prior_temperature: float = 1.0,
+                   **kwargs) -> "CandidateEncoder":
         """Sized for a candidate env's observation space; ``tree_context=True`` adds a
-        :class:`TreeEncoder` (``tree_kwargs``: its keyword arguments) over the tree view."""
+        :class:`TreeEncoder` (``tree_kwargs``: its keyword arguments) over the tree view;
+        ``prior_checkpoint``: the ``tree/gnn-scorer`` checkpoint whose logits (over
+        ``prior_temperature``) the env appends as the features' last column."""
         feats = observation_space["candidate_features"]
+        if prior_checkpoint is not None:
+            from agents.checkpoints import read_checkpoint
+            record = read_checkpoint(prior_checkpoint)
+            kwargs["prior"] = {"scorer": record["ctor_args"], "temperature": float(prior_temperature)}
         tree_kwargs = dict(kwargs.pop("tree_kwargs", None) or {})
         if tree_context:
             enc = TreeEncoder.from_space(observation_space, **tree_kwargs)
@@ -218,12 +242,22 @@ class CandidateEncoder(nn.Module):
                               "feature_scale": enc.feature_scale.tolist(),
                               "state_low": (enc.state_center - enc.state_half_span).tolist(),
                               "state_high": (enc.state_center + enc.state_half_span).tolist()}
-        return cls(int(feats.shape[-1]), int(feats.shape[-2]), **kwargs)
+        encoder = cls(int(feats.shape[-1]), int(feats.shape[-2]), **kwargs)
+        if prior_checkpoint is not None:
+            encoder.load_prior(prior_checkpoint)
+        return encoder
+
+    def load_prior(self, path: str) -> None:
+        """The prior's weights from its ``tree/gnn-scorer`` checkpoint (again after a library re-initialised
+        every linear layer under its features extractor: SB3's orthogonal init does)."""
+        from agents.checkpoints import load_checkpoint
+        scorer, _ = load_checkpoint(path, expected_kind="tree/gnn-scorer")
+        self.prior_model.load_state_dict(scorer.state_dict())
 
     def config(self) -> dict:
         """Constructor arguments that rebuild this encoder (plain values)."""
         return {"feature_dim": self.feature_dim, "count": self.count, "hidden": self.hidden, "embed": self.embed,
-                "act": self.act_name, "tree": self.tree_config}
+                "act": self.act_name, "tree": self.tree_config, "prior": self.prior_config}
 
     def forward(self, obs: Mapping) -> tuple[torch.Tensor, torch.Tensor]:
         x = obs["candidate_features"]
@@ -236,9 +270,22 @@ class CandidateEncoder(nn.Module):
         return per, torch.cat([per.mean(-2), per.amax(-2)], -1)
 
     def flat(self, obs: Mapping) -> torch.Tensor:
-        """``[per_candidate.flatten(-2), mean, max]`` ``(*S, out_channels)``."""
+        """``[per_candidate.flatten(-2), mean, max]`` ``(*S, out_channels)`` (with a prior: then its ``K`` logits)."""
         per, summary = self(obs)
-        return torch.cat([per.flatten(-2), summary], -1)
+        parts = [per.flatten(-2), summary]
+        if self.prior_model is not None:
+            x = obs["candidate_features"]
+            parts.append((x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))).float()[..., -1])
+        return torch.cat(parts, -1)
 
 
-__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder", "plain_mean_sage"]
+def prior_head_init(linear: nn.Linear, count: int) -> None:
+    """Make a linear head over :meth:`CandidateEncoder.flat` (with a prior) start as the prior: the
+    weights of the last ``count`` inputs (the prior's logits) the identity, the rest as initialised
+    (SB3's orthogonal init of gain 0.01 gives a policy within a few hundredths of the prior), bias zero."""
+    with torch.no_grad():
+        linear.weight[:, -count:] = torch.eye(count, dtype=linear.weight.dtype)
+        linear.bias.zero_()
+
+
+__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder", "plain_mean_sage", "prior_head_init"]

@@ -157,3 +157,109 @@ def test_shipped_arm_pickers_beat_uniform_on_val_collision_checks(name):
     assert all(r.success for r in runs[name])
     checks = {s: np.median([r.collision_checks for r in records]) for s, records in runs.items()}
     assert checks[name] < 0.7 * checks["uniform"], checks
+
+
+# ----------------------------------------------------------------------------- the candidate prior
+def scorer_prior():
+    from agents.checkpoints import shipped_checkpoint
+    from agents.rl.prior import ScorerPrior
+    return ScorerPrior.from_checkpoint(shipped_checkpoint("gnn", "pendulum"))
+
+
+def test_candidate_prior_column_is_the_scorers_logit():
+    """The prior column against the scorer's numpy head at brute-force nearest nodes (an independent
+    path from the compiled one the prior calls); every other column as without a prior."""
+    from agents.checkpoints import load_checkpoint, shipped_checkpoint
+    from agents.tree.engine import IncrementalTreeScorer
+    env, obs, cs = grown_env("pendulum", 80)
+    with_prior = CandidateSet(env.action_space.low, env.action_space.high, prior=scorer_prior(),
+                              **candidate_settings("pendulum", 12))
+    plain = CandidateSet(env.action_space.low, env.action_space.high, **candidate_settings("pendulum", 12))
+    cands, feats = with_prior.propose(obs, np.random.default_rng(3))
+    cands2, feats2 = plain.propose(obs, np.random.default_rng(3))
+    np.testing.assert_array_equal(cands, cands2)
+    assert feats.shape == (12, feats2.shape[1] + 1)
+    np.testing.assert_array_equal(feats[:, :-1], feats2)
+    model, _ = load_checkpoint(shipped_checkpoint("gnn", "pendulum"), expected_kind="tree/gnn-scorer")
+    engine = IncrementalTreeScorer(model)
+    engine.ingest(obs)
+    n = int(obs["num_nodes"][0])
+    problem = env.unwrapped.problem
+    x = cands.astype(np.float64)
+    near = np.array([int(np.argmin(problem.distance(np.asarray(obs["nodes"][:n], np.float64), c))) for c in x])
+    np.testing.assert_allclose(feats[:, -1], engine.logits(x, near), rtol=1e-5, atol=1e-5)
+    assert np.ptp(feats[:, -1]) > 0.5                      # a real score, not a constant
+    env.close()
+
+
+def test_prior_picker_starts_as_the_prior_and_its_twin_agrees():
+    """A PickPolicy with a prior and its other head weights zeroed gives exactly the prior's logits; with
+    any weights, the numpy twin the sampler runs matches the torch policy."""
+    from agents.checkpoints import shipped_checkpoint
+    from agents.encoders import CandidateEncoder
+    from agents.rl.pick import PickPolicy
+    from agents.rl.sampler import numpy_pick_layers, numpy_pick_logits
+    env, obs, _ = grown_env("pendulum", 40)
+    cs = CandidateSet(env.action_space.low, env.action_space.high, prior=scorer_prior(),
+                      **candidate_settings("pendulum", 8))
+    _, feats = cs.propose(obs, np.random.default_rng(0))
+    space = make_rl_env("pendulum", candidates=8, candidate_prior=scorer_prior).observation_space
+    assert space["candidate_features"].shape == feats.shape
+    torch.manual_seed(0)
+    enc = CandidateEncoder.from_space(space, prior_checkpoint=str(shipped_checkpoint("gnn", "pendulum")),
+                                      hidden=16, embed=8)
+    policy = PickPolicy(enc.config()).eval()
+    policy.encoder.load_state_dict(enc.state_dict())
+    with torch.no_grad():
+        policy.logits.weight[:, :-8] = 0
+        start = policy({"candidate_features": torch.as_tensor(feats)[None]})[0].numpy()
+    np.testing.assert_array_equal(start, feats[:, -1])
+    with torch.no_grad():
+        policy.logits.weight.normal_()
+        expected = policy({"candidate_features": torch.as_tensor(feats)[None]})[0].numpy()
+    np.testing.assert_allclose(numpy_pick_logits(numpy_pick_layers(policy), feats), expected, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="linear head"):
+        PickPolicy(enc.config(), hidden=[16])
+    env.close()
+
+
+def test_prior_run_exports_the_prior_it_trained_with(tmp_path):
+    """A short SB3 run with --prior gnn (and a vanishing learning rate, so the policy stays the untrained
+    one): SB3's re-initialisation of its extractor does not reach the exported sampler's prior (the
+    same logits as the env's), and the pick probabilities are the prior's softmax to within SB3's
+    small head init."""
+    from agents.rl.sampler import sampler_from_checkpoint
+    from train.cli import main
+    out = tmp_path / "run"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["train", "rl", "--task", "pendulum", "--total-steps", "64", "--n-envs", "2", "--n-steps", "32",
+                     "--batch-size", "32", "--lr", "1e-12", "--eval-problems", "1", "--eval-max-steps", "100",
+                     "--out", str(out), "--no-progress"]) == 0
+    env, obs, _ = grown_env("pendulum", 50)
+    low, high = env.action_space.low, env.action_space.high
+    sampler = sampler_from_checkpoint(out / "policy.pt", low, high, seed=0)
+    reference = CandidateSet(low, high, prior=scorer_prior(), **sampler.candidate_set.config())
+    a = sampler.candidate_set.propose(obs, np.random.default_rng(5))[1]
+    b = reference.propose(obs, np.random.default_rng(5))[1]
+    np.testing.assert_allclose(a[:, -1], b[:, -1], rtol=1e-6, atol=1e-6)
+    logits = sampler.logits(obs, b).astype(np.float64)
+    p, q = np.exp(logits - logits.max()), np.exp(b[:, -1] - b[:, -1].max())
+    np.testing.assert_allclose(p / p.sum(), q / q.sum(), atol=0.02)
+    env.close()
+
+
+def test_prior_flags_are_refused_where_they_cannot_work(capsys):
+    from train.rl.cli import parse
+    for argv, message in ((["--task", "maze2d", "--prior", "gnn"], "tree/gnn-scorer"),
+                          (["--task", "pendulum", "--pi-arch", "32"], "linear"),
+                          (["--task", "pendulum", "--action", "box"], "picker"),
+                          (["--task", "pendulum", "--prior", "nosuch"], "no such file")):
+        with pytest.raises(SystemExit):
+            parse(argv)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) <= 2 and message in err[-1], (argv, err)     # usage line + one line of error
+    args = parse(["--task", "pendulum", "--action", "box", "--hyperparams", "none"])
+    assert args.prior is None and args.lr == 3e-4 and args.hyperparams is None
+    args = parse(["--task", "pendulum"])                # the task's YAML file: the prior picker
+    assert args.prior.name == "gnn_pendulum.pt" and args.candidates == 20 and args.pi_arch == []

@@ -115,7 +115,7 @@ def swap_run(sampler: Any, env: Any, shadow_env: Any, index: int, args: Args) ->
     low, high = sampler.low, sampler.high
     periodic = np.asarray(getattr(sampler, "periodic", np.zeros(len(low), bool)), bool)
     pick = hasattr(sampler, "candidate_set")
-    probe = CandidateSet(low, high, **sampler.candidate_set.config()) if pick else None
+    probe = CandidateSet(low, high, prior=sampler.new_prior(), **sampler.candidate_set.config()) if pick else None
     kls, tvs, blind, shifts = [], [], [], []
     captured: dict[str, Any] = {}
     if pick:

@@ -199,7 +199,8 @@ def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
     the body and the logits layer, for :func:`numpy_pick_logits` (a forward of ~10 us instead of
     torch's ~300 us of per-call overhead on one step's ``(K, F)`` features)."""
     return {"candidate": _numpy_layers(policy.encoder.net), "body": _numpy_layers(policy.body),
-            "logits": _numpy_layers(nn.Sequential(policy.logits))[0]}
+            "logits": _numpy_layers(nn.Sequential(policy.logits))[0],
+            "prior": policy.encoder.prior_model is not None}
 
 
 def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
@@ -259,8 +260,10 @@ def numpy_tree_params(twin: Mapping[str, Any], view: Mapping[str, np.ndarray]) -
 
 def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarray:
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
-    h = _numpy_mlp(twin["candidate"], np.asarray(features, np.float32))
-    x = _numpy_mlp(twin["body"], np.concatenate([h.reshape(-1), h.mean(0), h.max(0)]))
+    features = np.asarray(features, np.float32)
+    h = _numpy_mlp(twin["candidate"], features)
+    parts = [h.reshape(-1), h.mean(0), h.max(0)] + ([features[:, -1]] if twin["prior"] else [])
+    x = _numpy_mlp(twin["body"], np.concatenate(parts))
     return _numpy_mlp([twin["logits"]], x)
 
 
@@ -270,7 +273,8 @@ class PickSampler(ModelSampler):
     Each model sample draws the step's candidates from the sampler's stream with the
     :class:`~gnn_mp_envs.envs.candidates.CandidateSet` the policy was trained with (the same
     draws and features as the training env's :class:`CandidatePickWrapper`), scores them and
-    draws one (``deterministic=True``: the best). The one mixture of :class:`ModelSampler` puts
+    draws one (``deterministic=True``: the best); a policy trained with a candidate prior gets
+    the same prior, rebuilt from the scorer weights it carries. The one mixture of :class:`ModelSampler` puts
     ``uniform_mix`` / ``goal_bias`` samples in between; every sample sent is recorded, so the
     tree statistics (blocked extensions per node) are those the training env kept.
 
@@ -290,15 +294,24 @@ class PickSampler(ModelSampler):
         config = dict(candidates)
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=config.get("periodic"))
-        self.candidate_set = CandidateSet(low, high, **config)
+        self.policy = policy.eval()
+        self.candidate_set = CandidateSet(low, high, prior=self.new_prior(), **config)
         if self.candidate_set.count != policy.count:
             raise ValueError(f"the policy picks among {policy.count} candidates, the candidate set has "
                              f"{self.candidate_set.count}")
-        self.policy = policy.eval()
         self.view_nodes = int(view_nodes)
         self.deterministic = boolean_setting("deterministic", deterministic)
         self._picked: int | None = None
         self._twin = None if policy.reads_tree else numpy_pick_layers(policy)
+
+    def new_prior(self):
+        """A fresh copy of the candidate prior the policy was trained with (its own caches), rebuilt from
+        the scorer weights the policy carries; None for a policy without one."""
+        encoder = self.policy.encoder
+        if encoder.prior_model is None:
+            return None
+        from agents.rl.prior import ScorerPrior
+        return ScorerPrior(encoder.prior_model, encoder.prior_config["temperature"])
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)

@@ -37,7 +37,14 @@ cols   meaning
 12     BiRRT: ``dist(c, nearest node of the other tree) / D``; RRT: 0
 13..   ``c`` in ``[-1, 1]`` (d), ``n`` in ``[-1, 1]`` (d), ``wrap(c - n) / step`` clipped to
        ``[-4, 4]`` (d), ``wrap(g - n) / span`` (d)
+last   with a ``prior``: its logit of ``c`` (one more column, ``F = 14 + 4 d``)
 =====  ==========================================================================
+
+**A prior** (``CandidateSet(..., prior=...)``, :class:`CandidatePrior`): any object that scores the
+step's candidates from the full observation, e.g. ``agents.rl.prior.ScorerPrior``, the supervised
+GNN sample scorer read incrementally over the whole tree (a policy whose logits start as the
+prior's is a warm start that PPO refines; ``docs/rl.md``). This module only calls it, so the
+environments stay free of torch.
 
 The tree statistics (children, failures, best node) are kept incrementally per episode; a
 failure is counted when the sample actually sent (:meth:`CandidateSet.record`, the mixture's
@@ -47,7 +54,7 @@ that shrank) clears them.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -76,9 +83,19 @@ def wrap_into_box(x: np.ndarray, low: np.ndarray, span: np.ndarray, periodic: np
     return np.where(periodic, wrapped, x)
 
 
-def feature_width(state_dim: int) -> int:
-    """``F``: columns of the candidate features for ``state_dim``-D states."""
-    return SCALAR_FEATURES + 4 * int(state_dim)
+def feature_width(state_dim: int, prior: bool = False) -> int:
+    """``F``: columns of the candidate features for ``state_dim``-D states (``prior``: with the prior's logit)."""
+    return SCALAR_FEATURES + 4 * int(state_dim) + int(bool(prior))
+
+
+class CandidatePrior(Protocol):
+    """Scores a step's candidates from the full observation (per-episode caches allowed)."""
+
+    def reset(self) -> None:
+        """Forget the episode."""
+
+    def __call__(self, obs: Mapping, candidates: np.ndarray, active: int) -> np.ndarray:
+        """Logits ``(K,)`` of ``candidates`` ``(K, d)`` (float64) for tree ``active`` of ``obs``."""
 
 
 class CandidateSet:
@@ -91,6 +108,8 @@ class CandidateSet:
         periodic: ``(d,)`` bool, the coordinates that wrap (period ``high - low``).
         metric_weights: ``(d,)`` the planner's metric weights (None: Euclidean).
         local_scale: standard deviation of the local candidates, in extensions.
+        prior: a :class:`CandidatePrior` whose logit of each candidate is the features' last column
+            (None: no such column). Not part of :meth:`config`: its owner rebuilds it.
 
     ``propose(obs, rng)`` returns ``(candidates (K, d) float32, features (K, F) float32)``;
     ``record(obs, sample)`` is told the sample that was actually sent to the planner.
@@ -99,7 +118,7 @@ class CandidateSet:
     def __init__(self, low: np.ndarray, high: np.ndarray, *, count: int = DEFAULT_CANDIDATES,
                  step_scale: float = 1.0, periodic: Sequence[bool] | None = None,
                  metric_weights: Sequence[float] | None = None, local_scale: float = DEFAULT_LOCAL_SCALE,
-                 target_scale: float = DEFAULT_TARGET_SCALE) -> None:
+                 target_scale: float = DEFAULT_TARGET_SCALE, prior: CandidatePrior | None = None) -> None:
         self.low = np.asarray(low, np.float64)
         self.high = np.asarray(high, np.float64)
         d = self.low.shape[0]
@@ -123,7 +142,8 @@ class CandidateSet:
         self.local_scale, self.target_scale = float(local_scale), float(target_scale)
         self.local_std = self.local_scale * self.step / self.weights
         self.target_std = self.target_scale * self.span
-        self.width = feature_width(d)
+        self.prior = prior
+        self.width = feature_width(d, prior is not None)
         kinds = np.zeros((self.count, len(CANDIDATE_KINDS)), np.float64)
         fixed = len(CANDIDATE_KINDS) - 1
         kinds[np.arange(fixed), np.arange(fixed)] = 1
@@ -152,6 +172,8 @@ class CandidateSet:
         self._near = np.zeros(0, np.int64)                                   # the last proposal's nearest nodes
         self._best: list[tuple[float, int]] = [(np.inf, -1), (np.inf, -1)]
         self._pending: tuple[int, int] | None = None       # (num_nodes when sent, nearest node)
+        if getattr(self, "prior", None) is not None:
+            self.prior.reset()
 
     def _difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         diff = a - b
@@ -168,6 +190,7 @@ class CandidateSet:
 
     def _ingest(self, obs: Mapping) -> int:
         """Update the tree statistics with the observation's new rows; the number of nodes."""
+        self._obs = obs                      # what a prior scores the features' candidates against
         n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
         key = np.asarray(obs["start"]).tobytes() + np.asarray(obs["goal"]).tobytes()
         if key != self._key or n < self._seen:
@@ -266,7 +289,8 @@ class CandidateSet:
 
     def features(self, cands: np.ndarray, n: int, active: int, target: np.ndarray) -> np.ndarray:
         """Features ``(K, F)`` of candidate states ``cands`` for the active tree (see the module
-        docstring); remembers each candidate's nearest node for :meth:`record`."""
+        docstring) of the observation ingested last; remembers each candidate's
+        nearest node for :meth:`record`."""
         K, d = cands.shape
         D = self._scale
         j, reach = self._nearest(cands, active)
@@ -290,6 +314,8 @@ class CandidateSet:
         out[:, s + d:s + 2 * d] = (n_state - self.center) / self.half
         out[:, s + 2 * d:s + 3 * d] = np.clip(self._difference(cands, n_state) / self.step, -4.0, 4.0)
         out[:, s + 3 * d:s + 4 * d] = self._difference(target, n_state) / self.span
+        if self.prior is not None:
+            out[:, -1] = self.prior(self._obs, cands, active)
         return out.astype(np.float32)
 
     def record(self, obs: Mapping, sample: np.ndarray, candidate: int | None = None) -> None:
@@ -306,12 +332,14 @@ class CandidateSet:
         self._pending = (n, near)
 
 
-def candidate_space(state_dim: int, count: int, low: np.ndarray, high: np.ndarray) -> dict[str, spaces.Box]:
-    """The observation entries the candidate wrapper adds: ``candidates`` and ``candidate_features``."""
+def candidate_space(state_dim: int, count: int, low: np.ndarray, high: np.ndarray,
+                    prior: bool = False) -> dict[str, spaces.Box]:
+    """The observation entries the candidate wrapper adds: ``candidates`` and ``candidate_features``
+    (``prior``: with the prior's logit column)."""
     low32 = np.asarray(low, np.float32)
     high32 = np.asarray(high, np.float32)
     return {"candidates": spaces.Box(np.tile(low32, (count, 1)), np.tile(high32, (count, 1)), dtype=np.float32),
-            "candidate_features": spaces.Box(-np.inf, np.inf, shape=(count, feature_width(state_dim)),
+            "candidate_features": spaces.Box(-np.inf, np.inf, shape=(count, feature_width(state_dim, prior)),
                                              dtype=np.float32)}
 
 
@@ -319,7 +347,9 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Actions are ``Discrete(K)``: the index of one of the step's ``K`` candidates.
 
     ``candidates``: the keyword arguments of the :class:`CandidateSet` (``count``,
-    ``step_scale``, ``periodic``, ``metric_weights``, ``local_scale``, ``target_scale``).
+    ``step_scale``, ``periodic``, ``metric_weights``, ``local_scale``, ``target_scale``);
+    ``prior``: a zero-argument factory of its :class:`CandidatePrior` (each env builds its own,
+    with its own caches; None: no prior column).
 
     Adds ``candidates`` ``(K, d)`` and ``candidate_features`` ``(K, F)`` to the observation
     (:class:`CandidateSet`); ``step(k)`` sends candidate ``k`` to the planner, or, with
@@ -328,18 +358,22 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     draws come from the wrapper's own generator, seeded by ``reset(seed=...)``.
     """
 
-    def __init__(self, env: gym.Env, uniform_mix: float = 0.0, **candidates: Any) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, uniform_mix=uniform_mix, **candidates)
+    def __init__(self, env: gym.Env, uniform_mix: float = 0.0, prior: Callable[[], CandidatePrior] | None = None,
+                 **candidates: Any) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, uniform_mix=uniform_mix, prior=prior, **candidates)
         gym.Wrapper.__init__(self, env)
         if not 0.0 <= uniform_mix <= 1.0:
             raise ValueError(f"uniform_mix must be in [0, 1], got {uniform_mix}")
+        if prior is not None and not callable(prior):
+            raise ValueError(f"prior must be a zero-argument factory of a candidate prior, got {prior!r}")
         box = env.action_space
-        self.candidate_set = CandidateSet(box.low, box.high, **candidates)
+        self.candidate_set = CandidateSet(box.low, box.high, prior=None if prior is None else prior(), **candidates)
         count = self.candidate_set.count
         self.uniform_mix = float(uniform_mix)
         self.action_space = spaces.Discrete(int(count))
         self.observation_space = spaces.Dict({**env.observation_space.spaces,
-                                              **candidate_space(box.shape[0], count, box.low, box.high)})
+                                              **candidate_space(box.shape[0], count, box.low, box.high,
+                                                                prior is not None)})
         self._rng = np.random.default_rng()
         self._obs: Mapping | None = None
         self._cands: np.ndarray | None = None
@@ -372,6 +406,6 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._with_candidates(obs), reward, terminated, truncated, info
 
 
-__all__ = ["CANDIDATE_KINDS", "CandidatePickWrapper", "CandidateSet", "DEFAULT_CANDIDATES", "DEFAULT_LOCAL_SCALE",
+__all__ = ["CANDIDATE_KINDS", "CandidatePickWrapper", "CandidatePrior", "CandidateSet", "DEFAULT_CANDIDATES", "DEFAULT_LOCAL_SCALE",
            "DEFAULT_TARGET_SCALE",
            "candidate_space", "feature_width", "wrap_into_box"]

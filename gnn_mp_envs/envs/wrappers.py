@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -318,7 +318,7 @@ def candidate_settings(task: str, count: int = DEFAULT_CANDIDATES, local_scale: 
 def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: str = "train", *,
                 planner: str | None = None, action: str = "pick", candidates: int = DEFAULT_CANDIDATES,
                 local_scale: float = DEFAULT_LOCAL_SCALE, target_scale: float = DEFAULT_TARGET_SCALE,
-                scale_actions: bool = True, uniform_mix: float | None = None,
+                candidate_prior: Callable[[], Any] | None = None, scale_actions: bool = True, uniform_mix: float | None = None,
                 action_frame: str = "target", progress_reward: float = 10.0, gamma: float = 0.99,
                 reward_scale: float = 0.01, max_episode_steps: int | None = RL_MAX_EPISODE_STEPS,
                 **env_kwargs: Any) -> gym.Env:
@@ -334,7 +334,10 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
       :class:`ProgressReward` (potential-based shaping with the agent's ``gamma``), multiplied
       by ``reward_scale`` (Gymnasium's ``TransformReward``);
     * ``action="pick"``: :class:`~gnn_mp_envs.envs.candidates.CandidatePickWrapper`, ``Discrete(candidates)``
-      actions over the step's candidate states (features relative to the tree in the observation);
+      actions over the step's candidate states (features relative to the tree in the observation;
+      ``candidate_prior``, a zero-argument factory of a
+      :class:`~gnn_mp_envs.envs.candidates.CandidatePrior`, adds its logit of each candidate as the
+      last feature column);
       ``action="box"``: ``[-1, 1]^d`` actions, offsets from the active tree's target
       (``action_frame="target"``, :class:`TargetRelativeAction`) or the rescaled box
       (``"absolute"``; ``scale_actions=False`` keeps state-space actions);
@@ -359,6 +362,8 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
         raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
     if action_frame not in ACTION_FRAMES:
         raise ValueError(f"action_frame must be one of {ACTION_FRAMES}, got {action_frame!r}")
+    if candidate_prior is not None and action != "pick":
+        raise ValueError(f"candidate_prior scores a picker's candidates (action='pick'), not action={action!r}")
     budget = int(env_kwargs.get("max_nodes", spec.max_nodes))
     if view_nodes is not None and (isinstance(view_nodes, bool) or not isinstance(view_nodes, (int, np.integer))
                                    or not 2 <= view_nodes <= budget):
@@ -379,7 +384,8 @@ def make_rl_env(task: str, view_nodes: int | None = DEFAULT_VIEW_NODES, split: s
     if reward_scale != 1.0:
         env = TransformReward(env, partial(_scaled_reward, float(reward_scale)))
     if action == "pick":
-        env = CandidatePickWrapper(env, uniform_mix, **candidate_settings(task, candidates, local_scale, target_scale))
+        env = CandidatePickWrapper(env, uniform_mix, candidate_prior,
+                                   **candidate_settings(task, candidates, local_scale, target_scale))
     if view_nodes is not None:
         env = TreeViewWrapper(env, view_nodes)
     if action == "box" and scale_actions:

@@ -74,7 +74,8 @@ class RLArgs(RunFlags):
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
     hyperparams: Path | None = arg(None, "YAML hyperparameter file (RL Zoo style: a section per <lib>-<algo> of flag "
                                    "values; explicit flags win); default: the task's shipped "
-                                   "train/rl/hyperparams/<task>.yml when there is one", metavar="FILE")
+                                   "train/rl/hyperparams/<task>.yml when there is one; none: no file, the flags' "
+                                   "own defaults", metavar="FILE")
     resume: bool = arg(False, "continue the run in --out from its last saved SB3 model (model.zip) or TorchRL "
                        "state (training_state.pt), up to --total-steps")
     device: str = arg("cpu", "torch device of the networks (cpu, cuda, auto: cuda when available)")
@@ -121,6 +122,12 @@ class RLArgs(RunFlags):
     candidate_embed: int = arg(32, "pick: per-candidate embedding width", parse=positive_int)
     tree_context: bool = arg(False, "pick: also encode the tree view with a TreeEncoder (sized by the flags above) and "
                              "give its embedding to every candidate")
+    prior: Path | None = arg(None, "pick: a candidate prior, the supervised GNN sample scorer (a tree/gnn-scorer "
+                             "checkpoint, or NAME for the shipped weights of --task, e.g. gnn on the pendulum): its "
+                             "logit of each candidate over the whole tree is a feature, and the policy starts as "
+                             "exactly that prior (a linear head, --pi-arch none); PPO learns what to add",
+                             metavar="PATH|NAME")
+    prior_temperature: float = arg(1.0, "pick: the prior's logits are divided by this", parse=positive_float)
     encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
                        "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))
@@ -167,6 +174,11 @@ class RLArgs(RunFlags):
                 kw[name] = getattr(self, name)
         if self.max_nodes is not None:
             kw["max_nodes"] = self.max_nodes
+        if self.prior is not None:
+            from functools import partial
+
+            from agents.rl.prior import ScorerPrior
+            kw["candidate_prior"] = partial(ScorerPrior.from_checkpoint, str(self.prior), self.prior_temperature)
         return kw
 
     @property
@@ -186,6 +198,8 @@ class RLArgs(RunFlags):
                               "tree_context": self.tree_context}
         if self.tree_context:
             kw["tree_kwargs"] = self.encoder_kwargs()
+        if self.prior is not None:
+            kw.update(prior_checkpoint=str(self.prior), prior_temperature=self.prior_temperature)
         return kw
 
     def encoder_kwargs(self) -> dict[str, Any]:
@@ -245,9 +259,20 @@ def check_args(args: RLArgs) -> None:
                              f"{', '.join(CANDIDATE_KINDS)}), got {args.candidates}")
         if args.encoder != "tree" or args.init_from is not None:
             raise ValueError("--encoder tree-gnn and --init-from warm-start a box policy's tree encoder; a picker "
-                             "(--action pick) reads candidate features (--tree-context adds a TreeEncoder)")
-    elif args.tree_context:
-        raise ValueError("--tree-context is a picker's (--action pick); a box policy always reads the tree")
+                             "(--action pick) reads candidate features (--tree-context adds a TreeEncoder, --prior "
+                             "the supervised scorer's logits)")
+        if args.prior is not None:
+            if args.pi_arch:
+                raise ValueError(f"--prior: the policy head is linear, so that it starts as the prior; got --pi-arch "
+                                 f"{','.join(map(str, args.pi_arch))} (use --pi-arch none)")
+            from agents.checkpoints import read_checkpoint
+            args.prior = init_from_path(args.prior, args.task, flag="--prior")
+            kind = read_checkpoint(args.prior)["kind"]     # a CheckpointError names the file and what is wrong
+            if kind != "tree/gnn-scorer":
+                raise ValueError(f"--prior {args.prior}: a {kind} checkpoint; the prior is a GNN sample scorer "
+                                 "(tree/gnn-scorer: the pendulum's shipped gnn)")
+    elif args.tree_context or args.prior is not None:
+        raise ValueError("--tree-context and --prior are a picker's (--action pick); a box policy always reads the tree")
     if args.device not in ("cpu", "cuda", "auto") and not args.device.startswith("cuda:"):
         raise ValueError(f"--device must be cpu, cuda, cuda:N or auto, got {args.device!r}")
     if args.resume and args.out is None:
@@ -279,9 +304,10 @@ def torch_device(name: str) -> str:
 
 
 def hyperparams_file(args: RLArgs) -> Path | None:
-    """The YAML file a run reads: ``--hyperparams``, else the task's shipped one (None: none)."""
+    """The YAML file a run reads: ``--hyperparams``, else the task's shipped one (None: none, also for
+    ``--hyperparams none``)."""
     if args.hyperparams is not None:
-        return Path(args.hyperparams)
+        return None if str(args.hyperparams).lower() == "none" else Path(args.hyperparams)
     shipped = HYPERPARAMS_DIR / f"{args.task}.yml"
     return shipped if shipped.is_file() else None
 
@@ -318,10 +344,10 @@ def read_hyperparams(path: Path, section: str) -> dict[str, Any]:
     return out
 
 
-def init_from_path(value: str | Path, task: str) -> Path:
-    """``--init-from``: a checkpoint file, or the name of a sampler whose shipped weights for ``task``
-    exist (``gnn`` -> ``agents/checkpoints/gnn_<task>.pt``: works from any directory, unlike a path
-    into the checkout)."""
+def init_from_path(value: str | Path, task: str, flag: str = "--init-from") -> Path:
+    """``--init-from`` (or ``--prior``): a checkpoint file, or the name of a sampler whose shipped weights
+    for ``task`` exist (``gnn`` -> ``agents/checkpoints/gnn_<task>.pt``: works from any directory,
+    unlike a path into the checkout)."""
     from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
     path = Path(value)
     if path.is_file():
@@ -329,7 +355,7 @@ def init_from_path(value: str | Path, task: str) -> Path:
     if "/" not in str(value) and shipped_checkpoint(str(value), task).is_file():
         return shipped_checkpoint(str(value), task)
     names = sorted(p.stem[:-len(task) - 1] for p in SHIPPED_DIR.glob(f"*_{task}.pt"))
-    raise ValueError(f"--init-from {value}: no such file, nor shipped weights of that name for task {task!r} "
+    raise ValueError(f"{flag} {value}: no such file, nor shipped weights of that name for task {task!r} "
                      f"(shipped: {', '.join(names) or 'none'})")
 
 

@@ -24,6 +24,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from tqdm import tqdm
 
+from agents.encoders import CandidateEncoder, prior_head_init
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
 from agents.rl.sb3 import CandidateFeaturesExtractor, TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
@@ -99,6 +100,11 @@ def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
                policy_kwargs=policy_kwargs, **common)
 
 
+def candidate_encoders(model: PPO | SAC) -> list:
+    """Every candidate encoder of a model (PPO: the shared one, or the actor's and the critic's)."""
+    return [m for m in model.policy.modules() if isinstance(m, CandidateEncoder)]
+
+
 def encoders_of(model: PPO | SAC) -> list:
     """Every encoder of a model (PPO: the shared one; SAC: actor, critic, target critic)."""
     return [m for m in model.policy.modules() if type(m).__name__ in ("TreeEncoder", "TreeGNNEncoder")]
@@ -126,6 +132,11 @@ def train(args: RLArgs) -> RunResult:
         print(f"resuming {run.dir} at step {model.num_timesteps:,}")
     else:
         model = build_model(args, vec_env, run.dir)
+        if args.prior is not None:       # the untrained policy is the prior itself (plus SB3's small init)
+            for encoder in candidate_encoders(model):    # SB3's orthogonal init re-drew the scorer's layers too
+                encoder.load_prior(str(args.prior))
+            prior_head_init(model.policy.action_net, args.candidates)
+            print(f"policy head initialised to the prior's logits ({args.prior}, temperature {args.prior_temperature})")
     if args.init_from is not None and not args.resume:
         try:
             source = warm_start_encoder(args.init_from, *encoders_of(model))
