@@ -211,6 +211,7 @@ class CandidateEncoder(nn.Module):
                                                         "temperature": float(prior.get("temperature", 1.0))}
         #: The candidate prior's model (frozen; None without a prior).
         self.prior_model = None
+        self.prior_source: str | None = None
         if self.prior_config is not None:
             from agents.tree.scorer import TreeGNNScorer
             self.prior_model = TreeGNNScorer(**self.prior_config["scorer"]).eval().requires_grad_(False)
@@ -253,6 +254,8 @@ class CandidateEncoder(nn.Module):
         from agents.checkpoints import load_checkpoint
         scorer, _ = load_checkpoint(path, expected_kind="tree/gnn-scorer")
         self.prior_model.load_state_dict(scorer.state_dict())
+        #: Where the prior's weights came from (None: from a policy's own state dict).
+        self.prior_source = str(path)
 
     def config(self) -> dict:
         """Constructor arguments that rebuild this encoder (plain values)."""

@@ -218,8 +218,25 @@ def test_prior_picker_starts_as_the_prior_and_its_twin_agrees():
         policy.logits.weight.normal_()
         expected = policy({"candidate_features": torch.as_tensor(feats)[None]})[0].numpy()
     np.testing.assert_allclose(numpy_pick_logits(numpy_pick_layers(policy), feats), expected, rtol=1e-5, atol=1e-5)
-    with pytest.raises(ValueError, match="linear head"):
-        PickPolicy(enc.config(), hidden=[16])
+    # the shared head: exactly the prior at the start, then a score per candidate from one set of weights
+    shared = PickPolicy(enc.config(), head="shared").eval()
+    shared.encoder.load_state_dict(enc.state_dict())
+    obs_t = {"candidate_features": torch.as_tensor(feats)[None]}
+    with torch.no_grad():
+        np.testing.assert_array_equal(shared(obs_t)[0].numpy(), feats[:, -1])
+        for p in shared.logits.parameters():
+            p.normal_()
+        expected = shared(obs_t)[0].numpy()
+        # the oracle: each candidate scored by hand from the encoder's embeddings
+        per, summary = shared.encoder(obs_t)
+        head = shared.logits
+        by_hand = [float(head.score(torch.cat([per[0, k], summary[0]]))) + float(head.slot_bias[k])
+                   + float(head.prior_scale) * float(feats[k, -1]) for k in range(8)]
+    np.testing.assert_allclose(expected, by_hand, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(numpy_pick_logits(numpy_pick_layers(shared), feats), expected, rtol=1e-5, atol=1e-5)
+    for bad in ({"hidden": [16]}, {"hidden": [16], "head": "shared"}):
+        with pytest.raises(ValueError, match="no hidden layers"):
+            PickPolicy(enc.config(), **bad)
     env.close()
 
 
@@ -233,9 +250,9 @@ def test_prior_run_exports_the_prior_it_trained_with(tmp_path):
     out = tmp_path / "run"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["train", "rl", "--task", "pendulum", "--total-steps", "64", "--n-envs", "2", "--n-steps", "32",
-                     "--batch-size", "32", "--lr", "1e-12", "--eval-problems", "1", "--eval-max-steps", "100",
-                     "--out", str(out), "--no-progress"]) == 0
+        assert main(["train", "rl", "--task", "pendulum", "--pick-head", "linear", "--total-steps", "64", "--n-envs",
+                     "2", "--n-steps", "32", "--batch-size", "32", "--lr", "1e-12", "--eval-problems", "1",
+                     "--eval-max-steps", "100", "--out", str(out), "--no-progress"]) == 0
     env, obs, _ = grown_env("pendulum", 50)
     low, high = env.action_space.low, env.action_space.high
     sampler = sampler_from_checkpoint(out / "policy.pt", low, high, seed=0)

@@ -173,7 +173,8 @@ def policy_from_sb3(model: Any) -> tuple[nn.Module, str, dict[str, Any]]:
             raise TypeError(f"a Discrete-action PPO is exported with a CandidateFeaturesExtractor, "
                             f"not {type(encoder).__name__}")
         hidden, act = _hidden_of(sb3.mlp_extractor.policy_net)
-        args = {"encoder": encoder.config(), "hidden": hidden, "activation": act}
+        args = {"encoder": encoder.config(), "hidden": hidden, "activation": act,
+                "head": getattr(sb3, "pick_head", "linear")}
         policy = PickPolicy(**args)
         policy.encoder.load_state_dict(encoder.state_dict())
         policy.body.load_state_dict(sb3.mlp_extractor.policy_net.state_dict())
@@ -214,7 +215,7 @@ def policy_from_torchrl(actor: Any) -> tuple[nn.Module, str, dict[str, Any]]:
         source = inner[0]
         args = {"encoder": source.encoder.config(), "hidden": [m.out_features for m in source.body
                                                                if isinstance(m, nn.Linear)],
-                "activation": _hidden_of(source.body)[1] if len(source.body) else "tanh"}
+                "activation": _hidden_of(source.body)[1] if len(source.body) else "tanh", "head": source.head}
         policy = PickPolicy(**args)
         policy.load_state_dict(source.state_dict())
         return policy.eval(), "rl/torchrl-ppo-pick", args

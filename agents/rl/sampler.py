@@ -198,9 +198,16 @@ def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
     """A :class:`PickPolicy` without a tree context as numpy arrays (float32): the per-candidate MLP,
     the body and the logits layer, for :func:`numpy_pick_logits` (a forward of ~10 us instead of
     torch's ~300 us of per-call overhead on one step's ``(K, F)`` features)."""
-    return {"candidate": _numpy_layers(policy.encoder.net), "body": _numpy_layers(policy.body),
-            "logits": _numpy_layers(nn.Sequential(policy.logits))[0],
-            "prior": policy.encoder.prior_model is not None}
+    twin = {"candidate": _numpy_layers(policy.encoder.net), "body": _numpy_layers(policy.body),
+            "prior": policy.encoder.prior_model is not None, "shared": policy.head == "shared"}
+    if twin["shared"]:
+        head = policy.logits
+        twin.update(score=head.score.weight.detach().numpy()[0].copy(), bias=head.score.bias.detach().numpy().copy(),
+                    slot_bias=head.slot_bias.detach().numpy().copy(),
+                    prior_scale=None if head.prior_scale is None else head.prior_scale.detach().numpy().copy())
+    else:
+        twin["logits"] = _numpy_layers(nn.Sequential(policy.logits))[0]
+    return twin
 
 
 def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
@@ -262,6 +269,11 @@ def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarr
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
     features = np.asarray(features, np.float32)
     h = _numpy_mlp(twin["candidate"], features)
+    if twin["shared"]:           # SharedCandidateHead: w . [e_k, mean, max] + b + bias_k (+ scale * prior_k)
+        E = h.shape[1]
+        w = twin["score"]
+        logits = h @ w[:E] + (h.mean(0) @ w[E:2 * E] + h.max(0) @ w[2 * E:] + twin["bias"][0]) + twin["slot_bias"]
+        return logits + twin["prior_scale"][0] * features[:, -1] if twin["prior"] else logits
     parts = [h.reshape(-1), h.mean(0), h.max(0)] + ([features[:, -1]] if twin["prior"] else [])
     x = _numpy_mlp(twin["body"], np.concatenate(parts))
     return _numpy_mlp([twin["logits"]], x)

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import torch
 from gymnasium import spaces
+from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from agents.encoders import CandidateEncoder
+from agents.encoders import CandidateEncoder, prior_head_init
 from agents.rl.backbones import encoder_from_space
+from agents.rl.pick import PICK_HEADS, SharedCandidateHead
 
 
 class TreeFeaturesExtractor(BaseFeaturesExtractor):
@@ -59,3 +61,38 @@ class CandidateFeaturesExtractor(BaseFeaturesExtractor):
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
         return self.encoder.flat(observations)
+
+
+class CandidatePickPolicy(MultiInputActorCriticPolicy):
+    """SB3's actor-critic for the candidate envs, with the picker's head and its prior kept intact.
+
+    ``pick_head="shared"``: the action net is a :class:`~agents.rl.pick.SharedCandidateHead` (one
+    score for all candidates, a bias per slot, the prior's scale); ``"linear"``: SB3's own slot-wise
+    layer. SB3's orthogonal initialisation re-draws every linear layer under the features
+    extractor, the frozen prior scorer's too: its weights are re-loaded from their checkpoint, and
+    the head starts as the prior (:func:`~agents.encoders.prior_head_init`). Use with
+    :class:`CandidateFeaturesExtractor` and ``net_arch={"pi": [], ...}``.
+    """
+
+    def __init__(self, *args, pick_head: str = "linear", **kwargs) -> None:
+        if pick_head not in PICK_HEADS:
+            raise ValueError(f"pick_head must be one of {PICK_HEADS}, got {pick_head!r}")
+        self.pick_head = pick_head
+        super().__init__(*args, **kwargs)
+
+    def _build(self, lr_schedule) -> None:
+        super()._build(lr_schedule)
+        encoders = [m for m in self.modules() if isinstance(m, CandidateEncoder)]
+        for encoder in encoders:
+            if encoder.prior_model is not None:
+                encoder.load_prior(encoder.prior_source)
+        encoder = encoders[0]
+        prior = encoder.prior_model is not None
+        if self.pick_head == "shared":
+            self.action_net = SharedCandidateHead(encoder.count, encoder.embed, prior)
+        elif prior:
+            prior_head_init(self.action_net, encoder.count)
+        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    def _get_constructor_parameters(self) -> dict:
+        return {**super()._get_constructor_parameters(), "pick_head": self.pick_head}

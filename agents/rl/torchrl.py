@@ -111,16 +111,17 @@ class CandidateValue(nn.Module):
 
 
 def make_pick_actor(observation_space: spaces.Dict, *, head_hidden: list[int] | tuple[int, ...] = (),
-                    **encoder_kw) -> ProbabilisticActor:
+                    head: str = "linear", **encoder_kw) -> ProbabilisticActor:
     """A candidate picker: ``PickPolicy`` -> ``"logits"`` -> a categorical over the candidates.
 
     For envs wrapped as ``GymWrapper(env, categorical_action_encoding=True)`` (integer actions);
-    ``return_log_prob=True`` as ``ClipPPOLoss`` needs. ``encoder_kw`` go to
+    ``return_log_prob=True`` as ``ClipPPOLoss`` needs; ``head``: :class:`~agents.rl.pick.PickPolicy`'s.
+    ``encoder_kw`` go to
     ``CandidateEncoder.from_space`` (``hidden``, ``embed``, ``tree_context``, ...).
     """
     from agents.rl.pick import PickPolicy
     encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
-    policy = PickPolicy(encoder.config(), hidden=list(head_hidden), activation="tanh")
+    policy = PickPolicy(encoder.config(), hidden=list(head_hidden), activation="tanh", head=head)
     policy.encoder.load_state_dict(encoder.state_dict())
     module = PickModule(policy, "logits", policy.reads_tree)
     return ProbabilisticActor(module, in_keys=["logits"], out_keys=["action"],

@@ -118,6 +118,9 @@ class RLArgs(RunFlags):
     net_arch: list[int] = arg([64, 64], "hidden widths of the value head (box: and of the policy head)")
     pi_arch: list[int] = arg([], "pick: hidden widths of the policy head over the candidate embeddings (none: "
                              "a linear score per candidate slot)", parse=_widths)
+    pick_head: str = arg("linear", "pick: the policy's scores: a linear layer with a score per candidate slot, or one "
+                         "score shared by the candidates (a bias per slot; with --prior, the prior's scale)",
+                         choices=("linear", "shared"))
     candidate_hidden: int = arg(64, "pick: hidden width of the per-candidate MLP", parse=positive_int)
     candidate_embed: int = arg(32, "pick: per-candidate embedding width", parse=positive_int)
     tree_context: bool = arg(False, "pick: also encode the tree view with a TreeEncoder (sized by the flags above) and "
@@ -261,6 +264,9 @@ def check_args(args: RLArgs) -> None:
             raise ValueError("--encoder tree-gnn and --init-from warm-start a box policy's tree encoder; a picker "
                              "(--action pick) reads candidate features (--tree-context adds a TreeEncoder, --prior "
                              "the supervised scorer's logits)")
+        if args.pick_head == "shared" and args.pi_arch:
+            raise ValueError(f"--pick-head shared scores the candidate embeddings directly; got --pi-arch "
+                             f"{','.join(map(str, args.pi_arch))} (use --pi-arch none)")
         if args.prior is not None:
             if args.pi_arch:
                 raise ValueError(f"--prior: the policy head is linear, so that it starts as the prior; got --pi-arch "

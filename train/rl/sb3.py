@@ -24,9 +24,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from tqdm import tqdm
 
-from agents.encoders import CandidateEncoder, prior_head_init
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
-from agents.rl.sb3 import CandidateFeaturesExtractor, TreeFeaturesExtractor
+from agents.rl.sb3 import CandidateFeaturesExtractor, CandidatePickPolicy, TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
@@ -74,11 +73,11 @@ class ProgressCallback(BaseCallback):
 
 
 def policy_kwargs_of(args: RLArgs) -> dict:
-    """SB3's ``policy_kwargs``: the candidate extractor with a linear score per slot (``pick``) or
-    the tree encoder with a Gaussian head (``box``)."""
+    """SB3's ``policy_kwargs``: the candidate extractor with the picker's head (``pick``,
+    :class:`~agents.rl.sb3.CandidatePickPolicy`) or the tree encoder with a Gaussian head (``box``)."""
     if args.action == "pick":
         return {"features_extractor_class": CandidateFeaturesExtractor,
-                "features_extractor_kwargs": args.candidate_kwargs(),
+                "features_extractor_kwargs": args.candidate_kwargs(), "pick_head": args.pick_head,
                 "net_arch": {"pi": list(args.pi_arch), "vf": list(args.net_arch)}}
     kwargs = {"features_extractor_class": TreeFeaturesExtractor, "features_extractor_kwargs": args.encoder_kwargs(),
               "net_arch": list(args.net_arch)}
@@ -93,16 +92,12 @@ def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
     common = {"learning_rate": args.lr, "gamma": args.gamma, "batch_size": args.batch_size, "seed": args.seed,
               "device": torch_device(args.device), "tensorboard_log": str(run_dir / "tb"), "verbose": 0}
     if args.algo == "ppo":
-        return PPO("MultiInputPolicy", env, n_steps=args.n_steps, n_epochs=args.n_epochs,
+        policy = CandidatePickPolicy if args.action == "pick" else "MultiInputPolicy"
+        return PPO(policy, env, n_steps=args.n_steps, n_epochs=args.n_epochs,
                    gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
                    policy_kwargs=policy_kwargs, **common)
     return SAC("MultiInputPolicy", env, buffer_size=args.buffer_size, learning_starts=args.learning_starts,
                policy_kwargs=policy_kwargs, **common)
-
-
-def candidate_encoders(model: PPO | SAC) -> list:
-    """Every candidate encoder of a model (PPO: the shared one, or the actor's and the critic's)."""
-    return [m for m in model.policy.modules() if isinstance(m, CandidateEncoder)]
 
 
 def encoders_of(model: PPO | SAC) -> list:
@@ -132,11 +127,8 @@ def train(args: RLArgs) -> RunResult:
         print(f"resuming {run.dir} at step {model.num_timesteps:,}")
     else:
         model = build_model(args, vec_env, run.dir)
-        if args.prior is not None:       # the untrained policy is the prior itself (plus SB3's small init)
-            for encoder in candidate_encoders(model):    # SB3's orthogonal init re-drew the scorer's layers too
-                encoder.load_prior(str(args.prior))
-            prior_head_init(model.policy.action_net, args.candidates)
-            print(f"policy head initialised to the prior's logits ({args.prior}, temperature {args.prior_temperature})")
+        if args.prior is not None:       # CandidatePickPolicy starts its head as the prior
+            print(f"the policy starts as the prior's logits ({args.prior}, temperature {args.prior_temperature})")
     if args.init_from is not None and not args.resume:
         try:
             source = warm_start_encoder(args.init_from, *encoders_of(model))

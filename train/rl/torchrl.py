@@ -123,7 +123,8 @@ def train(args: RLArgs) -> RunResult:
     # 2. actor and critic, each over its own encoder: a categorical over the candidates (pick) or a
     #    TanhNormal on [-1, 1] over a TreeEncoder (box)
     if args.action == "pick":
-        actor = make_pick_actor(observation_space, head_hidden=args.pi_arch, **args.candidate_kwargs())
+        actor = make_pick_actor(observation_space, head_hidden=args.pi_arch, head=args.pick_head,
+                                **args.candidate_kwargs())
         value = make_pick_value(observation_space, head_hidden=args.net_arch, **args.candidate_kwargs())
     else:
         actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
