@@ -256,15 +256,42 @@ def test_compiled_target_map_is_the_numpy_expressions_bit_for_bit():
             assert np.array_equal(got, expected) and np.array_equal(np.signbit(got), np.signbit(expected)), trial
 
 
-@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
-def test_the_shipped_policy_acts_alike_with_and_without_the_compiled_map(task):
-    """The shipped ``rl-ppo`` sampler plans a validation problem with the same actions, bit for bit,
-    whether its state map is the compiled call or the numpy expressions."""
+def box_policy_sampler(task: str, seed: int = 0, **settings):
+    """A continuous (box) SB3 PPO policy sampler of ``task`` in the target frame: the shipped ``rl-ppo``
+    for maze2d; for the pendulum, whose shipped ``rl-ppo`` is a picker, a random policy of the same
+    kind (a wide Gaussian, so its states wrap around the angle often), saved and loaded by name."""
+    import tempfile
+
+    from agents.encoders import TreeEncoder
     from agents.registry import load_sampler
+    from agents.rl.policies import SB3PPOPolicy, encoder_config
+    from agents.rl.sampler import save_policy
+    from gnn_mp_envs.registration import task_spec
+    if task == "maze2d":
+        return load_sampler("rl-ppo", task, seed=seed, **settings)
+    spec = task_spec(task)
+    low, high = spec.state_bounds()
+    enc = encoder_config(TreeEncoder.from_space(make_rl_env(task, view_nodes=64, action="box").observation_space,
+                                                hidden_channels=8, num_layers=1, out_channels=16))
+    torch.manual_seed(0)
+    args = {"encoder": enc, "action_dim": 2, "hidden": [16]}
+    policy = SB3PPOPolicy(**args)
+    with torch.no_grad():
+        policy.log_std.fill_(np.log(0.3))
+    path = save_policy(Path(tempfile.mkdtemp()) / "box.pt", policy, "rl/sb3-ppo", args, task=task, view_nodes=64,
+                       low=low, high=high, uniform_mix=0.5, action_frame="target",
+                       periodic=spec.periodic_mask(2).tolist())
+    return load_sampler("rl-ppo", task, seed=seed, checkpoint=path, **settings)
+
+
+@pytest.mark.parametrize("task", ["maze2d", "pendulum"])
+def test_the_box_policy_acts_alike_with_and_without_the_compiled_map(task):
+    """A box ``rl-ppo`` sampler (maze2d: the shipped one) plans a validation problem with the same
+    actions, bit for bit, whether its state map is the compiled call or the numpy expressions."""
     from gnn_mp_envs.evaluation import evaluation_env
     runs = []
     for compiled in (True, False):
-        sampler = load_sampler("rl-ppo", task, seed=0)
+        sampler = box_policy_sampler(task)
         assert sampler._compiled_map
         sampler._compiled_map = compiled
         sampler.reset(5)
@@ -669,7 +696,7 @@ def test_rl_sampler_target_map_is_policy_action_to_state_bit_for_bit():
     from gnn_mp_envs.evaluation import evaluation_env
     torch.set_num_threads(1)
     env = evaluation_env("pendulum", "val")
-    mine, oracle = (load_sampler("rl-ppo", task="pendulum", seed=5, proposals=1) for _ in range(2))
+    mine, oracle = (box_policy_sampler("pendulum", seed=5, proposals=1) for _ in range(2))
     obs, _ = env.reset(seed=5, options={"index": 2})
     wrapped = 0
     for _ in range(300):

@@ -290,13 +290,15 @@ def test_prior_flags_are_refused_where_they_cannot_work(capsys):
     from train.rl.cli import parse
     for argv, message in ((["--task", "maze2d", "--prior", "gnn"], "tree/gnn-scorer"),
                           (["--task", "pendulum", "--pi-arch", "32"], "--pi-arch none"),
-                          (["--task", "pendulum", "--action", "box"], "picker"),
+                          (["--task", "pendulum", "--action", "box", "--prior", "gnn"], "picker"),
                           (["--task", "pendulum", "--prior", "nosuch"], "no such file")):
         with pytest.raises(SystemExit):
             parse(argv)
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) <= 2 and message in err[-1], (argv, err)     # usage line + one line of error
     args = parse(["--task", "pendulum", "--action", "box", "--hyperparams", "none"])
-    assert args.prior is None and args.lr == 3e-4 and args.hyperparams is None
+    assert args.prior is None and args.n_envs == 4 and args.hyperparams is None
+    args = parse(["--task", "pendulum", "--action", "box"])      # the file's picker keys do not apply
+    assert args.prior is None and args.candidates == 8 and args.n_envs == 16
     args = parse(["--task", "pendulum"])                # the task's YAML file: the prior picker
     assert args.prior.name == "gnn_pendulum.pt" and args.candidates == 20 and args.pi_arch == []

@@ -40,16 +40,28 @@ def hyperparam_tokens(values: dict[str, Any]) -> list[str]:
     return tokens
 
 
+#: Flags that describe a picker (``--action pick``): a box run ignores them in a YAML file, whose
+#: section describes the task's picker (the pendulum's file sets a candidate prior).
+PICK_ONLY_FLAGS = ("candidates", "local_scale", "target_scale", "pi_arch", "pick_head", "candidate_hidden",
+                   "candidate_embed", "tree_context", "prior", "prior_temperature")
+
+
 def parse(argv: list[str]) -> RLArgs:
     """The flags: the dataclass's defaults, then the task's YAML section (``--hyperparams``, by
-    default ``train/rl/hyperparams/<task>.yml``), then the command line."""
+    default ``train/rl/hyperparams/<task>.yml``; a box run skips its picker keys), then the
+    command line."""
     parser = OneLineParser(prog="gnn-mp train rl", description=__doc__.splitlines()[0])
     add_dataclass_arguments(parser, RLArgs)
     first = from_namespace(RLArgs, parser.parse_args(argv))
     try:
         import_modules(first.modules)
         path = hyperparams_file(first)
-        tokens = hyperparam_tokens(read_hyperparams(path, f"{first.lib}-{first.algo}")) if path else []
+        values = read_hyperparams(path, f"{first.lib}-{first.algo}") if path else {}
+        explicit_action = any(a == "--action" or a.startswith("--action=") for a in argv)
+        action = first.action if explicit_action else values.get("action", first.action)
+        if action == "box":
+            values = {k: v for k, v in values.items() if k not in PICK_ONLY_FLAGS}
+        tokens = hyperparam_tokens(values)
     except ValueError as exc:
         parser.error(str(exc))
     if tokens:
