@@ -3,9 +3,10 @@
 For each of problems ``0..N-1`` of split ``val`` (``i``), a *shadow* environment plans, in
 lockstep with the real one, problem ``j`` (the next problem whose obstacles admit ``i``'s start
 and goal) with ``i``'s start and goal, so the shadow tree is a tree of the same query among other
-obstacles; a task without obstacles (the pendulum) has no such problem, so the shadow plans
-problem ``j`` itself (another goal) and its tree is shown relabelled with ``i``'s start and goal.
-Every sample the sampler proposes is sent to both environments. Two figures:
+obstacles; every sample the sampler proposes is sent to both environments. A task without
+obstacles (the pendulum) has no such problem, and the same samples would grow the same tree
+whatever the goal (the dynamics do not depend on it), so there the shadow plans problem ``i``
+itself from uniform samples of its own stream: another tree of the same query. Two figures:
 
 * **the action distribution**: at every step the policy scores the same candidate states twice,
   with their features relative to the real tree and relative to the shadow tree; reported are the
@@ -26,7 +27,7 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -51,12 +52,11 @@ class Args:
 
 
 def shadow_problem(task: Any, real: Any, index: int, count: int, split: str = "val") -> tuple[Any, int, bool]:
-    """``(problem, j, relabelled)``: problem ``j != index`` with ``real``'s start and goal among its own
+    """``(problem, j, resampled)``: problem ``j != index`` with ``real``'s start and goal among its own
     obstacles (the first ``j`` after ``index`` whose obstacles admit them), or, for a task without
-    obstacles, problem ``j = index + 1`` itself (``relabelled``: shown with ``real``'s endpoints)."""
+    obstacles, ``real`` itself (``resampled``: its shadow grows from uniform samples of its own)."""
     if not len(task.obstacle_rows(real)):
-        j = (index + 1) % max(count, 2)
-        return task.problem(split, j), j, True
+        return real, index, True
     for step in range(1, 200):
         j = index + step
         other = copy.copy(task.problem(split, j))
@@ -68,23 +68,6 @@ def shadow_problem(task: Any, real: Any, index: int, count: int, split: str = "v
         if bool(np.all(other.is_state_valid(np.stack([other.start, other.goal])))):
             return other, j, False
     raise RuntimeError(f"no validation problem admits problem {index}'s start and goal")
-
-
-def relabel(obs: Mapping[str, np.ndarray], start: np.ndarray, goal: np.ndarray, periodic: np.ndarray,
-            low: np.ndarray, high: np.ndarray) -> dict[str, np.ndarray]:
-    """A copy of ``obs`` whose start and goal (and node features ``[x_init - x, x_goal - x, tree]``)
-    are ``start`` and ``goal``."""
-    out = {k: np.array(v, copy=True) for k, v in obs.items()}
-    n = int(out["num_nodes"][0])
-    d = len(start)
-    out["start"][:], out["goal"][:] = start, goal
-    x = out["nodes"][:n].astype(np.float64)
-    span = (high - low).astype(np.float64)
-    for col, end in ((0, start), (d, goal)):
-        diff = np.asarray(end, np.float64) - x
-        diff = np.where(periodic, (diff + span / 2) % span - span / 2, diff)
-        out["node_features"][:n, col:col + d] = diff
-    return out
 
 
 def categorical(logits: np.ndarray) -> np.ndarray:
@@ -107,13 +90,13 @@ def swap_run(sampler: Any, env: Any, shadow_env: Any, index: int, args: Args) ->
     from gnn_mp_envs.envs.wrappers import tree_view
     task = env.task
     real = task.problem("val", index)
-    other, j, relabelled = shadow_problem(shadow_env.task, real, index, args.problems)
+    other, j, resampled = shadow_problem(shadow_env.task, real, index, args.problems)
     s = problem_seed(args.seed, index)
+    shadow_rng = np.random.default_rng([s, 0x5AD0])      # the resampled shadow's own uniform samples
     sampler.reset(s)
     obs, info = env.reset(seed=s, options={"index": index})
     shadow, _ = shadow_env.reset(seed=s, options={"problem": other})
     low, high = sampler.low, sampler.high
-    periodic = np.asarray(getattr(sampler, "periodic", np.zeros(len(low), bool)), bool)
     pick = hasattr(sampler, "candidate_set")
     probe = CandidateSet(low, high, prior=sampler.new_prior(), **sampler.candidate_set.config()) if pick else None
     kls, tvs, blind, shifts = [], [], [], []
@@ -128,7 +111,7 @@ def swap_run(sampler: Any, env: Any, shadow_env: Any, index: int, args: Args) ->
     shadow_done = False
     try:
         for _ in range(args.max_steps):
-            seen = relabel(shadow, real.start, real.goal, periodic, low, high) if relabelled else shadow
+            seen = shadow
             captured.clear()
             x = sampler.act(seen)
             if pick and "cands" in captured:           # the model was consulted this step
@@ -151,7 +134,8 @@ def swap_run(sampler: Any, env: Any, shadow_env: Any, index: int, args: Args) ->
                 probe.record(obs, x)
             obs, _, terminated, truncated, info = env.step(x)
             if not shadow_done:
-                shadow, _, shadow_term, shadow_trunc, _ = shadow_env.step(x)
+                shadow_x = (low + (high - low) * shadow_rng.random(len(low))).astype(np.float32) if resampled else x
+                shadow, _, shadow_term, shadow_trunc, _ = shadow_env.step(shadow_x)
                 shadow_done = bool(shadow_term or shadow_trunc)    # then the shadow tree stays as it is
             if terminated or truncated:
                 break
@@ -159,7 +143,7 @@ def swap_run(sampler: Any, env: Any, shadow_env: Any, index: int, args: Args) ->
         if pick:
             sampler.candidate_set.propose = propose
     del tree_view
-    out = {"problem": index, "shadow_problem": j, "relabelled": relabelled, "success": bool(info["is_success"]),
+    out = {"problem": index, "shadow_problem": j, "resampled": resampled, "success": bool(info["is_success"]),
            "nodes": int(info["nodes_expanded"]), "collision_checks": int(info["collision_checks"]),
            "steps_scored": len(kls), "mean_kl": float(np.mean(kls)) if kls else None,
            "mean_tv": float(np.mean(tvs)) if tvs else None,
