@@ -108,6 +108,23 @@ def test_worker_processes_make_the_same_dataset_file(tmp_path):
     assert one.read_bytes() == two.read_bytes()
 
 
+def test_ray_actors_make_the_same_dataset_file(tmp_path):
+    """`gnn-mp train sampler --ray`: the problems planned on Ray actors give the one-process file."""
+    from train.tree.data import TreeDataConfig, generate, save
+    config = TreeDataConfig(task="maze2d", problems=4, max_nodes=800)
+    one = save(generate(config, progress=False, workers=1), tmp_path / "one.npz")
+    on_ray = save(generate(config, progress=False, workers=2, ray="local"), tmp_path / "ray.npz")
+    assert one.read_bytes() == on_ray.read_bytes()
+
+
+def test_train_sampler_refuses_an_unreachable_ray_address_in_one_line(capsys):
+    from train.tree.cli import main
+    with pytest.raises(SystemExit):
+        main(["--ray", "127.0.0.1:9", "--problems", "2"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "cannot reach Ray at 127.0.0.1:9" in err[-1]
+
+
 def _crafted(data: TreeDataset, case: str) -> TreeDataset:
     """A readable file whose contents do not fit together (issue #21, item 22)."""
     from dataclasses import replace

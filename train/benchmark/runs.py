@@ -263,36 +263,44 @@ class BenchmarkIncomplete(BenchmarkError):
         self.interrupted = interrupted
 
 
-class _EpisodeActor:
+class _JobActor:
     """A Ray actor: one worker process with its envs and samplers, as the local workers."""
 
     def __init__(self, modules) -> None:
         _init_worker(modules, die_with_parent=False)
 
-    def run(self, job: tuple) -> dict[str, Any]:
-        return _run_episode_job(job)
+    def run(self, fn, job: tuple) -> Any:
+        return fn(job)
 
 
 def _run_on_ray(args: BenchmarkArgs, jobs: list[tuple], finished) -> None:
-    """Run ``jobs`` on ``args.workers`` Ray actors, locally (``--ray``) or on a cluster
-    (``--ray auto`` / ``ray://HOST:10001``). Results equal a local run for the same seed."""
+    """Run the benchmark's ``jobs`` on ``args.workers`` Ray actors (:func:`run_on_ray`)."""
+    run_on_ray(args.ray, args.workers, args.modules, jobs, finished)
+
+
+def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished, fn=None) -> None:
+    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors: a local Ray
+    instance (``address="local"``, the flags' ``--ray``) or a cluster (``"auto"`` /
+    ``ray://HOST:10001``); ``fn`` a module-level function (default: one benchmark episode). Results
+    equal a local run's for the same seed."""
     try:
         import ray
         from ray.util import ActorPool
     except ImportError:
         raise BenchmarkError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
-    local = args.ray == "local"
+    local = address == "local"
     started = not ray.is_initialized()
     if started:
         try:
-            ray.init(address=None if local else args.ray, num_cpus=args.workers if local else None,
+            ray.init(address=None if local else address, num_cpus=workers if local else None,
                      include_dashboard=False, log_to_driver=False, configure_logging=False)
         except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise BenchmarkError(f"cannot reach Ray at {args.ray}: {str(exc).splitlines()[0]}") from None
+            raise BenchmarkError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
+    fn = fn or _run_episode_job
     try:
-        actor = ray.remote(num_cpus=1)(_EpisodeActor)
-        pool = ActorPool([actor.remote(args.modules) for _ in range(args.workers)])
-        for record in pool.map_unordered(lambda a, job: a.run.remote(job), jobs):
+        actor = ray.remote(num_cpus=1)(_JobActor)
+        pool = ActorPool([actor.remote(modules) for _ in range(workers)])
+        for record in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
             finished(record)
     except ray.exceptions.RayTaskError as exc:
         cause = exc.cause if isinstance(getattr(exc, "cause", None), BenchmarkError) else None

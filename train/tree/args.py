@@ -47,6 +47,9 @@ class TrainArgs(RunFlags):
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
     workers: int = arg(1, "processes that plan the training problems (the dataset is the same for any count)",
                        parse=positive_int)
+    ray: str | None = arg(None, "plan the training problems on --workers Ray actors, as gnn-mp benchmark --ray: no "
+                          "ADDRESS starts a local Ray instance; 'auto' or ray://HOST:10001 joins a running cluster "
+                          "(the same dataset)", metavar="ADDRESS", const="local")
     resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
 
 

@@ -19,13 +19,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                            "evaluate it against uniform on validation problems.")
     add_dataclass_arguments(parser, TrainArgs)
     args = from_namespace(TrainArgs, parser.parse_args(argv))
+    from train.benchmark.args import BenchmarkError, check_ray_address
+    if args.ray not in (None, "local", "auto"):
+        try:
+            check_ray_address(args.ray)
+        except BenchmarkError as exc:
+            parser.error(str(exc))
     from agents.checkpoints import CheckpointError       # torch: only once the flags are known to be good
     from gnn_mp_envs.utils.npz import DatasetCacheError
     from train.run import RunError
     from train.tree.training import TrainError, train
     try:
         summary = train(args)
-    except (TrainError, RunError, CheckpointError, DatasetCacheError) as exc:
+    except (TrainError, RunError, CheckpointError, DatasetCacheError, BenchmarkError) as exc:
         print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: summary[k] for k in ("run_dir", "checkpoint", "items", "train_seconds", "validation",

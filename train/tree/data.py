@@ -205,11 +205,12 @@ def _solve_job(job: tuple) -> tuple | None:
 
 
 def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None,
-             workers: int = 1) -> TreeDataset:
+             workers: int = 1, ray: str | None = None) -> TreeDataset:
     """Solve the config's problems with its sampler (uniform, or a learned one from
     ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones.
-    ``workers`` > 1 plans them in the benchmark's worker processes; the problems are assembled
-    in index order, so the dataset (and its file) is the same whatever the worker count."""
+    ``workers`` > 1 plans them in the benchmark's worker processes, ``ray`` (an address, or
+    ``"local"``) on ``workers`` Ray actors as the benchmark's ``--ray``; the problems are assembled
+    in index order, so the dataset (and its file) is the same whatever the worker count or backend."""
     indices = range(config.first_problem, config.first_problem + config.problems)
     bar = tqdm(total=config.problems, desc=f"{config.task} {config.sampler} solutions", unit="problem",
                disable=not progress)
@@ -221,7 +222,10 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
             solved[result[0]] = result
 
     try:
-        if workers > 1:
+        if ray is not None:
+            from train.benchmark.runs import run_on_ray
+            run_on_ray(ray, workers, [], [(config, i, checkpoint) for i in indices], finished, _solve_job)
+        elif workers > 1:
             from train.benchmark.runs import WorkerPool
             with WorkerPool(workers) as pool:
                 pool.run([(config, i, checkpoint) for i in indices], finished, _solve_job)
@@ -319,9 +323,9 @@ def load(path: str | Path) -> TreeDataset:
 
 
 def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bool = True,
-                     workers: int = 1) -> TreeDataset:
-    """The cached dataset of ``config`` in ``directory``, generated first (by ``workers`` processes)
-    when missing or damaged."""
+                     workers: int = 1, ray: str | None = None) -> TreeDataset:
+    """The cached dataset of ``config`` in ``directory``, generated first (by ``workers`` processes,
+    or Ray actors at ``ray``) when missing or damaged."""
     path = Path(directory) / config.file_name()
     if path.exists():
         try:
@@ -331,6 +335,6 @@ def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bo
             log.warning("%s: generated with another config; regenerating it", path)
         except DatasetCacheError as exc:
             log.warning("%s; regenerating it", exc)
-    dataset = generate(config, progress, workers=workers)
+    dataset = generate(config, progress, workers=workers, ray=ray)
     save(dataset, path)
     return dataset

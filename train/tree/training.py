@@ -206,7 +206,7 @@ def train(args: TrainArgs) -> dict[str, Any]:
 
     # 1. data: uniform solutions of training problems
     data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
-    data = load_or_generate(data_config, args.data_dir, progress=args.progress, workers=args.workers)
+    data = load_or_generate(data_config, args.data_dir, progress=args.progress, workers=args.workers, ray=args.ray)
     rng = np.random.default_rng(args.seed)
     snapshots = args.max_snapshots
     if len(data) < 2:
@@ -297,7 +297,7 @@ def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_
         config = TreeDataConfig(task=args.task, split="train", scene=scene,
                                 problems=args.dagger_problems, seed=args.seed + 1000 * (round_index + 1),
                                 first_problem=args.problems + round_index * args.dagger_problems, sampler=args.model)
-        return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers)
+        return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers, ray=args.ray)
 
 
 #: Validation problems per held-out kind (``TaskSpec.validation_scenes``) at the end of training.
