@@ -44,10 +44,6 @@ class SharedCandidateHead(nn.Module):
             self.score.weight.zero_()
             self.score.bias.zero_()
 
-    @property
-    def in_features(self) -> int:
-        return self.count * self.embed + 2 * self.embed + (self.count if self.has_prior else 0)
-
     def forward(self, flat: torch.Tensor) -> torch.Tensor:
         K, E = self.count, self.embed
         per = flat[..., :K * E].unflatten(-1, (K, E))
