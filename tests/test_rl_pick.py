@@ -177,6 +177,25 @@ def test_shipped_pendulum_picker_beats_goal_bias_on_val_nodes():
     assert nodes["rl-ppo"] < 0.5 * nodes["goal-bias"], nodes
 
 
+def test_a_picker_with_proposals_scores_a_set_for_that_many_samples():
+    """proposals=1 is the training env's picker (a fresh candidate set every model sample, the
+    counters the benchmark records); proposals=k scores one set per k model samples, each of its
+    picks drawn from the same categorical, and plans as well."""
+    from agents.registry import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+    torch.set_num_threads(1)
+    env = evaluation_env("arm", "val")
+    one = load_sampler("rl-ppo", task="arm", seed=0)
+    assert one.proposals == 1
+    base = plan_problem(env, one, 0, 0)
+    assert one.forward_calls == base.iterations            # no uniform mix: every iteration a fresh set
+    four = load_sampler("rl-ppo", task="arm", seed=0, proposals=4)
+    run = plan_problem(env, four, 0, 0)
+    env.close()
+    assert run.success and four.forward_calls <= (run.iterations + 3) // 4 + 2     # one set per 4 (per tree)
+    assert (run.nodes_expanded, run.collision_checks) != (base.nodes_expanded, base.collision_checks)
+
+
 # ----------------------------------------------------------------------------- the candidate prior
 def scorer_prior():
     from agents.checkpoints import shipped_checkpoint

@@ -298,14 +298,14 @@ class PickSampler(ModelSampler):
             ``periodic``, ``metric_weights``, ``local_scale``), from the checkpoint.
     """
 
-    settings = ("uniform_mix", "goal_bias", "deterministic")
+    settings = ("uniform_mix", "goal_bias", "deterministic", "proposals")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: PickPolicy,
                  view_nodes: int, candidates: Mapping[str, Any], uniform_mix: float = 0.0, goal_bias: float = 0.0,
-                 deterministic: bool = False) -> None:
+                 deterministic: bool = False, proposals: int = 1) -> None:
         config = dict(candidates)
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=config.get("periodic"))
+                         periodic=config.get("periodic"), proposals=proposals)
         self.policy = policy.eval()
         self.candidate_set = CandidateSet(low, high, prior=self.new_prior(), **config)
         if self.candidate_set.count != policy.count:
@@ -351,16 +351,22 @@ class PickSampler(ModelSampler):
         with torch.inference_mode():
             return self.policy(inputs).numpy()
 
-    def model_sample(self, obs: Mapping) -> np.ndarray:
+    def scored(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray, int]:
+        """The forward: the step's candidates, the running sums of the policy's pick probabilities
+        over them, and the likeliest one."""
         cands, feats = self.candidate_set.propose(obs, self.rng)
-        logits = self.timed(lambda o: self.logits(o, feats), obs).astype(np.float64)
-        if self.deterministic:
-            k = int(np.argmax(logits))
-        else:
-            p = np.exp(logits - logits.max())
-            cumulative = np.cumsum(p)
-            k = min(int(cumulative.searchsorted(self.rng.random() * cumulative[-1], "right")), len(p) - 1)
-        self._picked = k
+        logits = self.logits(obs, feats).astype(np.float64)
+        return cands, np.cumsum(np.exp(logits - logits.max())), int(np.argmax(logits))
+
+    def model_sample(self, obs: Mapping) -> np.ndarray:
+        """A pick among the candidates of the last forward (one per ``proposals`` model samples:
+        ``proposals=1``, the training env's, scores a fresh set every time)."""
+        calls = self.forward_calls
+        cands, cumulative, best = self.refreshed(obs, self.scored)
+        k = best if self.deterministic else \
+            min(int(cumulative.searchsorted(self.rng.random() * cumulative[-1], "right")), len(cumulative) - 1)
+        # a reused set's nearest nodes are stale: the sample's own nearest node is looked up when recorded
+        self._picked = k if self.forward_calls != calls else None
         return cands[k]
 
 
@@ -402,16 +408,14 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
                          f"not {np.asarray(low).tolist()}..{np.asarray(high).tolist()}")
     stored = meta.get("sampler", {})
     uniform_mix = float(stored.get("uniform_mix", 0.0)) if uniform_mix is None else uniform_mix
+    proposals = int(stored.get("proposals", 1)) if proposals is None else proposals
     if record["kind"] in PICK_KINDS:
-        if proposals not in (None, 1):
-            raise ValueError("a candidate picker scores the candidates of every step (proposals=1)")
         goal_bias = float(stored.get("goal_bias", 0.0)) if goal_bias is None else goal_bias
         return PickSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
                            candidates=spec["candidates"], uniform_mix=uniform_mix, goal_bias=goal_bias,
-                           deterministic=deterministic)
+                           deterministic=deterministic, proposals=proposals)
     if goal_bias not in (None, 0.0):
         raise ValueError("goal_bias is a setting of candidate pickers; a continuous policy has uniform_mix")
-    proposals = int(stored.get("proposals", 1)) if proposals is None else proposals
     return RLSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
                      uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
                      action_frame=spec.get("action_frame", "absolute"), periodic=spec.get("periodic"))
