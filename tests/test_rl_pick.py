@@ -159,22 +159,23 @@ def test_shipped_arm_pickers_beat_uniform_on_val_collision_checks(name):
     assert checks[name] < 0.7 * checks["uniform"], checks
 
 
-def test_shipped_pendulum_picker_beats_goal_bias_on_val_nodes():
-    """The shipped pendulum picker (docs/rl.md: 47 median nodes on 200 val problems against goal-bias's
-    626) needs far fewer nodes than goal-bias on a few val problems, with the benchmark's seeding,
-    every problem solved; it carries the scorer prior it was trained with."""
+@pytest.mark.parametrize("name", ["rl-ppo", "rl-ppo-torchrl"])
+def test_shipped_pendulum_pickers_beat_goal_bias_on_val_nodes(name):
+    """The shipped SB3 and TorchRL pendulum pickers (docs/rl.md: 47 and 50 median nodes on 200 val
+    problems against goal-bias's 626) need far fewer nodes than goal-bias on a few val problems,
+    with the benchmark's seeding, every problem solved; each carries the scorer prior it was trained with."""
     from agents.registry import load_sampler
     from gnn_mp_envs.evaluation import evaluation_env, plan_problems
     torch.set_num_threads(1)
-    picker = load_sampler("rl-ppo", task="pendulum", seed=0)
+    picker = load_sampler(name, task="pendulum", seed=0)
     assert picker.candidate_set.prior is not None and picker.policy.head == "shared"
     env = evaluation_env("pendulum", "val")
-    runs = {s: plan_problems(load_sampler(s, task="pendulum", seed=0) if s != "rl-ppo" else picker, env, range(8), 0)
-            for s in ("goal-bias", "rl-ppo")}
+    runs = {"goal-bias": plan_problems(load_sampler("goal-bias", task="pendulum", seed=0), env, range(8), 0),
+            name: plan_problems(picker, env, range(8), 0)}
     env.close()
-    assert all(r.success for r in runs["rl-ppo"])
+    assert all(r.success for r in runs[name])
     nodes = {s: np.median([r.nodes_expanded for r in records]) for s, records in runs.items()}
-    assert nodes["rl-ppo"] < 0.5 * nodes["goal-bias"], nodes
+    assert nodes[name] < 0.5 * nodes["goal-bias"], nodes
 
 
 def test_a_picker_with_proposals_scores_a_set_for_that_many_samples():

@@ -24,6 +24,7 @@ SHIPPED_SAMPLERS = {
     ("gnn-cvae", "arm"): "tree/gnn-cvae",
     ("rl-ppo", "maze2d"): "rl/sb3-ppo", ("rl-ppo", "pendulum"): "rl/sb3-ppo-pick",
     ("rl-ppo", "arm"): "rl/sb3-ppo-pick", ("rl-ppo-torchrl", "arm"): "rl/torchrl-ppo-pick",
+    ("rl-ppo-torchrl", "pendulum"): "rl/torchrl-ppo-pick",
     ("gnn", "panda-mbm"): "tree/gnn", ("cvae", "panda-mbm"): "tree/cvae",
 }
 #: Critical-sample models (maze2d's fixed Halton graph; no task in the name).
