@@ -175,7 +175,7 @@ register_sampler("gnn-cvae", _lazy("agents.tree.samplers", "load_tree_sampler", 
                  "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True)
 for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum and arm"),
                              ("rl-sac", "SB3 SAC", "no shipped weights"),
-                             ("rl-ppo-torchrl", "TorchRL PPO", "shipped for arm")):
+                             ("rl-ppo-torchrl", "TorchRL PPO", "shipped for pendulum and arm")):
     register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),
                      f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
                      settings=("uniform_mix", "deterministic", "proposals"), learned=True)
