@@ -172,7 +172,7 @@ class CandidateSet:
         self._near = np.zeros(0, np.int64)                                   # the last proposal's nearest nodes
         self._best: list[tuple[float, int]] = [(np.inf, -1), (np.inf, -1)]
         self._pending: tuple[int, int] | None = None       # (num_nodes when sent, nearest node)
-        if getattr(self, "prior", None) is not None:
+        if self.prior is not None:
             self.prior.reset()
 
     def _difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
