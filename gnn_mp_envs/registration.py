@@ -66,6 +66,9 @@ class TaskSpec:
     #: Out-of-distribution test scenes (``gnn-mp benchmark --suite ood``): never trained or tuned on;
     #: ``gnn-mp train sampler --scene`` refuses them.
     ood_scenes: tuple[str, ...] = ()
+    #: Collision checkers the task's problems offer (``gym.make(..., checker=...)``, ``gnn-mp benchmark
+    #: --checker``); the first is the default. Empty: the task has one checker and takes no ``checker=``.
+    checkers: tuple[str, ...] = ()
     #: OMPL planners the isolated runner can run on this task (rows ``ompl-<planner>``).
     ompl_planners: tuple[str, ...] = ()
     #: ``"module:function"`` building the OMPL control-space setup of a kinodynamic task
@@ -311,6 +314,22 @@ BUILTIN_TASKS = (
              max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
                                      "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
              benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
+             checkers=("spheres", "pybullet"),
+             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
+    # MotionBenchMaker's UR5 and Fetch problems (the same seven scenes and splits; docs/mbm.md).
+    TaskSpec("ur5-mbm", "gnn_mp_envs.tasks.mbm:UR5MBMTask",
+             envs={"GNNMP/UR5MBM-v0": {"planner": "birrt"}},
+             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
+                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
+             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
+             checkers=("pybullet",),
+             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
+    TaskSpec("fetch-mbm", "gnn_mp_envs.tasks.mbm:FetchMBMTask",
+             envs={"GNNMP/FetchMBM-v0": {"planner": "birrt"}},
+             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
+                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
+             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"),
+             path_unit="joint-space L2 (rad; the torso's lift in m)", checkers=("pybullet",),
              step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
 )
 

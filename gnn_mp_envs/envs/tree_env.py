@@ -86,6 +86,8 @@ class TreePlanningEnv(gym.Env):
     plans the i-th problem of the env's ``split`` (``"test"``: the held-out problems); other
     option keys are refused. Tasks with scene families (the arm) take ``scene=``; without
     one, ``split="test"`` plans the held-out family and the other splits the training ones.
+    Tasks with several collision checkers (the MotionBenchMaker robots) take ``checker=``
+    (``"spheres"`` or ``"pybullet"``; default: the task's first, ``TaskSpec.checkers``).
 
     ## Episode end
     ``terminated`` when a start-to-goal path is found. ``truncated`` when the tree holds
@@ -106,7 +108,8 @@ class TreePlanningEnv(gym.Env):
                  max_steps: int | None = None, split: str = "train", scene: str | None = None,
                  task_kwargs: dict[str, Any] | None = None, render_mode: str | None = None,
                  step_penalty: float = 1.0, success_reward: float = 10.0,
-                 collision_check_cost: float = 0.0, copy_observations: bool = True, node_cost: float = 0.0) -> None:
+                 collision_check_cost: float = 0.0, copy_observations: bool = True, node_cost: float = 0.0,
+                 checker: str | None = None) -> None:
         spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
@@ -132,7 +135,18 @@ class TreePlanningEnv(gym.Env):
                                  f"known: {', '.join(spec.scenes)}")
         elif scene is not None:
             raise ValueError(f"task {task!r} has no scenes (scene={scene!r})")
+        if checker is not None or spec.checkers:
+            if not spec.checkers:
+                raise ValueError(f"task {task!r} has one collision checker (checker={checker!r})")
+            if checker is not None and task_kwargs.get("checker", checker) != checker:
+                raise ValueError(f"checker={checker!r} and task_kwargs['checker']={task_kwargs['checker']!r} disagree")
+            task_kwargs.setdefault("checker", checker or spec.checkers[0])
+            if task_kwargs["checker"] not in spec.checkers:
+                raise ValueError(f"unknown checker {task_kwargs['checker']!r} for task {task!r}; "
+                                 f"known: {', '.join(spec.checkers)}")
         self.scene = task_kwargs.get("scene")
+        #: The collision checker of the planner's checks (None: the task has only one).
+        self.checker = task_kwargs.get("checker")
         self.task = make_task(task, **task_kwargs)
         if planner not in self.task.planners:
             self.task.close()

@@ -62,6 +62,8 @@ class BenchmarkArgs:
     seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=seed_int)
     max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
     scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
+    checker: str | None = arg(None, "collision checker of tasks with several (the MotionBenchMaker robots: "
+                              "spheres or pybullet; default: the task's first); OMPL rows use the same")
     workers: int = arg(1, "worker processes over problems (with --ray: Ray actors)", parse=positive_int)
     ray: str | None = arg(None, "run the jobs as Ray actors: no ADDRESS starts a local Ray instance with "
                           "--workers CPUs; 'auto' or ray://HOST:10001 joins a running cluster (pip install "
@@ -107,6 +109,8 @@ def env_kwargs_for(args: BenchmarkArgs) -> dict[str, Any]:
         kwargs["max_nodes"] = int(args.max_nodes)
     if args.scene is not None:
         kwargs["scene"] = args.scene
+    if args.checker is not None:
+        kwargs["checker"] = args.checker
     return kwargs
 
 
@@ -144,6 +148,11 @@ def validate_args(args: BenchmarkArgs) -> None:
         raise BenchmarkError(f"unknown scene {args.scene!r} for {args.task}; known: {', '.join(spec.scenes)}")
     if args.scene is None:
         args.scene = spec.benchmark_scene   # the held-out family, for both splits
+    if args.checker is not None and args.checker not in spec.checkers:
+        raise BenchmarkError(f"--checker {args.checker!r}: {args.task} offers "
+                             + (", ".join(spec.checkers) if spec.checkers else "one checker only, named by no flag"))
+    if args.checker is None and spec.checkers:
+        args.checker = spec.checkers[0]
     if not 1 <= args.problems <= MAX_PROBLEMS:
         raise BenchmarkError(f"--problems must be in [1, {MAX_PROBLEMS:,}], got {args.problems}")
     if not 0 <= args.seed < MAX_SEED:

@@ -55,7 +55,7 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
     except ImportError as exc:
         raise BenchmarkError(f"the OMPL runner is not available in this checkout ({exc})") from None
     planner = planner_row[len(OMPL_PREFIX):]
-    task_kwargs = {"scene": args.scene} if args.scene is not None else None
+    task_kwargs = {k: v for k, v in (("scene", args.scene), ("checker", args.checker)) if v is not None} or None
     try:
         with tqdm(total=len(indices), desc=f"{args.task} {planner_row}", unit="run", disable=not args.progress,
                   file=sys.stderr) as bar:

@@ -55,6 +55,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "max_nodes": int(max_nodes),
         "time_limit_s": float(args.ompl_time_limit),   # the time budget (OMPL rows: their solve limit)
         "scene": args.scene,
+        "checker": args.checker,
         "samplers": list(args.samplers),
         "runs": {name: [{k: v for k, v in r.items() if k != "snapshots"} for r in runs[name]]
                  for name in args.samplers},

@@ -56,14 +56,15 @@ class SuiteEntry:
     scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
     split: str = "test"
+    checker: str | None = None         # None: the task's default (TaskSpec.checkers[0], where it has several)
     #: also report as the field does: <name>_field.txt (success within the budgets, median / p95 time,
     #: iterations, checks, initial path length; per scene) and <name>_success_vs_time.png
     field: bool = False
 
     @property
     def name(self) -> str:
-        """File stem of the entry's outputs: the task, and the scene when one is named."""
-        return self.task if self.scene is None else f"{self.task}-{self.scene}"
+        """File stem of the entry's outputs: the task, and the scene and checker when they are named."""
+        return "-".join([self.task] + [v for v in (self.scene, self.checker) if v is not None])
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores. The learned rows
 #: (``gnn``, ``cvae``, ``gnn-cvae``: Algorithm 1; ``rl-ppo``: the RL policy) use the shipped weights;
@@ -141,6 +142,7 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
             samplers += [OMPL_PREFIX + p for p in entry.ompl]
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers, split=entry.split,
+                             checker=entry.checker,
                              json=out / f"{entry.name}.json", plot=out / f"{entry.name}.png",
                              render=render,
                              ompl_log=out / "ompl" if with_ompl else None,

@@ -1,5 +1,6 @@
-"""Joint-space planning problems of an arm (the xArm6, the Panda): bounds, straight-line steering
-and counted, sequential edge checks at :data:`RESOLUTION` against one scene of an :class:`ArmWorld`.
+"""Joint-space planning problems of an arm (the xArm6, the Panda, the UR5, the Fetch): bounds,
+straight-line steering and counted edge checks at :data:`RESOLUTION` against one scene of an
+:class:`ArmWorld`, by one of :data:`CHECKERS`.
 
 Each configuration checked counts one collision check; edges are interpolated every
 :data:`RESOLUTION` rad (joint-space L2) and stop at the first invalid configuration.
@@ -21,6 +22,10 @@ from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld
 STEP_SIZE = 0.4
 #: Collision-checking resolution along edges (rad, L2); 0.05 rad moves the flange <= ~4 cm.
 RESOLUTION = 0.05
+#: The planner's collision checkers: ``"spheres"``, the compiled sphere model that covers the
+#: robot's collision geometry (:mod:`gnn_mp_envs.tasks.arm.spheres`), and ``"pybullet"``, contacts
+#: of the convex hulls in pybullet. Returned paths are re-checked with pybullet either way.
+CHECKERS = ("spheres", "pybullet")
 
 
 @functools.lru_cache(maxsize=4096)
@@ -39,6 +44,14 @@ def bisection_order(n: int) -> tuple[int, ...]:
     return tuple(order)
 
 
+@functools.lru_cache(maxsize=4096)
+def _order_array(n: int, bisection: bool) -> np.ndarray:
+    """:func:`bisection_order` (or ``1..n``) as a read-only int64 array, for the compiled checker."""
+    order = np.array(bisection_order(n) if bisection else range(1, n + 1), dtype=np.int64)
+    order.setflags(write=False)
+    return order
+
+
 class ArmProblem(Problem):
     """Joint-space planning for the world's robot (bounds: its joint limits) in one scene of an
     :class:`ArmWorld`."""
@@ -47,11 +60,16 @@ class ArmProblem(Problem):
     geometric = True
 
     def __init__(self, world: ArmWorld, scene: Scene | tuple[Obstacle, ...], start: np.ndarray,
-                 goal: np.ndarray, step_size: float = STEP_SIZE, resolution: float = RESOLUTION) -> None:
+                 goal: np.ndarray, step_size: float = STEP_SIZE, resolution: float = RESOLUTION,
+                 checker: str = "pybullet") -> None:
         super().__init__(start, goal, low=world.low, high=world.high, step_size=step_size,
                          resolution=resolution)
+        if checker not in CHECKERS:
+            raise ValueError(f"checker must be one of {CHECKERS}, got {checker!r}")
         self.world = world
         self.scene = scene
+        #: Which of :data:`CHECKERS` the planner's checks use.
+        self.checker = checker
         # NaN fails both comparisons, so these bounds tests also reject non-finite states.
         self._low = self.low - 1e-12
         self._high = self.high + 1e-12
@@ -71,6 +89,10 @@ class ArmProblem(Problem):
     def is_state_valid(self, states: np.ndarray) -> np.ndarray:
         s = np.asarray(states, dtype=np.float64).reshape(-1, self.state_dim)
         ok = self._in_bounds(s)
+        if self.checker == "spheres":
+            if ok.any():
+                ok[ok] = self.world.sphere_checker(self.scene).valid(s[ok])
+            return ok
         self.world.load(self.scene)
         collides = self.world.collides
         rows = s.tolist()
@@ -98,7 +120,7 @@ class ArmProblem(Problem):
     def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Check of the states every ``resolution`` (``b`` included) that stops at the first
         invalid configuration, in :attr:`bisection` order; sequentially it counts exactly as
-        :meth:`Problem.check_motion`.
+        :meth:`Problem.check_motion`. The sphere checker checks the whole edge in one compiled call.
 
         Plain Python floats: for the ~8 states of an edge this is faster than numpy, and
         ``a + (k / n) * (b - a)`` gives the same states as the base class.
@@ -113,6 +135,11 @@ class ArmProblem(Problem):
             # a is valid and the box convex: the states leave it once, somewhere before b.
             limit = next(k for k in range(1, n + 1)
                          if not all(l <= x + (k / n) * v <= h for x, v, l, h in zip(al, dl, lo, hi))) - 1
+        if self.checker == "spheres":
+            valid, checks = self.world.sphere_checker(self.scene).check_edge(
+                a, b, n, _order_array(n, self.bisection), limit)
+            self.collision_checks += checks
+            return valid
         self.world.load(self.scene)
         collides = self.world.collides
         for k in (bisection_order(n) if self.bisection else range(1, n + 1)):

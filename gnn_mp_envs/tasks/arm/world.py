@@ -16,6 +16,7 @@ faster than per-pair ``getClosestPoints`` queries (~35 us for two bodies alone, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -60,6 +61,27 @@ class RobotModel:
     padding: float = 0.0
     table: bool = True
     base_links: tuple[int, ...] = (-1, 0)
+    #: Name of the robot's shipped sphere model (``sphere_models/<name>.npz``, made by
+    #: ``python -m tools.spherize``), for the compiled checker; None: pybullet only.
+    spheres: str | None = None
+
+
+#: Where the shipped sphere models live.
+SPHERE_MODELS = Path(__file__).resolve().parent / "sphere_models"
+
+
+def sphere_model_path(name: str) -> Path:
+    """The shipped sphere model file of robot ``name``."""
+    return SPHERE_MODELS / f"{name}.npz"
+
+
+def urdf_file(urdf: str) -> Path:
+    """A RobotModel's URDF as a file: absolute paths as they are, others inside ``pybullet_data``."""
+    path = Path(urdf)
+    if path.is_absolute():
+        return path
+    import pybullet_data
+    return Path(pybullet_data.getDataPath()) / path
 
 
 #: The arm task's xArm6 on the table.
@@ -161,8 +183,11 @@ class ArmWorld:
         self._reset = p.resetJointStatesMultiDof
         self._detect = p.performCollisionDetection
         self._contacts = p.getContactPoints
+        self._closest = p.getClosestPoints
         self.bodies_created = 0
         self.rebuilds = 0
+        self._sphere_checker = None
+        self._sphere_scene: object = None
         self._connect()
 
     def _connect(self) -> None:
@@ -279,6 +304,38 @@ class ArmWorld:
             self._pooled -= 1
         self.scene = scene
 
+    # ------------------------------------------------------------------ the sphere checker
+    def sphere_checker(self, scene: Scene | tuple[Obstacle, ...]):
+        """The robot's compiled :class:`~gnn_mp_envs.tasks.arm.spheres.SphereChecker` with ``scene``
+        loaded (and the table, which the robot's base links may touch). Built on first use from the
+        robot's URDF, its shipped sphere model and this client's joint names."""
+        if self._sphere_checker is None:
+            from gnn_mp_envs.tasks.arm.spheres import SphereChecker, load_sphere_model
+            model = self.robot_model
+            if model.spheres is None:
+                raise ValueError(f"robot {model.urdf!r} has no sphere model; use checker='pybullet'")
+            self._require()
+            p, cid = self.p, self.client
+            name = lambda j: p.getJointInfo(self.robot, j, physicsClientId=cid)[1].decode()  # noqa: E731
+            link = lambda j: (p.getBodyInfo(self.robot, physicsClientId=cid)[0].decode() if j < 0   # noqa: E731
+                              else p.getJointInfo(self.robot, j, physicsClientId=cid)[12].decode())
+            self._sphere_checker = SphereChecker(
+                urdf_file(model.urdf), load_sphere_model(sphere_model_path(model.spheres)),
+                [name(j) for j in model.joints], {name(j): v for j, v in model.held_joints},
+                model.allowed_collisions)
+            self._base_link_names = [link(j) for j in model.base_links]
+        if scene is not self._sphere_scene:
+            obstacles = list(scene.obstacles if isinstance(scene, Scene) else scene)
+            exempt = {}
+            if self.robot_model.table:
+                x0, y0, x1, y1 = TABLE_EXTENT
+                exempt[len(obstacles)] = self._base_link_names
+                obstacles.append(Obstacle("box", ((x1 - x0) / 2, (y1 - y0) / 2, TABLE_THICKNESS / 2),
+                                          ((x0 + x1) / 2, (y0 + y1) / 2, -TABLE_THICKNESS / 2)))
+            self._sphere_checker.set_obstacles(obstacles, exempt)
+            self._sphere_scene = scene
+        return self._sphere_checker
+
     @property
     def obstacle_bodies(self) -> list[int]:
         return [b for _, b in self._active]
@@ -291,14 +348,27 @@ class ArmWorld:
     def collides(self, q: np.ndarray | list[float], distance: float | None = None) -> bool:
         """True when configuration ``q`` (the planned joints' angles) touches the table, an
         obstacle or itself: a contact at or below ``distance`` (default: the robot's padding
-        above :data:`CONTACT_DISTANCE`). The hot path of the task: one call per collision check."""
+        above :data:`CONTACT_DISTANCE`). The hot path of the task: one call per collision check.
+
+        A function of the configuration alone: Bullet keeps contact points from earlier queries
+        (refreshed, not recomputed) next to the one it computes fresh, so a contact the scan finds
+        is confirmed by a query that keeps no state (``getClosestPoints`` of that link pair) before
+        it counts. A free configuration costs one detection; only reported contacts pay more."""
         cid, robot = self.client, self.robot
         limit = self.contact_distance if distance is None else distance
         self._reset(robot, self._joints, [[v] for v in q], physicsClientId=cid)
         self._detect(physicsClientId=cid)
+        seen = set()
         for cp in self._contacts(bodyA=robot, physicsClientId=cid):
             if cp[8] <= limit:
-                return True
+                key = (cp[2], cp[3], cp[4])
+                if key in seen:
+                    continue
+                seen.add(key)
+                for fresh in self._closest(robot, cp[2], limit, linkIndexA=cp[3], linkIndexB=cp[4],
+                                           physicsClientId=cid):
+                    if fresh[8] <= limit:
+                        return True
         return False
 
     def contacts(self, q: np.ndarray) -> list[tuple[int, int, int, int, float]]:

@@ -21,9 +21,13 @@ from gnn_mp_envs.tasks.mbm.task import (
     SPLIT_POSITIONS,
     STEP_SIZE,
     TRAIN_SCENES,
+    FetchMBMTask,
     MBMProblem,
+    MBMTask,
     PandaMBMTask,
+    UR5MBMTask,
 )
 
 __all__ = ["EXCLUDED", "HELD_OUT_SCENES", "RESOLUTION", "SCENES", "SCENE_SETS", "SPLIT_POSITIONS", "STEP_SIZE",
-           "TRAIN_SCENES", "MBMProblem", "MBMRecord", "PandaMBMTask", "panda_model", "scene_records"]
+           "TRAIN_SCENES", "FetchMBMTask", "MBMProblem", "MBMRecord", "MBMTask", "PandaMBMTask", "UR5MBMTask",
+           "panda_model", "scene_records"]

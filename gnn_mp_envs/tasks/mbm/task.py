@@ -1,5 +1,5 @@
-"""The MotionBenchMaker task: MBM's own Panda problems by scene and split, plus perturbed copies
-of the training problems for learned samplers."""
+"""The MotionBenchMaker tasks: MBM's own problems of a robot (the Panda, the UR5, the Fetch) by
+scene and split, plus perturbed copies of the training problems for learned samplers."""
 
 from __future__ import annotations
 
@@ -9,12 +9,21 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.tasks.arm.problem import ArmProblem
+from gnn_mp_envs.tasks.arm.problem import CHECKERS, ArmProblem
 from gnn_mp_envs.tasks.arm.render import render_arm
 from gnn_mp_envs.tasks.arm.scenes import Obstacle
 from gnn_mp_envs.tasks.arm.world import ArmWorld
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS, Task, check_keys
-from gnn_mp_envs.tasks.mbm.data import SCENES, MBMRecord, panda_model, scene_records
+from gnn_mp_envs.tasks.arm.world import RobotModel
+from gnn_mp_envs.tasks.mbm.data import (
+    INVALID_PROBLEMS,
+    SCENES,
+    MBMRecord,
+    fetch_model,
+    panda_model,
+    scene_records,
+    ur5_model,
+)
 
 #: BiRRT extension length (rad, joint-space L2 over the seven joints).
 STEP_SIZE = 1.0
@@ -43,7 +52,7 @@ CAMERA_TARGET = (0.6, 0.0, 0.3)
 
 
 class MBMProblem(ArmProblem):
-    """A Panda problem in one MotionBenchMaker scene (``family``: the scene's name; ``mbm_file``:
+    """A problem in one MotionBenchMaker scene (``family``: the scene's name; ``mbm_file``:
     the problem's file number in MBM, 0 for perturbed copies and problems given by hand)."""
 
     task = "panda-mbm"
@@ -51,8 +60,9 @@ class MBMProblem(ArmProblem):
 
     def __init__(self, world: ArmWorld, obstacles: tuple[Obstacle, ...], start: Any, goal: Any,
                  step_size: float = STEP_SIZE, resolution: float = RESOLUTION, family: str | None = None,
-                 mbm_file: int = 0) -> None:
-        super().__init__(world, obstacles, start, goal, step_size, resolution)
+                 mbm_file: int = 0, checker: str = "spheres", task: str = "panda-mbm") -> None:
+        super().__init__(world, obstacles, start, goal, step_size, resolution, checker)
+        self.task = task
         self._family = family
         self.mbm_file = int(mbm_file)
 
@@ -72,9 +82,11 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
 
 
-class PandaMBMTask(Task):
-    """MotionBenchMaker's Panda problems of ``scene`` (one of :data:`SCENES`, ``"all"``, ``"train"``:
-    the five training scenes, ``"test"``: the held-out ``bookshelf_thin`` and ``cage``).
+class MBMTask(Task):
+    """MotionBenchMaker's problems of one robot (:attr:`robot`) in ``scene`` (one of :data:`SCENES`,
+    ``"all"``, ``"train"``: the five training scenes, ``"test"``: the held-out ``bookshelf_thin``
+    and ``cage``), checked by ``checker`` (``"spheres"`` or ``"pybullet"``, see
+    :data:`~gnn_mp_envs.tasks.arm.problem.CHECKERS`).
 
     ``problem(split, i)`` walks the scenes round-robin: problem ``i`` is the ``i // n``-th problem
     of the split in scene ``i % n`` (n scenes), so any prefix covers every scene. Splits take
@@ -85,6 +97,8 @@ class PandaMBMTask(Task):
     """
 
     name = "panda-mbm"
+    #: The robot (its data file and model): ``"panda"``, ``"ur5"`` or ``"fetch"``.
+    robot = "panda"
     #: ``[is_box, is_cylinder, is_sphere, size (3; box half extents, cylinder radius and height,
     #: sphere radius; zero-padded), position (3), quaternion x, y, z, w (w >= 0)]``.
     obstacle_width = 13
@@ -92,16 +106,29 @@ class PandaMBMTask(Task):
     planners = ("birrt", "rrt")
 
     def __init__(self, scene: str = "all", step_size: float = STEP_SIZE, resolution: float = RESOLUTION,
-                 render_size: tuple[int, int] = (480, 360)) -> None:
+                 render_size: tuple[int, int] = (480, 360), checker: str = "spheres") -> None:
         if scene not in SCENE_SETS:
-            raise ValueError(f"unknown panda-mbm scene {scene!r}; known: {', '.join(SCENE_SETS)}")
+            raise ValueError(f"unknown {self.name} scene {scene!r}; known: {', '.join(SCENE_SETS)}")
+        if checker not in CHECKERS:
+            raise ValueError(f"checker must be one of {CHECKERS}, got {checker!r}")
+        self.checker = checker
         self.scene = scene
         self.scenes = SCENE_SETS[scene]
         self.step_size = float(step_size)
         self.resolution = float(resolution)
         self.render_size = (int(render_size[0]), int(render_size[1]))
-        self.world = ArmWorld(panda_model())
+        self.world = ArmWorld(self.robot_model())
         self._order: dict[str, list[MBMRecord]] = {}
+
+    @staticmethod
+    def robot_model() -> RobotModel:
+        """The robot as MotionBenchMaker plans it (:mod:`gnn_mp_envs.tasks.mbm.data`)."""
+        return panda_model()
+
+    def excluded(self) -> dict[tuple[str, int], str]:
+        """Problems left out, ``(scene, file) -> why``: those whose start or goal is invalid under the
+        shipped robot model (:data:`EXCLUDED`, ``data.INVALID_PROBLEMS``)."""
+        return {**(EXCLUDED if self.robot == "panda" else {}), **INVALID_PROBLEMS.get(self.robot, {})}
 
     # ------------------------------------------------------------------ problems
     def split_records(self, split: str) -> list[MBMRecord]:
@@ -110,7 +137,8 @@ class PandaMBMTask(Task):
             raise ValueError(f"unknown split {split!r}; known: {sorted(SPLIT_POSITIONS)}")
         if split not in self._order:
             first, last = SPLIT_POSITIONS[split]
-            per_scene = [[r for r in scene_records(s)[first:last] if (s, r.file) not in EXCLUDED]
+            excluded = self.excluded()
+            per_scene = [[r for r in scene_records(s, self.robot)[first:last] if (s, r.file) not in excluded]
                          for s in self.scenes]
             self._order[split] = [records[k] for k in range(max(map(len, per_scene)))
                                   for records in per_scene if k < len(records)]
@@ -127,7 +155,7 @@ class PandaMBMTask(Task):
         if index < len(records):
             return self._mbm_problem(records[index])
         if split != "train":
-            raise ValueError(f"split {split!r} of panda-mbm scene {self.scene!r} has {len(records)} problems "
+            raise ValueError(f"split {split!r} of {self.name} scene {self.scene!r} has {len(records)} problems "
                              f"(indices 0..{len(records) - 1}), got index {index}")
         rng = np.random.default_rng([SPLIT_SEEDS[split], int(index)])
         return self.perturbed(records[index % len(records)], rng)
@@ -139,7 +167,8 @@ class PandaMBMTask(Task):
 
     def _mbm_problem(self, record: MBMRecord) -> MBMProblem:
         return MBMProblem(self.world, record.obstacles, record.start, record.goal, self.step_size, self.resolution,
-                          family=record.scene, mbm_file=record.file)
+                          family=record.scene, mbm_file=record.file, checker=self.checker,
+                          task=self.name)
 
     def perturbed(self, record: MBMRecord, rng: np.random.Generator) -> MBMProblem:
         """``record``'s scene rotated about the robot's base axis by up to :data:`PERTURB_YAW` and
@@ -150,7 +179,7 @@ class PandaMBMTask(Task):
         follows exactly. Redrawn until start and goal are valid; the unperturbed problem after
         :data:`PERTURB_TRIES` failures."""
         world = self.world
-        fixed_start = len({r.start for r in scene_records(record.scene)}) == 1
+        fixed_start = len({r.start for r in scene_records(record.scene, self.robot)}) == 1
         for attempt in range(PERTURB_TRIES):
             yaw = float(rng.uniform(-PERTURB_YAW, PERTURB_YAW))
             shift = rng.uniform(-1.0, 1.0, 3) * np.asarray(PERTURB_SHIFT)
@@ -176,7 +205,7 @@ class PandaMBMTask(Task):
                                        orientation=tuple(_quat_mul(turn, np.asarray(o.quaternion()))))
                               for o in record.obstacles)
             problem = MBMProblem(world, obstacles, start, goal, self.step_size, self.resolution,
-                                 family=record.scene)
+                                 family=record.scene, checker=self.checker, task=self.name)
             if problem.is_state_valid(np.stack([problem.start, problem.goal])).all():
                 return problem
         return self._mbm_problem(record)
@@ -188,26 +217,27 @@ class PandaMBMTask(Task):
         """A Problem, or a dict ``{"start", "goal"[, "obstacles"]}`` with obstacles as :class:`Obstacle`
         or dicts ``{"kind", "size", "position"[, "yaw"][, "orientation"]}`` (default: no obstacles)."""
         if isinstance(spec, dict):
-            check_keys(spec, ("start", "goal", "obstacles"), "a panda-mbm problem dict")
+            check_keys(spec, ("start", "goal", "obstacles"), f"a {self.name} problem dict")
             obstacles = []
             for o in spec.get("obstacles", ()):
                 if isinstance(o, dict):
-                    check_keys(o, ("kind", "size", "position", "yaw", "orientation"), "a panda-mbm obstacle dict")
+                    check_keys(o, ("kind", "size", "position", "yaw", "orientation"), f"a {self.name} obstacle dict")
                     try:
                         o = Obstacle(str(o["kind"]), o["size"], o["position"], o.get("yaw", 0.0),
                                      o.get("orientation"))
                     except KeyError as e:
-                        raise InvalidProblemError(f"a panda-mbm obstacle needs 'kind', 'size' and 'position' "
+                        raise InvalidProblemError(f"a {self.name} obstacle needs 'kind', 'size' and 'position' "
                                                   f"(missing {e})") from None
                 obstacles.append(o)
             if "start" not in spec or "goal" not in spec:
-                raise InvalidProblemError("a panda-mbm problem dict needs 'start' and 'goal'")
+                raise InvalidProblemError(f"a {self.name} problem dict needs 'start' and 'goal'")
             spec = MBMProblem(self.world, tuple(obstacles), spec["start"], spec["goal"], self.step_size,
-                              self.resolution)
+                              self.resolution, checker=self.checker, task=self.name)
         elif isinstance(spec, ArmProblem) and spec.world is not self.world:
-            raise InvalidProblemError("the panda-mbm problem belongs to another PandaMBMTask (pybullet client)")
+            raise InvalidProblemError(f"the {self.name} problem belongs to another {type(self).__name__} "
+                                      "(pybullet client)")
         if isinstance(spec, Problem) and len(self.obstacle_rows(spec)) > self.max_obstacles:
-            raise InvalidProblemError(f"a panda-mbm problem has at most {self.max_obstacles} obstacles")
+            raise InvalidProblemError(f"a {self.name} problem has at most {self.max_obstacles} obstacles")
         return super().make_problem(spec)
 
     def obstacle_rows(self, problem: Problem) -> np.ndarray:
@@ -220,10 +250,10 @@ class PandaMBMTask(Task):
         return np.asarray(rows, dtype=np.float64).reshape(-1, self.obstacle_width)
 
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
-        """TinyRenderer image: the Panda at the start (and, faded, at the goal), the scene, hand
+        """TinyRenderer image: the robot at the start (and, faded, at the goal), the scene, hand
         positions of (up to 2000) tree nodes and, on success, the hand's trace along the path."""
         if not isinstance(problem, ArmProblem):
-            raise TypeError(f"expected a panda-mbm problem, got {type(problem).__name__}")
+            raise TypeError(f"expected a {self.name} problem, got {type(problem).__name__}")
         return render_arm(self.world, problem, tree, path, *self.render_size, camera=self.camera(problem))
 
     @staticmethod
@@ -238,3 +268,32 @@ class PandaMBMTask(Task):
 
     def close(self) -> None:
         self.world.close()
+
+
+class PandaMBMTask(MBMTask):
+    """MotionBenchMaker's Franka Panda problems (seven joints; pybullet_data's Panda, fingers open)."""
+
+    name = "panda-mbm"
+    robot = "panda"
+
+
+class UR5MBMTask(MBMTask):
+    """MotionBenchMaker's UR5 problems (six joints; VAMP's UR5 with a Robotiq FT-300 and 2F-85)."""
+
+    name = "ur5-mbm"
+    robot = "ur5"
+
+    @staticmethod
+    def robot_model() -> RobotModel:
+        return ur5_model()
+
+
+class FetchMBMTask(MBMTask):
+    """MotionBenchMaker's Fetch problems (the torso's lift and seven arm joints; base fixed)."""
+
+    name = "fetch-mbm"
+    robot = "fetch"
+
+    @staticmethod
+    def robot_model() -> RobotModel:
+        return fetch_model()

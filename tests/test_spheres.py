@@ -1,0 +1,201 @@
+"""The sphere checker against its oracles: pybullet's link frames (forward kinematics), the mesh
+files (coverage of every link's hulls grown by the margin), pybullet's contacts (never less
+conservative), brute-force sphere tests (the tree walk) and a state-by-state loop (the edge
+check's order and count)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnn_mp_envs.tasks.arm.problem import _order_array, bisection_order
+from gnn_mp_envs.tasks.arm.scenes import Obstacle
+from gnn_mp_envs.tasks.arm.spheres import load_sphere_model
+from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, coverage_gaps, max_overshoot
+from gnn_mp_envs.tasks.arm.urdf import read_urdf
+from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld, sphere_model_path, urdf_file
+from gnn_mp_envs.tasks.mbm.data import panda_model
+
+#: Robot models with a shipped sphere model, and the MBM task that plans each.
+ROBOTS = {"panda": (panda_model, "panda-mbm")}
+
+
+@pytest.fixture(scope="module", params=sorted(ROBOTS))
+def world(request):
+    w = ArmWorld(ROBOTS[request.param][0]())
+    yield w
+    w.close()
+
+
+def _names(world):
+    p, cid, r = world.p, world.client, world.robot
+    return {j: p.getJointInfo(r, j, physicsClientId=cid)[12].decode() for j in range(p.getNumJoints(r, physicsClientId=cid))}
+
+
+def test_the_shipped_model_exists_and_matches_the_robot(world):
+    path = sphere_model_path(world.robot_model.spheres)
+    assert path.exists(), f"missing shipped sphere model {path}"
+    model = load_sphere_model(path)
+    robot = read_urdf(str(urdf_file(world.robot_model.urdf)))
+    with_geometry = {link for link, cols in robot.collisions.items() if cols}
+    assert set(model.roots) == with_geometry
+    assert model.margin == pytest.approx(BULLET_MARGIN + world.robot_model.padding)
+
+
+def test_forward_kinematics_matches_pybullet(world):
+    checker = world.sphere_checker(())
+    names = _names(world)
+    rng = np.random.default_rng(0)
+    p, cid = world.p, world.client
+    for _ in range(20):
+        q = rng.uniform(world.low, world.high)
+        world.set_config(q)
+        rot, trans = checker.link_frames(q)
+        for j, name in names.items():
+            s = p.getLinkState(world.robot, j, computeForwardKinematics=True, physicsClientId=cid)
+            i = checker.links.index(name)
+            np.testing.assert_allclose(trans[i], s[4], atol=1e-6)
+            np.testing.assert_allclose(rot[i], np.array(p.getMatrixFromQuaternion(s[5])).reshape(3, 3), atol=1e-6)
+
+
+def test_every_inner_node_contains_the_leaves_below_it(world):
+    """What the walk relies on: a sphere that misses a node misses every leaf under it."""
+    model = world.sphere_checker(()).model
+    for i in np.flatnonzero(model.child_count > 0):
+        below, stack = [], [int(i)]
+        while stack:
+            k = stack.pop()
+            if model.child_count[k] == 0:
+                below.append(k)
+            else:
+                stack.extend(range(model.first_child[k], model.first_child[k] + model.child_count[k]))
+        leaves = model.nodes[below]
+        reach = np.linalg.norm(leaves[:, :3] - model.nodes[i, :3], axis=1) + leaves[:, 3]
+        assert (reach <= model.nodes[i, 3] + 1e-12).all()
+
+
+def test_spheres_cover_every_link_hull_grown_by_the_margin(world):
+    """Every hull vertex (pushed out by the margin over its whole normal cone) and a fresh boundary
+    sample 1.5 mm apart lie in the union of the link's leaves; no leaf reaches beyond the margin by
+    more than the link's stated overshoot."""
+    model = load_sphere_model(sphere_model_path(world.robot_model.spheres))
+    robot = read_urdf(str(urdf_file(world.robot_model.urdf)))
+    for link in model.roots:
+        leaves = model.leaves(link)
+        gaps = coverage_gaps(robot, link, leaves, model.margin, 0.0015, seed=7)
+        assert gaps["vertices"] == 0 and gaps["surface"] == 0, (link, gaps)
+        assert gaps["checked"] > 1000
+        assert max_overshoot(robot, link, leaves, model.margin) <= model.meta["links"][link]["overshoot"] + 1e-9
+
+
+def _grazing_states(world, problem_scene, rng, count):
+    """Configurations within 1e-4 rad of a pybullet contact (on both sides), by bisection between
+    a free and a colliding configuration."""
+    out = []
+    world.load(problem_scene)
+    while len(out) < count:
+        a, b = rng.uniform(world.low, world.high, (2, len(world.low)))
+        fa, fb = world.collides(a.tolist(), CONTACT_DISTANCE), world.collides(b.tolist(), CONTACT_DISTANCE)
+        if fa == fb:
+            continue
+        lo, hi = (a, b) if not fa else (b, a)
+        while np.linalg.norm(hi - lo) > 1e-4:
+            mid = (lo + hi) / 2
+            if world.collides(mid.tolist(), CONTACT_DISTANCE):
+                hi = mid
+            else:
+                lo = mid
+        out += [lo, hi]
+    return np.array(out)
+
+
+def test_spheres_say_collision_wherever_pybullet_does(world):
+    """Random and grazing configurations of the first test problems: every configuration pybullet
+    calls a collision, exactly or with the robot's padding, is a collision for the spheres."""
+    from gnn_mp_envs.registration import make_task
+    name = next(k for k, v in ROBOTS.items() if v[0]().urdf == world.robot_model.urdf)
+    task = make_task(ROBOTS[name][1], checker="pybullet")
+    rng = np.random.default_rng(1)
+    pybullet_hits = 0
+    try:
+        for i in range(6):
+            problem = task.problem("test", i)
+            states = np.concatenate([rng.uniform(world.low, world.high, (400, len(world.low))),
+                                     _grazing_states(world, problem.obstacles, rng, 100)])
+            world.load(problem.obstacles)
+            exact = np.array([world.collides(q.tolist(), CONTACT_DISTANCE) for q in states])
+            padded = np.array([world.collides(q.tolist()) for q in states])
+            spheres = ~world.sphere_checker(problem.obstacles).valid(states)
+            assert not (exact & ~spheres).any(), states[exact & ~spheres][:3]
+            assert not (padded & ~spheres).any(), states[padded & ~spheres][:3]
+            pybullet_hits += int(exact.sum())
+    finally:
+        task.close()
+    assert pybullet_hits > 500        # the test saw collisions to agree on
+
+
+def _brute_force_collides(checker, leaves, q):
+    """Every leaf against every obstacle and every checked pair, no tree: the oracle of the walk."""
+    from scipy.spatial.distance import cdist
+    rot, trans = checker.link_frames(q)
+    world_leaves = {}
+    for i, link in enumerate(checker.links):
+        if link in leaves:
+            world_leaves[link] = np.c_[leaves[link][:, :3] @ rot[i].T + trans[i], leaves[link][:, 3]]
+    for o in range(len(checker._ob_kind)):
+        for link, lv in world_leaves.items():
+            if checker._exempt[o, checker.links.index(link)]:
+                continue
+            d = lv[:, :3] - checker._ob_centre[o]
+            local = d @ checker._ob_rot[o]
+            size = checker._ob_size[o]
+            if checker._ob_kind[o] == 0:
+                gap = np.linalg.norm(np.maximum(np.abs(local) - size, 0.0), axis=1)
+            elif checker._ob_kind[o] == 1:
+                er = np.maximum(np.linalg.norm(local[:, :2], axis=1) - size[0], 0.0)
+                ez = np.maximum(np.abs(local[:, 2]) - size[1], 0.0)
+                gap = np.hypot(er, ez)
+            else:
+                gap = np.maximum(np.linalg.norm(d, axis=1) - size[0], 0.0)
+            if (gap <= lv[:, 3]).any():
+                return True
+    for a, b in checker.self_pairs:
+        la, lb = world_leaves[a], world_leaves[b]
+        if (cdist(la[:, :3], lb[:, :3]) <= la[:, None, 3] + lb[None, :, 3]).any():
+            return True
+    return False
+
+
+def test_the_tree_walk_equals_brute_force(world):
+    obstacles = (Obstacle("box", (0.1, 0.3, 0.02), (0.45, 0.0, 0.4), yaw=0.3),
+                 Obstacle("cylinder", (0.05, 0.5), (0.3, -0.3, 0.3)),
+                 Obstacle("sphere", (0.08,), (0.2, 0.35, 0.6)))
+    checker = world.sphere_checker(obstacles)
+    rng = np.random.default_rng(3)
+    states = rng.uniform(world.low, world.high, (60, len(world.low)))
+    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    got = ~checker.valid(states)
+    want = np.array([_brute_force_collides(checker, leaves, q) for q in states])
+    np.testing.assert_array_equal(got, want)
+    assert 5 < got.sum() < 55            # both answers occur
+
+
+def test_edge_check_visits_the_order_and_counts_to_the_first_invalid_state(world):
+    obstacles = (Obstacle("box", (0.05, 0.05, 0.05), (0.45, 0.0, 0.45)),)
+    checker = world.sphere_checker(obstacles)
+    rng = np.random.default_rng(4)
+    seen_invalid = 0
+    for _ in range(60):
+        a, b = rng.uniform(world.low, world.high, (2, len(world.low)))
+        n = int(rng.integers(1, 60))
+        for order in (_order_array(n, True), _order_array(n, False)):
+            limit = n if rng.random() < 0.8 else int(rng.integers(0, n + 1))
+            states = np.array([a + (k / n) * (b - a) for k in order])
+            ok = checker.valid(states) & (order <= limit)
+            first_bad = int(np.argmin(ok)) if not ok.all() else None
+            valid, checks = checker.check_edge(a, b, n, order, limit)
+            assert valid == (first_bad is None)
+            assert checks == (n if first_bad is None else first_bad + 1)
+            seen_invalid += not valid
+    assert seen_invalid > 10
+    assert tuple(_order_array(7, True)) == bisection_order(7)

@@ -1,0 +1,133 @@
+"""Make the shipped sphere models: spheres that cover each link's collision geometry (the convex
+hulls pybullet collides, grown by its collision margin and the robot's padding), grouped into a
+tree per link. Run from the repository root::
+
+    python -m tools.spherize --robot panda            # writes gnn_mp_envs/tasks/arm/sphere_models/panda.npz
+    python -m tools.spherize --robot panda --check    # coverage and overshoot of the shipped file
+
+Method and guarantees: :mod:`gnn_mp_envs.tasks.arm.spherize`. The margin is pybullet's collision
+margin plus the robot model's padding, so a configuration the pybullet checker calls a collision
+(with or without the padding) is one for the spheres too; the overshoot (how much farther the
+spheres may reach) is chosen per link below, from the clearance of the dataset's starts and goals
+(``--clearance`` prints it): below it, so that every start and goal stays valid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnn_mp_envs.tasks.arm.spheres import SphereModel, build_tree, load_sphere_model
+from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, coverage_gaps, max_overshoot, spherize_link
+from gnn_mp_envs.tasks.arm.urdf import read_urdf
+from gnn_mp_envs.tasks.arm.world import sphere_model_path, urdf_file
+
+#: Robot -> how its model is made: ``model`` names the RobotModel factory (``module:function``);
+#: ``overshoot`` (m) per link, ``"*"`` for the others. The tightest links are the ones whose
+#: start/goal clearance is smallest (``--clearance``).
+SETTINGS: dict[str, dict[str, Any]] = {
+    "panda": {"model": "gnn_mp_envs.tasks.mbm.data:panda_model",
+              "overshoot": {"*": 0.005, "panda_link5": 0.0007, "panda_hand": 0.0012, "panda_link6": 0.002,
+                            "panda_leftfinger": 0.002, "panda_rightfinger": 0.002},
+              "self_overshoot": 0.006},
+}
+#: Boundary sample spacing of the cover (m).
+SPACING = 0.001
+
+
+def robot_model(robot: str):
+    module, _, func = SETTINGS[robot]["model"].partition(":")
+    import importlib
+    return getattr(importlib.import_module(module), func)()
+
+
+def overshoot_of(robot: str, link: str) -> float:
+    table = SETTINGS[robot]["overshoot"]
+    return float(table.get(link, table["*"]))
+
+
+def make(robot: str, out: Path, seed: int = 0) -> SphereModel:
+    model = robot_model(robot)
+    urdf = urdf_file(model.urdf)
+    r = read_urdf(str(urdf))
+    margin = BULLET_MARGIN + model.padding
+    self_overshoot = float(SETTINGS[robot]["self_overshoot"])
+    nodes, first, count, roots, self_roots, meshes, per_link = [], [], [], {}, {}, {}, {}
+    offset = 0
+
+    def add(leaves: np.ndarray) -> int:
+        nonlocal offset
+        n, f, c = build_tree(leaves, seed=seed)
+        nodes.append(n)
+        first.append(np.where(c > 0, f + offset, 0))
+        count.append(c)
+        offset += len(n)
+        return offset - len(n)
+
+    for link in r.links:
+        if not r.collisions.get(link):
+            continue
+        start = time.time()
+        leaves = spherize_link(r, link, margin, overshoot_of(robot, link), SPACING, seed=seed)
+        self_leaves = spherize_link(r, link, margin, self_overshoot, 2 * SPACING, seed=seed)
+        roots[link] = add(leaves)
+        self_roots[link] = add(self_leaves)
+        per_link[link] = {"leaves": int(len(leaves)), "overshoot": overshoot_of(robot, link),
+                          "self_leaves": int(len(self_leaves)), "self_overshoot": self_overshoot}
+        for col in r.collisions[link]:
+            if col.mesh is not None:
+                meshes[col.mesh.name] = hashlib.sha256(col.mesh.read_bytes()).hexdigest()
+        print(f"{link}: {len(leaves)} spheres against obstacles, {len(self_leaves)} against the robot "
+              f"({time.time() - start:.0f} s)", flush=True)
+    result = SphereModel(np.concatenate(nodes), np.concatenate(first), np.concatenate(count), roots, self_roots,
+                         {"robot": robot, "urdf": urdf.name, "margin": margin, "bullet_margin": BULLET_MARGIN,
+                          "padding": model.padding, "links": per_link, "spacing": SPACING, "seed": seed,
+                          "mesh_sha256": meshes, "command": f"python -m tools.spherize --robot {robot}"})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result.save(out)
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB, "
+          f"{sum(v['leaves'] + v['self_leaves'] for v in per_link.values())} spheres)")
+    return result
+
+
+def check(robot: str, path: Path) -> int:
+    """Coverage (hull vertices and a fresh boundary sample grown by the margin) and overshoot per link."""
+    model = robot_model(robot)
+    r = read_urdf(str(urdf_file(model.urdf)))
+    spheres = load_sphere_model(path)
+    bad = 0
+    for link in spheres.roots:
+        for self_collision in (False, True):
+            leaves = spheres.leaves(link, self_collision)
+            gaps = coverage_gaps(r, link, leaves, spheres.margin, SPACING)
+            reach = max_overshoot(r, link, leaves, spheres.margin)
+            bad += gaps["vertices"] + gaps["surface"]
+            print(f"{link} ({'self' if self_collision else 'obstacles'}): {len(leaves)} spheres, {gaps['checked']} "
+                  f"points checked, {gaps['vertices']} vertex and {gaps['surface']} surface points out; overshoot "
+                  f"{reach * 1e3:.2f} mm")
+    return 1 if bad else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--robot", choices=sorted(SETTINGS), required=True)
+    ap.add_argument("--out", type=Path, default=None, help="output file (default: the package's)")
+    ap.add_argument("--check", action="store_true", help="check the file's coverage instead of writing it")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    out = args.out or sphere_model_path(args.robot)
+    if args.check:
+        return check(args.robot, out)
+    make(args.robot, out, args.seed)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
