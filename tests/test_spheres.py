@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnn_mp_envs.tasks.arm.problem import _order_array, bisection_order
+from gnn_mp_envs.tasks.arm.problem import bisection_order
 from gnn_mp_envs.tasks.arm.scenes import Obstacle
 from gnn_mp_envs.tasks.arm.spheres import load_sphere_model
 from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, coverage_gaps, max_overshoot
@@ -180,22 +180,38 @@ def test_the_tree_walk_equals_brute_force(world):
     assert 5 < got.sum() < 55            # both answers occur
 
 
-def test_edge_check_visits_the_order_and_counts_to_the_first_invalid_state(world):
-    obstacles = (Obstacle("box", (0.05, 0.05, 0.05), (0.45, 0.0, 0.45)),)
+def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
+    """The edge kernel skips states and pairs that its distance bounds vouch for; the answer and the
+    count must be those of checking every state in order (the oracle: ``valid`` state by state, and
+    the box test), for edges of every length, both orders and boxes cut anywhere, in clutter where
+    edges end at every depth."""
+    obstacles = (Obstacle("box", (0.05, 0.05, 0.05), (0.45, 0.0, 0.45)),
+                 Obstacle("box", (0.2, 0.4, 0.01), (0.55, 0.0, 0.02)),
+                 Obstacle("cylinder", (0.03, 0.4), (0.35, 0.3, 0.4)),
+                 Obstacle("sphere", (0.06,), (0.3, -0.35, 0.5)))
     checker = world.sphere_checker(obstacles)
     rng = np.random.default_rng(4)
-    seen_invalid = 0
-    for _ in range(60):
-        a, b = rng.uniform(world.low, world.high, (2, len(world.low)))
-        n = int(rng.integers(1, 60))
-        for order in (_order_array(n, True), _order_array(n, False)):
-            limit = n if rng.random() < 0.8 else int(rng.integers(0, n + 1))
+    outcomes = {True: 0, False: 0}
+    for _ in range(3000):
+        if min(outcomes.values()) >= 60:
+            break
+        a = rng.uniform(world.low, world.high)
+        if not checker.valid(a[None])[0]:
+            continue
+        d = rng.normal(size=len(a))
+        b = a + d / np.linalg.norm(d) * rng.choice([0.05, 0.2, 0.6])
+        resolution = float(rng.choice([0.003, 0.01, 0.04]))
+        low, high = world.low.copy(), world.high.copy()
+        if rng.random() < 0.3:                    # a box that b may leave (a stays inside)
+            low, high = np.minimum(a, low + 0.5 * (a - low)), np.maximum(a, high - 0.5 * (high - a))
+        n = max(1, int(np.ceil(np.sqrt(np.sum((b - a) ** 2)) / resolution)))
+        for bisection in (True, False):
+            order = np.array(bisection_order(n) if bisection else range(1, n + 1))
             states = np.array([a + (k / n) * (b - a) for k in order])
-            ok = checker.valid(states) & (order <= limit)
+            ok = checker.valid(states) & np.all((states >= low) & (states <= high), axis=1)
             first_bad = int(np.argmin(ok)) if not ok.all() else None
-            valid, checks = checker.check_edge(a, b, n, order, limit)
-            assert valid == (first_bad is None)
-            assert checks == (n if first_bad is None else first_bad + 1)
-            seen_invalid += not valid
-    assert seen_invalid > 10
-    assert tuple(_order_array(7, True)) == bisection_order(7)
+            valid, checks = checker.check_motion(a, b, resolution, low, high, bisection)
+            assert valid == (first_bad is None), (n, bisection)
+            assert checks == (n if first_bad is None else first_bad + 1), (n, bisection)
+            outcomes[valid] += 1
+    assert min(outcomes.values()) >= 60, outcomes

@@ -80,17 +80,19 @@ def main(argv: list[str] | None = None) -> int:
             per_edge[c] += _time(edges, repeat=1)
             checks[c] += prob.collision_checks
         checker = p.world.sphere_checker(p.scene)
-        obstacles = (checker._ob_kind, checker._ob_centre, checker._ob_rot, checker._ob_size, checker._exempt)
-        pairs = checker._pairs
+        obstacles = p.obstacles
+        pairs, pair_reach = checker._pairs, checker._pair_reach
         try:
             parts["whole"] += _time(lambda: checker.valid(states))
-            checker._pairs = pairs[:0]
+            checker._pairs, checker._pair_reach = pairs[:0], pair_reach[:0]
+            checker._pack()
             parts["obstacles"] += _time(lambda: checker.valid(states))
             checker.set_obstacles(())
             parts["fk"] += _time(lambda: checker.valid(states))
         finally:
-            checker._pairs = pairs
-            checker._ob_kind, checker._ob_centre, checker._ob_rot, checker._ob_size, checker._exempt = obstacles
+            checker._pairs, checker._pair_reach = pairs, pair_reach
+            p.world._sphere_scene = None          # the world reloads the scene at its next use
+            checker.set_obstacles(obstacles)
         n_states += len(states)
         n_edges += len(starts)
     for t in tasks.values():

@@ -44,14 +44,6 @@ def bisection_order(n: int) -> tuple[int, ...]:
     return tuple(order)
 
 
-@functools.lru_cache(maxsize=4096)
-def _order_array(n: int, bisection: bool) -> np.ndarray:
-    """:func:`bisection_order` (or ``1..n``) as a read-only int64 array, for the compiled checker."""
-    order = np.array(bisection_order(n) if bisection else range(1, n + 1), dtype=np.int64)
-    order.setflags(write=False)
-    return order
-
-
 class ArmProblem(Problem):
     """Joint-space planning for the world's robot (bounds: its joint limits) in one scene of an
     :class:`ArmWorld`."""
@@ -126,6 +118,11 @@ class ArmProblem(Problem):
         ``a + (k / n) * (b - a)`` gives the same states as the base class.
         """
         self.edges_checked += 1
+        if self.checker == "spheres":
+            valid, checks = self.world.sphere_checker(self.scene).check_motion(a, b, self.resolution, self._low,
+                                                                               self._high, self.bisection)
+            self.collision_checks += checks
+            return valid
         al, bl = a.tolist(), b.tolist()
         dl = [y - x for x, y in zip(al, bl)]
         n = max(1, math.ceil(math.sqrt(sum(v * v for v in dl)) / self.resolution))
@@ -135,11 +132,6 @@ class ArmProblem(Problem):
             # a is valid and the box convex: the states leave it once, somewhere before b.
             limit = next(k for k in range(1, n + 1)
                          if not all(l <= x + (k / n) * v <= h for x, v, l, h in zip(al, dl, lo, hi))) - 1
-        if self.checker == "spheres":
-            valid, checks = self.world.sphere_checker(self.scene).check_edge(
-                a, b, n, _order_array(n, self.bisection), limit)
-            self.collision_checks += checks
-            return valid
         self.world.load(self.scene)
         collides = self.world.collides
         for k in (bisection_order(n) if self.bisection else range(1, n + 1)):
