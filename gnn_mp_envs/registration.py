@@ -322,7 +322,7 @@ BUILTIN_TASKS = (
              max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
                                      "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
              benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
-             checkers=("pybullet",),
+             checkers=("spheres", "pybullet"),
              step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
     TaskSpec("fetch-mbm", "gnn_mp_envs.tasks.mbm:FetchMBMTask",
              envs={"GNNMP/FetchMBM-v0": {"planner": "birrt"}},

@@ -11,13 +11,13 @@ import pytest
 from gnn_mp_envs.tasks.arm.problem import bisection_order
 from gnn_mp_envs.tasks.arm.scenes import Obstacle
 from gnn_mp_envs.tasks.arm.spheres import load_sphere_model
-from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, coverage_gaps, max_overshoot
+from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, COVER_TOLERANCE, coverage_gaps, max_overshoot
 from gnn_mp_envs.tasks.arm.urdf import read_urdf
 from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld, sphere_model_path, urdf_file
-from gnn_mp_envs.tasks.mbm.data import panda_model
+from gnn_mp_envs.tasks.mbm.data import fetch_model, panda_model, ur5_model
 
 #: Robot models with a shipped sphere model, and the MBM task that plans each.
-ROBOTS = {"panda": (panda_model, "panda-mbm")}
+ROBOTS = {"panda": (panda_model, "panda-mbm"), "ur5": (ur5_model, "ur5-mbm"), "fetch": (fetch_model, "fetch-mbm")}
 
 
 @pytest.fixture(scope="module", params=sorted(ROBOTS))
@@ -39,7 +39,9 @@ def test_the_shipped_model_exists_and_matches_the_robot(world):
     robot = read_urdf(str(urdf_file(world.robot_model.urdf)))
     with_geometry = {link for link, cols in robot.collisions.items() if cols}
     assert set(model.roots) == with_geometry
-    assert model.margin == pytest.approx(BULLET_MARGIN + world.robot_model.padding)
+    # the margin: pybullet's and a padding no larger than the pybullet checker's
+    assert model.margin == pytest.approx(BULLET_MARGIN + model.meta["padding"])
+    assert 0 < model.meta["padding"] <= world.robot_model.padding
 
 
 def test_forward_kinematics_matches_pybullet(world):
@@ -75,17 +77,21 @@ def test_every_inner_node_contains_the_leaves_below_it(world):
 
 
 def test_spheres_cover_every_link_hull_grown_by_the_margin(world):
-    """Every hull vertex (pushed out by the margin over its whole normal cone) and a fresh boundary
-    sample 1.5 mm apart lie in the union of the link's leaves; no leaf reaches beyond the margin by
-    more than the link's stated overshoot."""
+    """Every hull vertex (pushed out over its whole normal cone) and a fresh boundary sample 1.5 mm
+    apart, grown by the margin less the cover's tolerance (still beyond pybullet's own margin), lie
+    in the union of the link's leaves, for both trees of every link; no leaf reaches beyond the
+    margin by more than the link's stated overshoot."""
     model = load_sphere_model(sphere_model_path(world.robot_model.spheres))
     robot = read_urdf(str(urdf_file(world.robot_model.urdf)))
+    covered = model.margin - COVER_TOLERANCE
+    assert covered > BULLET_MARGIN
     for link in model.roots:
-        leaves = model.leaves(link)
-        gaps = coverage_gaps(robot, link, leaves, model.margin, 0.0015, seed=7)
-        assert gaps["vertices"] == 0 and gaps["surface"] == 0, (link, gaps)
-        assert gaps["checked"] > 1000
-        assert max_overshoot(robot, link, leaves, model.margin) <= model.meta["links"][link]["overshoot"] + 1e-9
+        for self_collision, key in ((False, "overshoot"), (True, "self_overshoot")):
+            leaves = model.leaves(link, self_collision)
+            gaps = coverage_gaps(robot, link, leaves, covered, 0.0015, seed=7)
+            assert gaps["vertices"] == 0 and gaps["surface"] == 0, (link, self_collision, gaps)
+            assert gaps["checked"] > 200
+            assert max_overshoot(robot, link, leaves, model.margin) <= model.meta["links"][link][key] + 1e-9
 
 
 def _grazing_states(world, problem_scene, rng, count):
@@ -115,6 +121,7 @@ def test_spheres_say_collision_wherever_pybullet_does(world):
     from gnn_mp_envs.registration import make_task
     name = next(k for k, v in ROBOTS.items() if v[0]().urdf == world.robot_model.urdf)
     task = make_task(ROBOTS[name][1], checker="pybullet")
+    model_padding = load_sphere_model(sphere_model_path(world.robot_model.spheres)).meta["padding"]
     rng = np.random.default_rng(1)
     pybullet_hits = 0
     try:
@@ -127,21 +134,24 @@ def test_spheres_say_collision_wherever_pybullet_does(world):
             padded = np.array([world.collides(q.tolist()) for q in states])
             spheres = ~world.sphere_checker(problem.obstacles).valid(states)
             assert not (exact & ~spheres).any(), states[exact & ~spheres][:3]
-            assert not (padded & ~spheres).any(), states[padded & ~spheres][:3]
+            if model_padding >= world.robot_model.padding:      # the Panda's spheres keep the padding too
+                assert not (padded & ~spheres).any(), states[padded & ~spheres][:3]
             pybullet_hits += int(exact.sum())
     finally:
         task.close()
     assert pybullet_hits > 500        # the test saw collisions to agree on
 
 
-def _brute_force_collides(checker, leaves, q):
-    """Every leaf against every obstacle and every checked pair, no tree: the oracle of the walk."""
+def _brute_force_collides(checker, leaves, self_leaves, q):
+    """Every obstacle-tree leaf against every obstacle and every self-tree leaf of every checked pair,
+    no tree: the oracle of the walk."""
     from scipy.spatial.distance import cdist
     rot, trans = checker.link_frames(q)
-    world_leaves = {}
+    world_leaves, world_self = {}, {}
     for i, link in enumerate(checker.links):
         if link in leaves:
             world_leaves[link] = np.c_[leaves[link][:, :3] @ rot[i].T + trans[i], leaves[link][:, 3]]
+            world_self[link] = np.c_[self_leaves[link][:, :3] @ rot[i].T + trans[i], self_leaves[link][:, 3]]
     for o in range(len(checker._ob_kind)):
         for link, lv in world_leaves.items():
             if checker._exempt[o, checker.links.index(link)]:
@@ -160,22 +170,30 @@ def _brute_force_collides(checker, leaves, q):
             if (gap <= lv[:, 3]).any():
                 return True
     for a, b in checker.self_pairs:
-        la, lb = world_leaves[a], world_leaves[b]
+        la, lb = world_self[a], world_self[b]
         if (cdist(la[:, :3], lb[:, :3]) <= la[:, None, 3] + lb[None, :, 3]).any():
             return True
     return False
 
 
+def _around(world, offset):
+    """A point ``offset`` away from the middle of the robot's links at its middle configuration (so
+    that hand-made obstacles sit where every robot reaches)."""
+    _, trans = world.sphere_checker(()).link_frames((world.low + world.high) / 2)
+    return tuple(float(v) for v in trans.mean(axis=0) + np.asarray(offset))
+
+
 def test_the_tree_walk_equals_brute_force(world):
-    obstacles = (Obstacle("box", (0.1, 0.3, 0.02), (0.45, 0.0, 0.4), yaw=0.3),
-                 Obstacle("cylinder", (0.05, 0.5), (0.3, -0.3, 0.3)),
-                 Obstacle("sphere", (0.08,), (0.2, 0.35, 0.6)))
+    obstacles = (Obstacle("box", (0.1, 0.3, 0.02), _around(world, (0.25, 0.0, 0.0)), yaw=0.3),
+                 Obstacle("cylinder", (0.05, 0.5), _around(world, (0.1, -0.3, -0.1))),
+                 Obstacle("sphere", (0.08,), _around(world, (0.0, 0.35, 0.2))))
     checker = world.sphere_checker(obstacles)
     rng = np.random.default_rng(3)
     states = rng.uniform(world.low, world.high, (60, len(world.low)))
     leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
     got = ~checker.valid(states)
-    want = np.array([_brute_force_collides(checker, leaves, q) for q in states])
+    want = np.array([_brute_force_collides(checker, leaves, self_leaves, q) for q in states])
     np.testing.assert_array_equal(got, want)
     assert 5 < got.sum() < 55            # both answers occur
 
@@ -185,10 +203,10 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
     count must be those of checking every state in order (the oracle: ``valid`` state by state, and
     the box test), for edges of every length, both orders and boxes cut anywhere, in clutter where
     edges end at every depth."""
-    obstacles = (Obstacle("box", (0.05, 0.05, 0.05), (0.45, 0.0, 0.45)),
-                 Obstacle("box", (0.2, 0.4, 0.01), (0.55, 0.0, 0.02)),
-                 Obstacle("cylinder", (0.03, 0.4), (0.35, 0.3, 0.4)),
-                 Obstacle("sphere", (0.06,), (0.3, -0.35, 0.5)))
+    obstacles = (Obstacle("box", (0.05, 0.05, 0.05), _around(world, (0.25, 0.0, 0.05))),
+                 Obstacle("box", (0.2, 0.4, 0.01), _around(world, (0.35, 0.0, -0.38))),
+                 Obstacle("cylinder", (0.03, 0.4), _around(world, (0.15, 0.3, 0.0))),
+                 Obstacle("sphere", (0.06,), _around(world, (0.1, -0.35, 0.1))))
     checker = world.sphere_checker(obstacles)
     rng = np.random.default_rng(4)
     outcomes = {True: 0, False: 0}
@@ -215,3 +233,69 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
             assert checks == (n if first_bad is None else first_bad + 1), (n, bisection)
             outcomes[valid] += 1
     assert min(outcomes.values()) >= 60, outcomes
+
+
+# ---------------------------------------------------------------------- the checker as users choose it
+def test_the_environment_takes_a_checker_and_refuses_unknown_ones():
+    import gymnasium as gym
+
+    import gnn_mp_envs  # noqa: F401
+    env = gym.make("GNNMP/PandaMBM-v0", split="test")
+    assert env.unwrapped.checker == "spheres"
+    env.reset(options={"index": 0})
+    assert env.unwrapped.problem.checker == "spheres"
+    env.close()
+    env = gym.make("GNNMP/PandaMBM-v0", split="test", checker="pybullet")
+    env.reset(options={"index": 0})
+    assert env.unwrapped.problem.checker == "pybullet"
+    env.close()
+    with pytest.raises(ValueError, match="unknown checker 'fcl'"):
+        gym.make("GNNMP/PandaMBM-v0", checker="fcl")
+    with pytest.raises(ValueError, match="one collision checker"):
+        gym.make("GNNMP/Maze2DRRT-v0", checker="spheres")
+
+
+def test_both_checkers_plan_the_same_problem_and_the_paths_pass_the_re_check():
+    """The same problem and samples with either checker: both solve it and both paths pass the
+    independent pybullet re-check at 10x finer resolution."""
+    from agents.samplers import load_sampler
+    from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+    for checker in ("spheres", "pybullet"):
+        env = evaluation_env("panda-mbm", checker=checker)
+        run = plan_problem(env, load_sampler("uniform", task="panda-mbm", seed=0), 0, 0)
+        assert run.success, checker
+        solution = env.planner.solution
+        assert env.problem.path_valid(solution.states, solution.controls, refine=PATH_CHECK_REFINE)
+        env.close()
+
+
+def test_the_benchmark_refuses_a_checker_the_task_lacks():
+    from train.benchmark.args import BenchmarkArgs, BenchmarkError, validate_args
+    with pytest.raises(BenchmarkError, match="--checker 'spheres': maze2d offers one checker only"):
+        validate_args(BenchmarkArgs(task="maze2d", checker="spheres"))
+    with pytest.raises(BenchmarkError, match="panda-mbm offers spheres, pybullet"):
+        validate_args(BenchmarkArgs(task="panda-mbm", checker="fcl"))
+    args = BenchmarkArgs(task="panda-mbm")
+    validate_args(args)
+    assert args.checker == "spheres"
+
+
+@pytest.mark.parametrize("robot", sorted(ROBOTS))
+def test_exactly_the_listed_problems_are_invalid_under_the_sphere_model(robot):
+    """Every start and goal of the robot's 700 MotionBenchMaker problems: invalid under the sphere
+    model exactly where the data lists it (invalid for pybullet, or for the spheres only)."""
+    from gnn_mp_envs.registration import make_task
+    from gnn_mp_envs.tasks.mbm.data import INVALID_PROBLEMS, SCENES, SPHERE_INVALID_PROBLEMS, scene_records
+    task = make_task(ROBOTS[robot][1], checker="spheres")
+    try:
+        invalid = set()
+        for scene in SCENES:
+            for record in scene_records(scene, robot):
+                problem = task._mbm_problem(record)
+                if not problem.is_state_valid(np.stack([problem.start, problem.goal])).all():
+                    invalid.add((scene, record.file))
+    finally:
+        task.close()
+    assert invalid - set(INVALID_PROBLEMS[robot]) == set(SPHERE_INVALID_PROBLEMS[robot])
+    assert 700 - len(set(INVALID_PROBLEMS[robot]) | set(SPHERE_INVALID_PROBLEMS[robot])) >= 665   # 95%

@@ -36,7 +36,23 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "panda": {"model": "gnn_mp_envs.tasks.mbm.data:panda_model",
               "overshoot": {"*": 0.005, "panda_link5": 0.0007, "panda_hand": 0.0012, "panda_link6": 0.002,
                             "panda_leftfinger": 0.002, "panda_rightfinger": 0.002},
-              "self_overshoot": 0.006},
+              "self_overshoot": {"*": 0.006}},
+    # The UR5's and the Fetch's starts and goals come within 1.1 mm (pybullet distance) of obstacles
+    # and of their own links: a quarter millimetre of padding, half a millimetre of overshoot on the
+    # links that come that close, 0.3 mm on the self pairs that do.
+    "ur5": {"model": "gnn_mp_envs.tasks.mbm.data:ur5_model", "padding": 0.00025,
+            "overshoot": {"*": 0.002, "robotiq_85_left_finger_tip_link": 0.0005,
+                          "robotiq_85_right_finger_tip_link": 0.0005, "robotiq_85_left_finger_link": 0.001,
+                          "robotiq_85_right_finger_link": 0.001},
+            "self_overshoot": {"*": 0.004, "forearm_link": 0.0003, "wrist_2_link": 0.0003, "wrist_3_link": 0.0003,
+                               "fts_robotside": 0.001}},
+    "fetch": {"model": "gnn_mp_envs.tasks.mbm.data:fetch_model", "padding": 0.00025,
+              "overshoot": {"*": 0.002, "forearm_roll_link": 0.0005, "wrist_flex_link": 0.0005,
+                            "r_gripper_finger_link": 0.0005, "l_gripper_finger_link": 0.0005,
+                            "upperarm_roll_link": 0.0005, "gripper_link": 0.0005},
+              "self_overshoot": {"*": 0.003, "base_link": 0.001, "wrist_flex_link": 0.0003,
+                                 "upperarm_roll_link": 0.0003, "forearm_roll_link": 0.0005,
+                                 "shoulder_lift_link": 0.0005}},
 }
 #: Boundary sample spacing of the cover (m).
 SPACING = 0.001
@@ -48,8 +64,8 @@ def robot_model(robot: str):
     return getattr(importlib.import_module(module), func)()
 
 
-def overshoot_of(robot: str, link: str) -> float:
-    table = SETTINGS[robot]["overshoot"]
+def overshoot_of(robot: str, link: str, key: str = "overshoot") -> float:
+    table = SETTINGS[robot][key]
     return float(table.get(link, table["*"]))
 
 
@@ -57,8 +73,9 @@ def make(robot: str, out: Path, seed: int = 0) -> SphereModel:
     model = robot_model(robot)
     urdf = urdf_file(model.urdf)
     r = read_urdf(str(urdf))
-    margin = BULLET_MARGIN + model.padding
-    self_overshoot = float(SETTINGS[robot]["self_overshoot"])
+    # the model's padding: the robot model's (the pybullet checker's) unless the settings name a smaller one
+    padding = float(SETTINGS[robot].get("padding", model.padding))
+    margin = BULLET_MARGIN + padding
     nodes, first, count, roots, self_roots, meshes, per_link = [], [], [], {}, {}, {}, {}
     offset = 0
 
@@ -76,6 +93,7 @@ def make(robot: str, out: Path, seed: int = 0) -> SphereModel:
             continue
         start = time.time()
         leaves = spherize_link(r, link, margin, overshoot_of(robot, link), SPACING, seed=seed)
+        self_overshoot = overshoot_of(robot, link, "self_overshoot")
         self_leaves = spherize_link(r, link, margin, self_overshoot, 2 * SPACING, seed=seed)
         roots[link] = add(leaves)
         self_roots[link] = add(self_leaves)
@@ -88,7 +106,7 @@ def make(robot: str, out: Path, seed: int = 0) -> SphereModel:
               f"({time.time() - start:.0f} s)", flush=True)
     result = SphereModel(np.concatenate(nodes), np.concatenate(first), np.concatenate(count), roots, self_roots,
                          {"robot": robot, "urdf": urdf.name, "margin": margin, "bullet_margin": BULLET_MARGIN,
-                          "padding": model.padding, "links": per_link, "spacing": SPACING, "seed": seed,
+                          "padding": padding, "links": per_link, "spacing": SPACING, "seed": seed,
                           "mesh_sha256": meshes, "command": f"python -m tools.spherize --robot {robot}"})
     out.parent.mkdir(parents=True, exist_ok=True)
     result.save(out)

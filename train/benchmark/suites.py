@@ -81,12 +81,17 @@ SUITES: dict[str, list[SuiteEntry]] = {
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
     ],
-    # MotionBenchMaker's Panda problems (docs/mbm.md): the whole test split, 30 problems of each of
-    # the seven scenes, reported as the field reports (Planner Arena log in OUT/ompl/). The learned
+    # MotionBenchMaker's problems (docs/mbm.md): the whole test split of each robot, 30 problems of
+    # each of the seven scenes, reported as the field reports (Planner Arena log in OUT/ompl/), with
+    # the sphere checker (the default) and, for the Panda, the same rows with pybullet's. The learned
     # rows trained on five scenes: bookshelf_thin and cage are their held-out scenes.
     "mbm": [
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
                    field=True),
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
+                   field=True, checker="pybullet"),
+        SuiteEntry("ur5-mbm", ["uniform", "goal-bias"], problems=210, ompl=("rrtconnect",), field=True),
+        SuiteEntry("fetch-mbm", ["uniform", "goal-bias"], problems=210, ompl=("rrtconnect",), field=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
@@ -163,15 +168,29 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
     total = time.perf_counter() - suite_start
     command = f"gnn-mp benchmark --suite {name} --out {out} --seed {seed} --workers {workers}"
     summary = [f"# Benchmark suite `{name}`", "", f"Command: `{command}`  ",
+               f"Machine: {machine_description()}  ", f"Date: {time.strftime('%Y-%m-%d')}  ",
                f"Total wall time: {total:.0f} s", "", "```", "\n\n".join(tables), "```", ""]
     if name in ("ood", "ood-val"):
         ratios = ood_markdown(reports, command)
         atomic_write_text(out / "ood.md", ratios)
-        summary[5:5] = [ratios, ""]
+        summary[7:7] = [ratios, ""]
         print(ratios)
     atomic_write_text(out / "summary.md", "\n".join(summary))
     print(f"suite {name!r}: {total:.0f} s; results in {out}/ (summary.md, <task>.json/.png/.txt)")
     return reports
+
+
+def machine_description() -> str:
+    """The CPU model and core count of this machine, for the header of a results page."""
+    import os
+    model = "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
+    except OSError:
+        import platform
+        model = platform.processor() or model
+    return f"{model}, {os.cpu_count()} cores"
 
 
 # ---------------------------------------------------------------------------- the OOD summary

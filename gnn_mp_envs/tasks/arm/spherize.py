@@ -37,6 +37,11 @@ from gnn_mp_envs.tasks.arm.urdf import Collision, URDFRobot, mesh_parts
 #: pybullet's collision margin of a URDF mesh's convex hull (m): its contacts report the hull's
 #: distance minus this (measured on the Panda's links against spheres and boxes).
 BULLET_MARGIN = 0.001
+#: The cover is checked on samples, so the union may dip between them: it contains ``H ⊕ (margin -
+#: COVER_TOLERANCE)`` (dips measured on the shipped models reach 0.2 mm). Every shipped model keeps
+#: ``margin - COVER_TOLERANCE`` above pybullet's margin, so it is conservative against pybullet's
+#: own check; ``tests/test_spheres.py`` checks the coverage at this tolerance.
+COVER_TOLERANCE = 0.2e-3
 #: Depths (m) below each candidate surface point at which candidate centres are tried.
 CANDIDATE_DEPTHS = (0.0, 0.001, 0.002, 0.004, 0.008, 0.016, 0.032, 0.064, 0.128)
 
@@ -84,7 +89,7 @@ def _clip_slab(triangle: np.ndarray, axis: np.ndarray, lo: float, hi: float) -> 
     return np.array(poly).reshape(-1, 3)
 
 
-def concave_hulls(triangles: np.ndarray, slabs: int = 48) -> list[Hull]:
+def concave_hulls(triangles: np.ndarray, slabs: int = 12) -> list[Hull]:
     """Convex hulls whose union contains a closed (concave) mesh: the mesh cut into ``slabs`` slabs
     along its longest principal axis, each slab's triangles clipped to it and their hull taken. The
     part of the solid in a slab lies in the hull of its boundary there (the clipped surface holds
@@ -236,8 +241,14 @@ def interior_samples(hull: Hull, spacing: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- cover
-def _candidates(hull: Hull, margin: float, overshoot: float, spacing: float, rng: np.random.Generator
-                ) -> np.ndarray:
+def union_depth(hulls: list[Hull], x: np.ndarray) -> np.ndarray:
+    """A lower bound of each point's depth in the union of ``hulls``: its largest depth in one of them
+    (a ball inside one hull is inside the union)."""
+    return np.max([h.depth(x) for h in hulls], axis=0)
+
+
+def _candidates(hull: Hull, margin: float, overshoot: float, spacing: float, rng: np.random.Generator,
+                union: list[Hull] | None = None) -> np.ndarray:
     """Candidate spheres ``(k, 4)`` inside ``hull ⊕ (margin + overshoot)``: centres at the hull's
     vertices and at surface points pushed in by each of :data:`CANDIDATE_DEPTHS` (deeper ones
     sparser: a sphere's cap on the boundary widens with its depth), radius ``depth + margin +
@@ -256,8 +267,8 @@ def _candidates(hull: Hull, margin: float, overshoot: float, spacing: float, rng
     best = hull.depth(ray.reshape(-1, 3)).reshape(len(base), len(ts)).argmax(axis=1)
     centres.append(ray[np.arange(len(base)), best])
     c = np.concatenate(centres)
-    d = hull.depth(c)
-    keep = d >= -1e-12
+    d = union_depth(union or [hull], c)
+    keep = d >= -1e-7           # the surface itself (vertices, edges) up to rounding
     c, d = c[keep], np.maximum(d[keep], 0.0)
     return np.c_[c, d + margin + overshoot]
 
@@ -306,7 +317,7 @@ def _greedy_cover(points: np.ndarray, candidates: np.ndarray) -> list[int]:
 
 
 def cover_hull(hull: Hull, margin: float, overshoot: float, spacing: float, seed: int = 0,
-               sag: float = 0.1e-3, rounds: int = 30) -> np.ndarray:
+               union: list[Hull] | None = None, sag: float = 0.1e-3, rounds: int = 30) -> np.ndarray:
     """Spheres ``(k, 4)`` whose union contains ``hull ⊕ margin`` and lies inside ``hull ⊕ (margin
     + overshoot)``.
 
@@ -316,9 +327,13 @@ def cover_hull(hull: Hull, margin: float, overshoot: float, spacing: float, seed
     ``margin``. Then a denser independent sample of ``hull ⊕ margin`` and the interior are checked,
     and spheres added where a point is out, until none is."""
     rng = np.random.default_rng(seed)
+    sag = min(sag, overshoot / 3)
     target = margin + sag
+    # a sphere on the surface (radius margin + overshoot) reaches the sampled boundary this far aside:
+    # samples and candidates must be closer than that, or small overshoots leave points uncovered
+    spacing = min(spacing, 0.7 * math.sqrt((margin + overshoot) ** 2 - target ** 2))
     points = boundary_samples(hull, target, spacing, None)[0]
-    candidates = _candidates(hull, margin, overshoot, spacing, rng)
+    candidates = _candidates(hull, margin, overshoot, spacing, rng, union)
     spheres = candidates[_greedy_cover(points, candidates)]
     interior = interior_samples(hull, max(4 * spacing, 0.004))
     for r in range(rounds):
@@ -331,7 +346,7 @@ def cover_hull(hull: Hull, margin: float, overshoot: float, spacing: float, seed
             spheres = np.concatenate([spheres, candidates[_greedy_cover(inner, candidates)]])
         if out.any():
             extra = np.unique(check_base[out], axis=0)
-            extra_c = np.c_[extra, np.maximum(hull.depth(extra), 0.0) + margin + overshoot]
+            extra_c = np.c_[extra, np.maximum(union_depth(union or [hull], extra), 0.0) + margin + overshoot]
             spheres = np.concatenate([spheres, extra_c[_greedy_cover(check[out], extra_c)]])
     raise RuntimeError(f"spheres still leave points of the hull uncovered after {rounds} repair rounds")
 
@@ -383,7 +398,8 @@ def spherize_link(robot: URDFRobot, link: str, margin: float, overshoot: float, 
                   seed: int = 0) -> np.ndarray:
     """Fine spheres ``(k, 4)`` of one link (in its frame) for ``margin`` and ``overshoot``."""
     hulls, balls = link_geometry(robot, link)
-    parts = [cover_hull(h, margin, overshoot, spacing, seed=seed + i) for i, h in enumerate(hulls)]
+    # spheres of one hull may reach into the others: the link's collision shape is their union
+    parts = [cover_hull(h, margin, overshoot, spacing, seed=seed + i, union=hulls) for i, h in enumerate(hulls)]
     if len(balls):
         parts.append(np.c_[balls[:, :3], balls[:, 3] + margin])
     return np.concatenate(parts) if parts else np.zeros((0, 4))

@@ -137,6 +137,21 @@ INVALID_PROBLEMS: dict[str, dict[tuple[str, int], str]] = {
 }
 
 
+#: Problems valid for the pybullet checker whose start or goal the robot's sphere model (which reaches
+#: a little beyond pybullet's shapes, docs/mbm.md) calls a collision, ``robot -> {(scene, file): why}``.
+#: Left out for both checkers, so that both plan the same problems; tests/test_spheres.py re-checks
+#: that exactly these (and :data:`INVALID_PROBLEMS`) are invalid under the sphere model.
+SPHERE_INVALID_PROBLEMS: dict[str, dict[tuple[str, int], str]] = {
+    "panda": {},
+    "ur5": {
+        ("bookshelf_tall", 18): "goal: within the sphere model's reach",
+        ("bookshelf_thin", 36): "goal: within the sphere model's reach",
+        ("bookshelf_thin", 76): "goal: within the sphere model's reach",
+    },
+    "fetch": {},
+}
+
+
 @dataclass(frozen=True)
 class MBMRecord:
     """One MotionBenchMaker problem as shipped: scene, file number (``sceneNNNN.yaml``), start,
@@ -258,7 +273,8 @@ def _vamp_model(robot: str, urdf: Path, joints: tuple[int, ...], ee_link: int, h
         k = doc["joints"].index(name)
         low[k], high[k] = -math.pi, math.pi
     return RobotModel(str(urdf), joints, tuple(low), tuple(high), ee_link,
-                      allowed_collisions=allowed_collisions(robot, aliases), padding=PANDA_PADDING, table=False)
+                      allowed_collisions=allowed_collisions(robot, aliases), padding=PANDA_PADDING, table=False,
+                      spheres=robot)
 
 
 @lru_cache(maxsize=1)

@@ -18,6 +18,7 @@ from gnn_mp_envs.tasks.arm.world import RobotModel
 from gnn_mp_envs.tasks.mbm.data import (
     INVALID_PROBLEMS,
     SCENES,
+    SPHERE_INVALID_PROBLEMS,
     MBMRecord,
     fetch_model,
     panda_model,
@@ -127,8 +128,10 @@ class MBMTask(Task):
 
     def excluded(self) -> dict[tuple[str, int], str]:
         """Problems left out, ``(scene, file) -> why``: those whose start or goal is invalid under the
-        shipped robot model (:data:`EXCLUDED`, ``data.INVALID_PROBLEMS``)."""
-        return {**(EXCLUDED if self.robot == "panda" else {}), **INVALID_PROBLEMS.get(self.robot, {})}
+        shipped robot model for either checker (:data:`EXCLUDED`, ``data.INVALID_PROBLEMS``,
+        ``data.SPHERE_INVALID_PROBLEMS``), so that both checkers plan the same problems."""
+        return {**(EXCLUDED if self.robot == "panda" else {}), **INVALID_PROBLEMS.get(self.robot, {}),
+                **SPHERE_INVALID_PROBLEMS.get(self.robot, {})}
 
     # ------------------------------------------------------------------ problems
     def split_records(self, split: str) -> list[MBMRecord]:
