@@ -262,6 +262,18 @@ def make_task(name: str, **kwargs: Any):
     return task_spec(name).task_class()(**kwargs)
 
 
+def _mbm_spec(name: str, task_class: str, env_id: str, path_unit: str = "rad, joint-space L2") -> TaskSpec:
+    """A MotionBenchMaker robot's task: BiRRT; the benchmark plans the test split of all seven scenes,
+    training uses the five training scenes (``"train"``), ``"test"`` holds the two held out; both
+    checkers (the sphere model by default); step_scale: tasks/mbm STEP_SIZE (rad)."""
+    return TaskSpec(name, f"gnn_mp_envs.tasks.mbm:{task_class}", envs={env_id: {"planner": "birrt"}},
+                    max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
+                                            "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
+                    benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit=path_unit,
+                    checkers=("spheres", "pybullet"), step_scale=1.0,
+                    rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0})
+
+
 #: The eight rotations and reflections of the square, as matrices of ``x - centre``.
 SQUARE_SYMMETRIES = tuple(
     tuple(tuple(float(v) for v in row) for row in m)
@@ -306,31 +318,10 @@ BUILTIN_TASKS = (
              benchmark_scene="test", validation_scenes=("pillars",), ood_scenes=("tall-clutter", "shelves", "bins"),
              ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4,
              rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
-    # MotionBenchMaker's Panda problems (docs/mbm.md): the benchmark plans the test split of all
-    # seven scenes; training uses the five training scenes ("train"), "test" holds the two held out.
-    # step_scale: tasks/mbm STEP_SIZE (rad).
-    TaskSpec("panda-mbm", "gnn_mp_envs.tasks.mbm:PandaMBMTask",
-             envs={"GNNMP/PandaMBM-v0": {"planner": "birrt"}},
-             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
-                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
-             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
-             checkers=("spheres", "pybullet"),
-             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
-    # MotionBenchMaker's UR5 and Fetch problems (the same seven scenes and splits; docs/mbm.md).
-    TaskSpec("ur5-mbm", "gnn_mp_envs.tasks.mbm:UR5MBMTask",
-             envs={"GNNMP/UR5MBM-v0": {"planner": "birrt"}},
-             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
-                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
-             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2",
-             checkers=("spheres", "pybullet"),
-             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
-    TaskSpec("fetch-mbm", "gnn_mp_envs.tasks.mbm:FetchMBMTask",
-             envs={"GNNMP/FetchMBM-v0": {"planner": "birrt"}},
-             max_nodes=5000, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
-                                     "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
-             benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"),
-             path_unit="joint-space L2 (rad; the torso's lift in m)", checkers=("pybullet",),
-             step_scale=1.0, rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
+    # MotionBenchMaker's problems of the Panda, the UR5 and the Fetch (docs/mbm.md).
+    _mbm_spec("panda-mbm", "PandaMBMTask", "GNNMP/PandaMBM-v0"),
+    _mbm_spec("ur5-mbm", "UR5MBMTask", "GNNMP/UR5MBM-v0"),
+    _mbm_spec("fetch-mbm", "FetchMBMTask", "GNNMP/FetchMBM-v0", path_unit="joint-space L2 (rad; the torso's lift in m)"),
 )
 
 

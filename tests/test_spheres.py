@@ -5,6 +5,8 @@ check's order and count)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -222,7 +224,8 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
         low, high = world.low.copy(), world.high.copy()
         if rng.random() < 0.3:                    # a box that b may leave (a stays inside)
             low, high = np.minimum(a, low + 0.5 * (a - low)), np.maximum(a, high - 0.5 * (high - a))
-        n = max(1, int(np.ceil(np.sqrt(np.sum((b - a) ** 2)) / resolution)))
+        # n as the planner computes it (a sequential sum: numpy's pairwise sum can round across an integer)
+        n = max(1, math.ceil(math.sqrt(sum(v * v for v in (b - a).tolist())) / resolution))
         for bisection in (True, False):
             order = np.array(bisection_order(n) if bisection else range(1, n + 1))
             states = np.array([a + (k / n) * (b - a) for k in order])

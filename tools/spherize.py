@@ -115,6 +115,63 @@ def make(robot: str, out: Path, seed: int = 0) -> SphereModel:
     return result
 
 
+def polish(robot: str, path: Path, spacing: float = 0.001, seeds: int = 2,
+           edge_spacings: tuple[float, ...] = (0.0015, 0.0012, 0.001, 0.0008, 0.0006, 0.0005)) -> None:
+    """Close the cover's remaining dips: every leaf set is checked on fresh boundary samples grown
+    by the margin less half the cover's tolerance (the faces at random, ``seeds`` samples ``spacing``
+    apart; the strips over edges and the caps over vertices, where narrow dips hide, at each of
+    ``edge_spacings``), a sphere added over each point still out (radius: the link's union depth there
+    plus the margin and the overshoot, as every sphere), and the trees rebuilt."""
+    from gnn_mp_envs.tasks.arm.spherize import (
+        COVER_TOLERANCE,
+        boundary_samples,
+        inside_union,
+        link_geometry,
+        union_depth,
+    )
+    model = robot_model(robot)
+    r = read_urdf(str(urdf_file(model.urdf)))
+    spheres = load_sphere_model(path)
+    margin = spheres.margin
+    nodes, first, count, roots, self_roots = [], [], [], {}, {}
+    offset = 0
+
+    def add(leaves: np.ndarray) -> int:
+        nonlocal offset
+        n, f, c = build_tree(leaves, seed=int(spheres.meta.get("seed", 0)))
+        nodes.append(n)
+        first.append(np.where(c > 0, f + offset, 0))
+        count.append(c)
+        offset += len(n)
+        return offset - len(n)
+
+    for link in sorted(spheres.roots, key=spheres.roots.get):
+        hulls, _ = link_geometry(r, link)
+        for self_collision, key in ((False, "overshoot"), (True, "self_overshoot")):
+            leaves = spheres.leaves(link, self_collision)
+            overshoot = spheres.meta["links"][link][key]
+            added = 0
+            for hull in hulls:
+                samples = [boundary_samples(hull, margin - COVER_TOLERANCE / 2, spacing, np.random.default_rng([7919, k]))
+                           for k in range(seeds)]
+                samples += [boundary_samples(hull, margin - COVER_TOLERANCE / 2, s, None, faces=False)
+                            for s in edge_spacings]
+                for pts, base, _ in samples:
+                    out = ~inside_union(pts, leaves)
+                    if out.any():
+                        extra = np.unique(base[out], axis=0)
+                        extra = np.c_[extra, np.maximum(union_depth(hulls, extra), 0.0) + margin + overshoot]
+                        leaves = np.concatenate([leaves, extra])
+                        added += len(extra)
+            if added:
+                print(f"{link} ({'self' if self_collision else 'obstacles'}): {added} spheres added", flush=True)
+                spheres.meta["links"][link]["self_leaves" if self_collision else "leaves"] = int(len(leaves))
+            (self_roots if self_collision else roots)[link] = add(leaves)
+    SphereModel(np.concatenate(nodes), np.concatenate(first), np.concatenate(count), roots, self_roots,
+                spheres.meta).save(path)
+    load_sphere_model.cache_clear()
+
+
 def check(robot: str, path: Path) -> int:
     """Coverage (hull vertices and a fresh boundary sample grown by the margin) and overshoot per link."""
     model = robot_model(robot)
@@ -138,12 +195,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot", choices=sorted(SETTINGS), required=True)
     ap.add_argument("--out", type=Path, default=None, help="output file (default: the package's)")
     ap.add_argument("--check", action="store_true", help="check the file's coverage instead of writing it")
+    ap.add_argument("--polish", action="store_true", help="close remaining dips of the existing file (also the last "
+                    "step of writing one)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     out = args.out or sphere_model_path(args.robot)
     if args.check:
         return check(args.robot, out)
-    make(args.robot, out, args.seed)
+    if not args.polish:
+        make(args.robot, out, args.seed)
+    polish(args.robot, out)
     return 0
 
 

@@ -170,13 +170,16 @@ def _triangle_lattice(t: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def boundary_samples(hull: Hull, margin: float, spacing: float, rng: np.random.Generator | None,
-                     faces_only: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     faces_only: bool = False, faces: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points on the boundary of ``hull ⊕ margin`` about ``spacing`` apart, the point of the hull
     each stands over and the outward unit normal there (``point = base + margin * normal``): on the
     faces at random (``rng``) or on a regular grid (``rng=None``); with ``faces_only``, only the
-    flat parts (over the hull's faces)."""
+    flat parts (over the hull's faces); without ``faces``, only the rounded parts (over the hull's
+    edges and vertices)."""
     tri = hull.triangles
-    if rng is None:
+    if not faces:
+        base, normal = [np.zeros((0, 3))], [np.zeros((0, 3))]
+    elif rng is None:
         # a triangular lattice on each triangle: no point of it farther than about spacing / sqrt(3)
         # from a sample (random points leave holes of about twice their spacing)
         base_f, which_f = [], []
@@ -195,7 +198,8 @@ def boundary_samples(hull: Hull, margin: float, spacing: float, rng: np.random.G
         u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
         t = tri[which]
         base = [t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])]
-    normal = [hull.triangle_normals[which]]
+    if faces:
+        normal = [hull.triangle_normals[which]]
     if faces_only:
         return base[0] + margin * normal[0], base[0], normal[0]
     # edges between non-coplanar triangles: the cylinder strip between the two face normals
@@ -324,8 +328,8 @@ def cover_hull(hull: Hull, margin: float, overshoot: float, spacing: float, seed
     The greedy cover is of boundary points of ``hull ⊕ (margin + sag)`` about ``spacing`` apart,
     so that the union's dips between sample points (well under ``sag`` for spheres of a few
     millimetres and more) stay outside ``hull ⊕ margin``; candidates reach ``overshoot`` beyond
-    ``margin``. Then a denser independent sample of ``hull ⊕ margin`` and the interior are checked,
-    and spheres added where a point is out, until none is."""
+    ``margin``. Then a denser independent sample of ``hull ⊕ (margin - COVER_TOLERANCE / 2)`` and
+    the interior are checked, and spheres added where a point is out, until none is."""
     rng = np.random.default_rng(seed)
     sag = min(sag, overshoot / 3)
     target = margin + sag
@@ -337,7 +341,12 @@ def cover_hull(hull: Hull, margin: float, overshoot: float, spacing: float, seed
     spheres = candidates[_greedy_cover(points, candidates)]
     interior = interior_samples(hull, max(4 * spacing, 0.004))
     for r in range(rounds):
-        check, check_base, _ = boundary_samples(hull, margin, spacing / 2, np.random.default_rng([seed, r + 1]))
+        # checked half way into the stated tolerance (shallower dips are within it), at most ~600k points
+        tri = hull.triangles
+        area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+        check, check_base, _ = boundary_samples(hull, margin - COVER_TOLERANCE / 2,
+                                                max(spacing / 2, math.sqrt(area / 600_000)),
+                                                np.random.default_rng([seed, r + 1]))
         out = ~inside_union(check, spheres)
         inner = interior[~inside_union(interior, spheres)]
         if not out.any() and not len(inner):

@@ -148,7 +148,11 @@ SPHERE_INVALID_PROBLEMS: dict[str, dict[tuple[str, int], str]] = {
         ("bookshelf_thin", 36): "goal: within the sphere model's reach",
         ("bookshelf_thin", 76): "goal: within the sphere model's reach",
     },
-    "fetch": {},
+    "fetch": {
+        ("bookshelf_small", 8): "goal: within the sphere model's reach",
+        ("bookshelf_small", 95): "goal: within the sphere model's reach",
+        ("table_under_pick", 80): "start: within the sphere model's reach",
+    },
 }
 
 
