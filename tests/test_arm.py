@@ -185,18 +185,34 @@ def test_stale_problem_keeps_its_own_scene(task):
 
 
 def test_check_motion_counts_like_the_base_class(task):
+    """Sequentially (``bisection`` off) the fast edge check answers and counts as the base class;
+    in the task's bisection order it answers the same and counts the states visited in that
+    order up to the first invalid one (brute force)."""
+    from gnn_mp_envs.tasks.arm.problem import bisection_order
     problem = task.problem("test", 2)
+    assert problem.bisection
     rng = np.random.default_rng(3)
+    blocked = 0
     for _ in range(20):
         a = problem.start
         b = np.clip(a + rng.normal(0, 0.6, 6), JOINT_LOW, JOINT_HIGH)
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / problem.resolution)))
+        valid = problem.is_state_valid(problem.interpolate(a, b, np.arange(1, n + 1) / n))
+        visited = next((i + 1 for i, k in enumerate(bisection_order(n)) if not valid[k - 1]), n)
+        problem.reset_counters()
+        assert problem.check_motion(a, b) == bool(valid.all())
+        assert problem.collision_checks == visited
+        problem.bisection = False
         problem.reset_counters()
         fast = problem.check_motion(a, b)
         fast_count = problem.collision_checks
         problem.reset_counters()
         slow = Problem.check_motion(problem, a, b)
-        assert fast == slow
+        del problem.bisection
+        assert fast == slow == bool(valid.all())
         assert fast_count == problem.collision_checks
+        blocked += not valid.all()
+    assert 3 <= blocked <= 17
 
 
 def test_check_state_counts_one(task):
@@ -450,6 +466,55 @@ def test_a_collision_answer_does_not_depend_on_the_queries_before_it():
                     break
     task.close()
     assert boundary == 40 and edges > 0
+
+
+def test_grazing_edges_get_one_answer_in_both_directions_and_state_by_state():
+    """The history probe's procedure (../shared/probes/arm_checker_history.py --grazing): edges from a
+    valid configuration to the last valid state before a contact (bisected to 1e-6 rad) get the
+    same verdict checked forwards and backwards, and every state of the sweep the same answer as a
+    fresh check of it after an unrelated configuration (issue #39, item 2: pybullet's contact
+    cache must not leak between queries)."""
+    from gnn_mp_envs.registration import make_task
+    task = make_task("arm", scene="test")
+    edges = states = 0
+    for i in range(5):                          # the probe's 5 problems x 200 grazing edges
+        p = task.problem("test", i)
+        w = p.world
+        w.load(p.scene)
+        rng = np.random.default_rng([9299, i])
+        found = 0
+        while found < 200:
+            a = rng.uniform(p.low, p.high)
+            if w.collides(a.tolist()):
+                continue
+            d = rng.normal(size=6)
+            b = np.clip(a + p.step_size * d / np.linalg.norm(d), p.low, p.high)
+            if not w.collides(b.tolist()):
+                continue
+            lo, hi = 0.0, 1.0
+            while (hi - lo) * p.step_size > 1e-6:
+                mid = 0.5 * (lo + hi)
+                w.collides([0.0] * 6)
+                if w.collides((a + mid * (b - a)).tolist()):
+                    hi = mid
+                else:
+                    lo = mid
+            b = a + lo * (b - a)
+            w.collides([0.0] * 6)
+            if w.collides(b.tolist()) or np.linalg.norm(b - a) < 2 * p.resolution:
+                continue
+            found += 1
+            assert p.check_motion(a, b) == p.check_motion(b, a), (i, a.tolist(), b.tolist())
+            n = max(1, int(np.ceil(np.linalg.norm(b - a) / p.resolution)))
+            w.collides([0.0] * 6)
+            sweep = [w.collides((a + (k / n) * (b - a)).tolist()) for k in range(1, n + 1)]
+            for k, answer in enumerate(sweep, 1):
+                w.collides([0.0] * 6)
+                assert w.collides((a + (k / n) * (b - a)).tolist()) == answer
+            states += n
+        edges += found
+    task.close()
+    assert edges == 1000 and states > 5000
 
 
 @pytest.fixture

@@ -105,6 +105,28 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["train", "sampler", "--seed", str(2**64)], ["--seed", "2**32"]),
     (["critical", "train", "--seed", str(2**64)], ["--seed", "2**32"]),
     (["no-such-command"], ["no-such-command"]),
+    # every count and size flag is bounded by one shared validator (train/args.py)
+    (["benchmark", "--workers", "100000"], ["--workers", "at most 256"]),
+    (["benchmark", "--workers", str(10**30)], ["--workers", "at most 256"]),
+    (["train", "rl", "--pi-arch", "-1"], ["--pi-arch"]),
+    (["train", "rl", "--pi-arch", "0"], ["--pi-arch"]),
+    (["train", "rl", "--prior-temperature", "1e-300"], ["--prior-temperature", "0.001"]),
+    (["train", "rl", "--candidates", "100000"], ["--candidates", "at most 4,096"]),
+    (["train", "rl", "--candidate-hidden", str(10**30)], ["--candidate-hidden"]),
+    (["train", "rl", "--n-envs", "100000"], ["--n-envs"]),
+    (["train", "rl", "--n-steps", str(10**30)], ["--n-steps"]),
+    (["train", "rl", "--eval-problems", str(10**30)], ["--eval-problems"]),
+    (["train", "rl", "--threads", str(10**30)], ["--threads"]),
+    (["train", "sampler", "--threads", str(10**30)], ["--threads"]),
+    (["train", "sampler", "--problems", str(10**30)], ["--problems"]),
+    (["train", "sampler", "--dagger-rounds", str(10**30)], ["--dagger-rounds"]),
+    (["critical", "evaluate", "--threads", str(10**30)], ["--threads"]),
+    (["critical", "evaluate", "--pairs-per-map", str(10**30)], ["--pairs-per-map"]),
+    (["critical", "evaluate", "--num-maps", str(10**30)], ["--num-maps"]),
+    # a figure suffix matplotlib cannot write is refused before any work
+    (["benchmark", "--problems", "1", "--plot", "boxes"], ["--plot", "suffix"]),
+    (["benchmark", "--problems", "1", "--plot", "boxes.txt"], ["--plot", "suffix"]),
+    (["critical", "evaluate", "--plot", "fig.txt"], ["--plot", "suffix"]),
 ])
 def test_bad_input_in_process(args: list[str], fragments: list[str], capsys):
     """The same one-line contract, checked in-process (faster than a subprocess per case)."""
@@ -190,3 +212,62 @@ def test_an_import_module_that_raises_is_one_line(tmp_path, monkeypatch, capsys)
     code = main(["benchmark", "--import", "raising_plugin", "--problems", "1"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "raising_plugin" in err[0] and "boom at import" in err[0], err
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+def test_an_output_that_is_not_a_regular_file_is_refused_and_left_alone(kind, tmp_path, capsys):
+    """A FIFO or a device (``/dev/null``) given as an output is refused in one line and never
+    replaced by a regular file (as root, replacing /dev/null would break the system)."""
+    import os
+    import stat
+    from train.cli import main
+    if kind == "fifo":
+        target = tmp_path / "pipe.png"         # a figure suffix: only the file's kind is wrong
+        os.mkfifo(target)
+    else:
+        target = Path("/dev/null")
+    for flag in ("--json", "--plot"):
+        try:
+            code = main(["benchmark", "--problems", "1", flag, str(target)])
+        except SystemExit as exit_:
+            code = exit_.code
+        assert code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        mode = os.stat(target).st_mode
+        assert (stat.S_ISFIFO(mode) if kind == "fifo" else stat.S_ISCHR(mode))
+
+
+def test_atomic_writes_refuse_special_files_and_write_through_links(tmp_path):
+    """Every output of every entry point goes through ``atomic_path``: a FIFO is refused with an
+    OSError naming it (the CLIs print it in one line), a symbolic link keeps pointing at the file
+    it names, which gets the new content."""
+    import os
+    from gnn_mp_envs.utils.io import atomic_write_text
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    with pytest.raises(OSError, match="not a regular file"):
+        atomic_write_text(fifo, "x")
+    real = tmp_path / "real.json"
+    real.write_text("old")
+    link = tmp_path / "link.json"
+    link.symlink_to(real)
+    atomic_write_text(link, "new")
+    assert link.is_symlink() and real.read_text() == "new"
+
+
+def test_the_benchmark_starts_no_more_workers_than_jobs(monkeypatch):
+    """``--workers 8`` over 2 jobs starts a pool of 2 processes (one job: none)."""
+    import train.benchmark.runs as runs
+    from train.benchmark.args import BenchmarkArgs
+    sizes = []
+
+    class Recording(runs.WorkerPool):
+        def __init__(self, workers, modules=()):
+            sizes.append(workers)
+            super().__init__(workers, modules)
+
+    monkeypatch.setattr(runs, "WorkerPool", Recording)
+    runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=2, workers=8, progress=False))
+    runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=1, workers=8, progress=False))
+    assert sizes == [2]

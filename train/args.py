@@ -55,34 +55,67 @@ def arg(default: Any, help: str, *, flag: str | tuple[str, ...] | None = None,
 
 
 # ---------------------------------------------------------------------------- value parsers
-def bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: str) -> Callable[[str], float]:
-    """An argparse type: ``cast(text)`` that must be ``> minimum`` (strict) or ``>= minimum``."""
+def bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: str,
+            maximum: float | None = None) -> Callable[[str], float]:
+    """An argparse type: ``cast(text)`` that must be ``> minimum`` (strict) or ``>= minimum``, and at
+    most ``maximum`` (a count or size beyond it would exhaust the machine rather than run)."""
     def parse(text: str):
         try:
             value = cast(text)
-        except ValueError:
+        except (ValueError, OverflowError):
             raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
         if not (value > minimum if strict else value >= minimum) or (
                 isinstance(value, float) and not math.isfinite(value)):  # NaN and inf too
             raise argparse.ArgumentTypeError(f"must be a finite number {'>' if strict else '>='} {minimum}, "
                                              f"got {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text}")
         return value
     parse.__name__ = noun
     return parse
 
 
-positive_int = bounded(int, 1, False, "a positive integer")
-non_negative_int = bounded(int, 0, False, "a non-negative integer")
+#: The largest count any flag takes (problems, steps, rounds, maps): beyond it a run would not end.
+MAX_COUNT = 10 ** 9
+#: The largest network width or candidate count: beyond it one forward pass would not fit in memory.
+MAX_SIZE = 4096
+#: The largest number of processes, Ray actors, environments or threads one command starts.
+MAX_WORKERS = 256
+
+positive_int = bounded(int, 1, False, "a positive integer", MAX_COUNT)
+non_negative_int = bounded(int, 0, False, "a non-negative integer", MAX_COUNT)
 positive_float = bounded(float, 0, True, "a positive number")
 non_negative_float = bounded(float, 0, False, "a non-negative number")
+size_int = bounded(int, 1, False, "a positive integer", MAX_SIZE)
+worker_count = bounded(int, 1, False, "a positive integer", MAX_WORKERS)
+#: Temperatures divide logits: below this the softmax underflows to NaN.
+temperature_float = bounded(float, 1e-3, False, "a number >= 0.001")
+_any_non_negative_int = bounded(int, 0, False, "a non-negative integer")
 
 
 def seed_int(text: str) -> int:
     """An argparse type: a seed in ``[0, 2**32)`` (what numpy's and torch's generators both take)."""
-    value = non_negative_int(text)
+    value = _any_non_negative_int(text)
     if value >= 2 ** 32:
         raise argparse.ArgumentTypeError(f"a seed must be below 2**32, got {text}")
     return value
+
+
+#: Figure formats matplotlib's Agg backend writes (``FigureCanvasBase.get_supported_filetypes``),
+#: so a bad suffix is refused before any work instead of failing at the end.
+FIGURE_SUFFIXES = ("eps", "jpeg", "jpg", "pdf", "pgf", "png", "ps", "raw", "rgba", "svg", "svgz", "tif",
+                   "tiff", "webp")
+
+
+def figure_path(text: str) -> Path:
+    """An argparse type: a figure file whose suffix names a format matplotlib writes (``.png``, ``.svg``, ...)."""
+    if not text:
+        raise argparse.ArgumentTypeError("expected a file name, got ''")
+    path = Path(text)
+    if path.suffix.lower().lstrip(".") not in FIGURE_SUFFIXES:
+        raise argparse.ArgumentTypeError(f"{text}: the suffix must name a figure format "
+                                         f"({', '.join('.' + s for s in ('png', 'svg', 'pdf', 'jpg'))}, ...)")
+    return path
 
 
 def name_list(text: str) -> list[str]:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from gnn_mp_envs.utils.io import atomic_path, atomic_write_bytes, atomic_write_text
-from train.args import arg, positive_int
+from train.args import arg, positive_int, worker_count
 
 #: Where run directories go by default: runs/<family>/<name>-seed<S>-<YYYYmmdd-HHMMSS>/.
 RUNS_ROOT = Path("runs")
@@ -55,7 +55,7 @@ class RunFlags:
     overwrite: bool = arg(False, "reuse an --out that already holds a run")
     ship: bool = arg(False, "also copy the result into the package's shipped weights "
                      "(agents/checkpoints/<name>_<task>.pt + .json)")
-    threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=positive_int)
+    threads: int = arg(1, "torch threads (the machine is shared: keep 1)", parse=worker_count)
     modules: list[str] = arg([], "import MODULE first: it registers a task (repeatable)", flag="--import",
                              metavar="MODULE", append=True)
     progress: bool = arg(True, "hide progress bars")

@@ -9,6 +9,10 @@ last :func:`os.replace` wins with a complete file.
         fig.savefig(tmp)
     atomic_write_text("results/run.json", json.dumps(report))
 
+A target that exists and is not a regular file (a device such as ``/dev/null``, a FIFO, a
+directory) is refused with an ``OSError`` before anything is written; a symbolic link is
+written through (the file it points to is replaced, the link stays).
+
 Errors are ``OSError`` subclasses whose ``filename`` is the *target* path, so a caller's
 one-line message names the file the user asked for, not the temporary one.
 """
@@ -16,6 +20,7 @@ one-line message names the file the user asked for, not the temporary one.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -41,6 +46,11 @@ def atomic_path(path: str | os.PathLike, *, mkdir: bool = True) -> Iterator[Path
     is removed and the target is left untouched. ``mkdir`` creates missing parent directories.
     """
     path = Path(path)
+    if path.is_symlink():            # write through a link: the file it names is replaced, the link stays
+        path = path.resolve()
+    if path.exists() and not path.is_file():
+        # a device, FIFO or socket (or a directory) must never be renamed over
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
     try:
         if mkdir:
             path.parent.mkdir(parents=True, exist_ok=True)

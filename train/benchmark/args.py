@@ -9,7 +9,8 @@ from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
 from train.args import import_modules as import_plugins
-from train.args import arg, name_list, non_negative_int, positive_float, positive_int, seed_int
+from train.args import (arg, figure_path, name_list, non_negative_int, positive_float, positive_int, seed_int,
+                        worker_count)
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
@@ -64,12 +65,14 @@ class BenchmarkArgs:
     scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
     checker: str | None = arg(None, "collision checker of tasks with several (the MotionBenchMaker robots: "
                               "spheres or pybullet; default: the task's first); OMPL rows use the same")
-    workers: int = arg(1, "worker processes over problems (with --ray: Ray actors)", parse=positive_int)
+    workers: int = arg(1, "worker processes over problems (with --ray: Ray actors); at most one per job",
+                       parse=worker_count)
     ray: str | None = arg(None, "run the jobs as Ray actors: no ADDRESS starts a local Ray instance with "
                           "--workers CPUs; 'auto' or ray://HOST:10001 joins a running cluster (pip install "
                           "'gnn-mp-envs[ray]')", metavar="ADDRESS", const="local")
     json: Path | None = arg(None, "write the results as JSON (schema: docs/results.md)")
-    plot: Path | None = arg(None, "write box plots (PNG)")
+    plot: Path | None = arg(None, "write box plots (the suffix names the format: .png, .svg, .pdf)",
+                            parse=figure_path)
     render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
@@ -221,6 +224,8 @@ def check_output_path(flag: str, path: Path, is_dir: bool) -> None:
     """Fail before planning when an output cannot be written (wrong kind, parent is a file, no access)."""
     if path.exists() and path.is_dir() != is_dir:
         raise BenchmarkError(f"{flag} {path}: expected a {'directory' if is_dir else 'file'}")
+    if path.exists() and not is_dir and not path.is_file():
+        raise BenchmarkError(f"{flag} {path}: not a regular file (a device, FIFO or socket is never replaced)")
     parent = path if (is_dir and path.exists()) else path.parent
     while not parent.exists():
         parent = parent.parent

@@ -228,11 +228,11 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
             _run_on_ray(args, jobs, finished)
         elif pool is not None:
             pool.run(jobs, finished)
-        elif args.workers == 1:
+        elif min(args.workers, len(jobs)) <= 1:
             for job in jobs:
                 finished(_run_episode_job(job))
-        else:
-            with WorkerPool(args.workers, args.modules) as own:
+        else:                                    # never more processes than jobs
+            with WorkerPool(min(args.workers, len(jobs)), args.modules) as own:
                 own.run(jobs, finished)
     except KeyboardInterrupt:
         reason = "interrupted"
@@ -299,7 +299,7 @@ def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple]
     fn = fn or _run_episode_job
     try:
         actor = ray.remote(num_cpus=1)(_JobActor)
-        pool = ActorPool([actor.remote(modules) for _ in range(workers)])
+        pool = ActorPool([actor.remote(modules) for _ in range(max(1, min(workers, len(jobs))))])
         for record in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
             finished(record)
     except ray.exceptions.RayTaskError as exc:

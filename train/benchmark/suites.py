@@ -130,7 +130,9 @@ def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: b
     if with_ompl is None:
         with_ompl = ompl_available()
     out.mkdir(parents=True, exist_ok=True)
-    if workers > 1:   # one pool for every task of the suite: each worker pays its imports once
+    # one pool for every task of the suite (each worker pays its imports once), no larger than its largest task
+    workers = min(workers, max(e.problems * len(e.samplers) for e in SUITES[name]))
+    if workers > 1:
         with WorkerPool(workers) as pool:
             return _run_entries(name, out, seed, workers, progress, with_ompl, render, pool)
     return _run_entries(name, out, seed, workers, progress, with_ompl, render, None)

@@ -18,7 +18,8 @@ from typing import Any
 from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
 from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
-from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int
+from train.args import (arg, figure_path, non_negative_float, non_negative_int, positive_float, positive_int, seed_int,
+                        worker_count)
 
 #: Where cached datasets go (git-ignored).
 DEFAULT_DATA_DIR = Path("data/critical")
@@ -122,7 +123,7 @@ class DataArgs:
     num_maps: int = arg(DatasetConfig.num_maps, "maps of the labelled set", parse=positive_int)
     pairs_per_map: int = arg(DatasetConfig.pairs_per_map, "start/goal pairs per map", parse=positive_int)
     eval_problems: int = arg(DatasetConfig.eval_problems, "problems of each evaluation set", parse=positive_int)
-    threads: int = arg(2, "torch threads", parse=positive_int)
+    threads: int = arg(2, "torch threads", parse=worker_count)
 
     def dataset(self) -> DatasetConfig:
         return DatasetConfig(seed=self.data_seed, num_maps=self.num_maps, pairs_per_map=self.pairs_per_map,
@@ -247,7 +248,8 @@ class EvaluateArgs(DataArgs):
     split: str = arg("eval", "eval: the in-distribution and blob evaluation sets; val: the labelled set's "
                      "validation problems (for tuning)", choices=["eval", "val"])
     json: Path | None = arg(None, _shown("write the report as JSON to this file", "none"))
-    plot: Path | None = arg(None, _shown("write the prediction figure (PNG) to this file", "none"))
+    plot: Path | None = arg(None, _shown("write the prediction figure to this file (the suffix names the format: "
+                                         ".png, .svg, .pdf)", "none"), parse=figure_path)
     problems: int | None = arg(None, _shown("first N of the 300 problems per set", "all"), parse=positive_int)
     samples: int = arg(EVAL_SAMPLES, "CVAE samples per problem for the point prediction (their mean) and "
                        "the best-of accuracy", parse=positive_int)

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from gnn_mp_envs.envs.wrappers import ACTIONS, RL_MAX_EPISODE_STEPS, make_rl_env
-from train.args import arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int
+from train.args import (arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int, size_int,
+                        temperature_float, worker_count)
 from train.run import RunFlags
 
 #: The defaults of ``make_rl_env``: the flags of the MDP take them, so a run trains the MDP of the
@@ -42,10 +43,8 @@ def _widths(text: str) -> list[int]:
     import argparse
     if text.strip().lower() in ("", "none"):
         return []
-    try:
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers (or none), got {text!r}") from None
+    from train.args import size_int
+    return [size_int(v.strip()) for v in text.split(",") if v.strip()]
 
 
 def _mixes(text: str) -> list[float]:
@@ -80,7 +79,7 @@ class RLArgs(RunFlags):
                        "state (training_state.pt), up to --total-steps")
     device: str = arg("cpu", "torch device of the networks (cpu, cuda, auto: cuda when available)")
     # --- environment (make_rl_env)
-    n_envs: int = arg(4, "environments stepped together (vectorised)", parse=positive_int)
+    n_envs: int = arg(4, "environments stepped together (vectorised)", parse=worker_count)
     parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
     view_nodes: int = arg(_ENV_DEFAULTS["view_nodes"], "rows of the tree view the policy sees (roots + most recent "
                           "nodes)", parse=positive_int)
@@ -89,7 +88,7 @@ class RLArgs(RunFlags):
                       "(Discrete; features relative to the tree) or output a state (box: [-1, 1]^d, --action-frame)",
                       choices=ACTIONS)
     candidates: int = arg(_ENV_DEFAULTS["candidates"], "pick: candidates per step (target, near-target, newest, "
-                          "greedy, the rest uniform)", parse=positive_int)
+                          "greedy, the rest uniform)", parse=size_int)
     local_scale: float = arg(_ENV_DEFAULTS["local_scale"], "pick: std of the newest/greedy candidates, in extensions",
                              parse=positive_float)
     target_scale: float = arg(_ENV_DEFAULTS["target_scale"], "pick: std of the near-target candidate, as a "
@@ -110,9 +109,9 @@ class RLArgs(RunFlags):
     reward_scale: float = arg(_ENV_DEFAULTS["reward_scale"], "multiply every reward by this (returns of order 1)",
                               parse=positive_float)
     # --- networks (the shared TreeEncoder + the library's head)
-    hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=positive_int)
+    hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=size_int)
     num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
-    out_channels: int = arg(64, "TreeEncoder graph embedding width", parse=positive_int)
+    out_channels: int = arg(64, "TreeEncoder graph embedding width", parse=size_int)
     conv: str = arg("sage", "TreeEncoder convolution", choices=("sage", "graph", "gcn", "gatv2"))
     knn: int = arg(0, "TreeEncoder k-NN edges per node (0: tree edges only)", parse=non_negative_int)
     net_arch: list[int] = arg([64, 64], "hidden widths of the value head (box: and of the policy head)")
@@ -121,8 +120,8 @@ class RLArgs(RunFlags):
     pick_head: str = arg("linear", "pick: the policy's scores: a linear layer with a score per candidate slot, or one "
                          "score shared by the candidates (a bias per slot; with --prior, the prior's scale)",
                          choices=("linear", "shared"))
-    candidate_hidden: int = arg(64, "pick: hidden width of the per-candidate MLP", parse=positive_int)
-    candidate_embed: int = arg(32, "pick: per-candidate embedding width", parse=positive_int)
+    candidate_hidden: int = arg(64, "pick: hidden width of the per-candidate MLP", parse=size_int)
+    candidate_embed: int = arg(32, "pick: per-candidate embedding width", parse=size_int)
     tree_context: bool = arg(False, "pick: also encode the tree view with a TreeEncoder (sized by the flags above) and "
                              "give its embedding to every candidate")
     prior: Path | None = arg(None, "pick: a candidate prior, the supervised GNN sample scorer (a tree/gnn-scorer "
@@ -130,7 +129,7 @@ class RLArgs(RunFlags):
                              "logit of each candidate over the whole tree is a feature, and the policy starts as "
                              "exactly that prior (a linear head, --pi-arch none); PPO learns what to add",
                              metavar="PATH|NAME")
-    prior_temperature: float = arg(1.0, "pick: the prior's logits are divided by this", parse=positive_float)
+    prior_temperature: float = arg(1.0, "pick: the prior's logits are divided by this", parse=temperature_float)
     encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
                        "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from train.args import arg, non_negative_int, positive_float, positive_int, seed_int
+from train.args import arg, non_negative_int, positive_float, positive_int, seed_int, worker_count
 from train.run import RunFlags
 from train.tree.data import VIEWS
 
@@ -46,7 +46,7 @@ class TrainArgs(RunFlags):
     seed: int = arg(0, "seed of data, initialisation, batching and evaluation", parse=seed_int)
     data_dir: Path = arg(Path("data/tree_samplers"), "dataset cache directory")
     workers: int = arg(1, "processes that plan the training problems (the dataset is the same for any count)",
-                       parse=positive_int)
+                       parse=worker_count)
     ray: str | None = arg(None, "plan the training problems on --workers Ray actors, as gnn-mp benchmark --ray: no "
                           "ADDRESS starts a local Ray instance; 'auto' or ray://HOST:10001 joins a running cluster "
                           "(the same dataset)", metavar="ADDRESS", const="local")

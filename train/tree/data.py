@@ -225,9 +225,9 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
         if ray is not None:
             from train.benchmark.runs import run_on_ray
             run_on_ray(ray, workers, [], [(config, i, checkpoint) for i in indices], finished, _solve_job)
-        elif workers > 1:
+        elif min(workers, len(indices)) > 1:
             from train.benchmark.runs import WorkerPool
-            with WorkerPool(workers) as pool:
+            with WorkerPool(min(workers, len(indices))) as pool:
                 pool.run([(config, i, checkpoint) for i in indices], finished, _solve_job)
         else:
             for i in indices:

@@ -85,7 +85,7 @@ def urdf_file(urdf: str) -> Path:
 
 
 #: The arm task's xArm6 on the table.
-XARM6 = RobotModel(URDF, JOINTS, tuple(JOINT_LOW.tolist()), tuple(JOINT_HIGH.tolist()), EE_LINK)
+XARM6 = RobotModel(URDF, JOINTS, tuple(JOINT_LOW.tolist()), tuple(JOINT_HIGH.tolist()), EE_LINK, padding=0.001)
 
 #: A contact at or below this signed distance (m) is a collision.
 CONTACT_DISTANCE = 0.0
