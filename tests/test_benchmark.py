@@ -100,6 +100,22 @@ def test_ompl_log_of_our_samplers(tmp_path):
     assert "\nuniform\n" in text and "2 runs" in text and "collision checks INTEGER" in text
 
 
+def test_ompl_log_names_the_experiment_in_one_word_and_control_planners_as_such(tmp_path):
+    """OMPL's ompl_benchmark_statistics.py names an experiment by the last word of its line: the
+    whole name is one word (scene and checker in it); the pendulum's OMPL rows are control-based
+    planners and are named so (maze2d's ompl-rrt is geometric RRT); OMPL rows carry their settings."""
+    from gnn_mp_envs.baselines.ompl_log import read_ompl_log
+    args = tiny_args(task="pendulum", problems=1, samplers=["uniform", "ompl-rrt"], ompl_log=tmp_path)
+    report = {"env_id": "GNNMP/PendulumRRT-v0", "max_nodes": 100, "checker": None,
+              "runs": {name: [{"problem": 0, "success": True, "wall_time_s": 0.01, "path_length": 1.0,
+                               "nodes_expanded": 5, "edges": 5, "collision_checks": 50, "iterations": 5}]
+                       for name in args.samplers}}
+    log = read_ompl_log(bm.write_ompl_logs(args, report, tmp_path))
+    assert len(log["experiment"].split()) == 1 and "PendulumRRT" in log["experiment"]
+    assert set(log["planners"]) == {"uniform", "ompl-control-rrt"}
+    assert log["planners"]["ompl-control-rrt"]["common"]
+
+
 @pytest.mark.skipif(not bm.ompl_available(), reason="OMPL (optional extra) not installed")
 def test_ompl_rows_run_the_same_problems():
     report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "ompl-rrtconnect"]))
@@ -206,3 +222,22 @@ def test_every_returned_path_is_rechecked_and_failures_are_named():
     assert f"1 of {solved} INVALID edge by edge (goal-bias: 1); {solved} of {solved} valid" in path_check_note(report)
     first["path_valid_fine"] = False
     assert path_check_note(report).endswith(f"1 of {solved} INVALID at 10x finer resolution (goal-bias: 1)")
+
+
+def test_every_suite_entry_fits_its_split():
+    """A suite entry never asks for more problems than its split holds (with its scene and
+    checker): a finite split (MotionBenchMaker's) is planned whole, not past its end."""
+    from gnn_mp_envs.registration import make_task, task_spec
+    from train.benchmark.suites import SUITES
+    for name, entries in SUITES.items():
+        for entry in entries:
+            kwargs = {"checker": entry.checker} if entry.checker else {}
+            scene = entry.scene or task_spec(entry.task).benchmark_scene
+            if scene:
+                kwargs["scene"] = scene
+            task = make_task(entry.task, **kwargs)
+            try:
+                size = task.num_problems(entry.split)
+            finally:
+                task.close()
+            assert size is None or entry.problems <= size, (name, entry.name, entry.problems, size)

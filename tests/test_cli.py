@@ -127,6 +127,12 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["benchmark", "--problems", "1", "--plot", "boxes"], ["--plot", "suffix"]),
     (["benchmark", "--problems", "1", "--plot", "boxes.txt"], ["--plot", "suffix"]),
     (["critical", "evaluate", "--plot", "fig.txt"], ["--plot", "suffix"]),
+    # an empty path is refused, not taken as the current directory
+    (["benchmark", "--render", ""], ["--render", "expected a path"]),
+    (["benchmark", "--out", ""], ["--out", "expected a path"]),
+    (["benchmark", "--ompl-log", ""], ["--ompl-log", "expected a path"]),
+    (["critical", "train", "--out", ""], ["--out", "expected a path"]),
+    (["train", "sampler", "--data-dir", ""], ["--data-dir", "expected a path"]),
 ])
 def test_bad_input_in_process(args: list[str], fragments: list[str], capsys):
     """The same one-line contract, checked in-process (faster than a subprocess per case)."""
@@ -271,3 +277,39 @@ def test_the_benchmark_starts_no_more_workers_than_jobs(monkeypatch):
     runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=2, workers=8, progress=False))
     runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=1, workers=8, progress=False))
     assert sizes == [2]
+
+
+def test_train_rl_without_yaml_names_the_extra(monkeypatch, capsys):
+    """An environments-only install (no pyyaml, part of the agents extra): `train rl` is the same
+    one-line refusal as the other commands of that extra, not a raw ModuleNotFoundError."""
+    import sys as _sys
+    from train.cli import main
+    monkeypatch.setitem(_sys.modules, "yaml", None)
+    try:
+        code = main(["train", "rl", "--total-steps", "10"])
+    except SystemExit as exit_:
+        code = exit_.code
+    assert code not in (0, None)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "agents" in err[0] and "yaml" in err[0], err
+
+
+def test_import_finds_a_module_of_the_current_directory_that_shadows_nothing(tmp_path):
+    """`gnn-mp benchmark --import my_plugin` run in the plugin's directory needs no PYTHONPATH, and a
+    `train.py` and an `agents/` package beside it do not replace this package's modules (in the
+    main process and in spawned workers)."""
+    (tmp_path / "my_plugin.py").write_text(
+        "from agents.samplers import register_sampler\n"
+        "from agents.samplers.baselines import UniformSampler\n"
+        "register_sampler('my-uniform', lambda low, high, task=None, seed=None, **kw: "
+        "UniformSampler(low, high, seed, **kw), 'uniform, from a plugin')\n")
+    (tmp_path / "train.py").write_text("raise SystemExit('the current directory shadowed train')\n")
+    (tmp_path / "agents").mkdir()
+    (tmp_path / "agents" / "__init__.py").write_text("raise SystemExit('the current directory shadowed agents')\n")
+    script = Path(sys.executable).parent / "gnn-mp"
+    result = subprocess.run([str(script), "benchmark", "--import", "my_plugin", "--samplers", "my-uniform,gnn",
+                             "--problems", "2", "--workers", "2", "--no-progress", "--json", "out.json"],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads((tmp_path / "out.json").read_text())
+    assert report["samplers"] == ["my-uniform", "gnn"] and report["results"]["my-uniform"]["success_rate"] == 1.0

@@ -241,3 +241,19 @@ def test_page_commands_run(page, docs_runner):
     """The page's bash blocks, in order, in a fresh clone, with the budget flags appended."""
     failure = docs_runner.results[page].result()
     assert failure is None, failure
+
+
+def test_every_relative_link_of_the_docs_names_a_file_that_exists():
+    """README and every page under docs/ (generated results pages and the journal included): a
+    relative link or image names a file of the repository (anchors are not checked)."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    missing = []
+    for page in pages:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)     # not inside code blocks
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"[a-z]+:", target) or target.startswith("#"):
+                continue
+            path = target.split("#")[0]
+            if path and not (page.parent / path).exists():
+                missing.append(f"{page.relative_to(ROOT)}: {target}")
+    assert not missing, missing

@@ -65,6 +65,42 @@ def test_candidate_features_match_brute_force(task):
     env.close()
 
 
+@pytest.mark.parametrize("task", ["maze2d", "pendulum", "arm"])
+def test_compiled_candidate_features_equal_the_numpy_statement_bit_for_bit(task):
+    """The compiled candidates and features (:func:`_assemble`, :func:`_features`) against
+    :meth:`CandidateSet.propose_reference` / :meth:`CandidateSet.features_reference`, along a growing tree (periodic coordinates on the pendulum, BiRRT's two trees on the arm): equal
+    arrays, and the same nearest node remembered for ``record``."""
+    env, obs, cs = grown_env(task, 0)
+    rng, twin_rng, picks = np.random.default_rng(7), np.random.default_rng(7), np.random.default_rng(8)
+    low, high = env.action_space.low, env.action_space.high
+    twin = CandidateSet(low, high, **candidate_settings(task))       # numpy all the way, fed the same tree
+    compared = 0
+    for step in range(60):
+        cands, feats = cs.propose(obs, rng)
+        twin_cands, twin_feats = twin.propose_reference(obs, twin_rng)
+        assert np.array_equal(cands, twin_cands) and np.array_equal(feats, twin_feats), (task, step)
+        n = int(obs["num_nodes"][0])
+        active = int(obs["active_tree"][0])
+        target = cs._start if active == 1 else cs._goal
+        extra = (low + (high - low) * picks.random((5, len(low)))).astype(np.float32).astype(np.float64)
+        for pts in (cands.astype(np.float64), extra):
+            fast = cs.features(pts, n, active, target)
+            fast_near = cs._near.copy()
+            slow = cs.features_reference(pts, n, active, target)
+            assert np.array_equal(fast, slow), (task, step, np.abs(fast - slow).max())
+            assert np.array_equal(fast_near, cs._near)
+            compared += 1
+        pick = int(picks.integers(len(cands)))
+        x = cands[pick]
+        cs.record(obs, x)
+        twin.record(obs, x, pick)
+        obs, _, term, trunc, _ = env.step(x)
+        if term or trunc:
+            break
+    env.close()
+    assert compared >= 20
+
+
 def test_rl_ids_are_the_training_commands_mdp_with_the_time_limit():
     """gym.make(<RL id>) == make_rl_env(task) == what `gnn-mp train rl` builds: same rewards, same
     observations for the same seed and actions; TimeLimit in the spec, as RL Zoo reads it."""

@@ -107,11 +107,17 @@ FIGURE_SUFFIXES = ("eps", "jpeg", "jpg", "pdf", "pgf", "png", "ps", "raw", "rgba
                    "tiff", "webp")
 
 
+def path_arg(text: str) -> Path:
+    """An argparse type: a file or directory name; ``''`` is refused (``Path('')`` would silently
+    be the current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path, got ''")
+    return Path(text)
+
+
 def figure_path(text: str) -> Path:
     """An argparse type: a figure file whose suffix names a format matplotlib writes (``.png``, ``.svg``, ...)."""
-    if not text:
-        raise argparse.ArgumentTypeError("expected a file name, got ''")
-    path = Path(text)
+    path = path_arg(text)
     if path.suffix.lower().lstrip(".") not in FIGURE_SUFFIXES:
         raise argparse.ArgumentTypeError(f"{text}: the suffix must name a figure format "
                                          f"({', '.join('.' + s for s in ('png', 'svg', 'pdf', 'jpg'))}, ...)")
@@ -140,12 +146,42 @@ def _float_list(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
 
 
+def _load_from_current_directory(top: str) -> None:
+    """Load the top-level module or package ``top`` from the current directory when nothing
+    installed provides it (its submodules then import through the package's ``__path__``)."""
+    import importlib.util
+    import os
+    import sys
+    if not top.isidentifier() or top in sys.modules or importlib.util.find_spec(top) is not None:
+        return
+    here = Path(os.getcwd())
+    package, plain = here / top / "__init__.py", here / f"{top}.py"
+    if package.is_file():
+        spec = importlib.util.spec_from_file_location(top, package, submodule_search_locations=[str(package.parent)])
+    elif plain.is_file():
+        spec = importlib.util.spec_from_file_location(top, plain)
+    else:
+        return
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[top] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[top]
+        raise
+
+
 def import_modules(modules: typing.Iterable[str]) -> None:
     """Import modules that call ``register_task`` / ``register_sampler`` (``--import MODULE``);
-    a one-line ``ValueError`` naming the module that cannot be imported."""
+    a one-line ``ValueError`` naming the module that cannot be imported.
+
+    A module that is not installed is looked up in the current directory (``my_pkg.tasks``:
+    ``./my_pkg/``), without ``PYTHONPATH=.``: the directory never joins ``sys.path``, so a
+    ``train.py`` or ``agents/`` there cannot shadow this package's own modules."""
     import importlib
     for module in modules:
         try:
+            _load_from_current_directory(module.split(".")[0])
             importlib.import_module(module)
         except ImportError as exc:
             raise ValueError(f"cannot import module {module!r}: {exc}") from None
@@ -173,7 +209,7 @@ def _parser_for(tp: Any) -> tuple[Callable[[str], Any] | None, bool]:
         (item, *_) = typing.get_args(tp) or (str,)
         return {int: _int_list, float: _float_list}.get(item, name_list), True
     if tp is Path:
-        return Path, False
+        return path_arg, False
     if tp in (int, float, str):
         return tp, False
     return None, False

@@ -171,7 +171,7 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
 
 
 #: Top-level modules of the ``agents`` extra (torch and the libraries built on it).
-EXTRA_MODULES = (*LEARNED_MODULES, "stable_baselines3", "torchrl", "tensorboard")
+EXTRA_MODULES = (*LEARNED_MODULES, "stable_baselines3", "torchrl", "tensorboard", "yaml")
 
 
 def missing_extra(exc: ModuleNotFoundError, what: str) -> CLIError | None:

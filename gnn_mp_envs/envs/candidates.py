@@ -59,6 +59,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
 #: The kind of each candidate row: row 0 target, 1 near the target, 2 newest, 3 greedy, the rest uniform.
 CANDIDATE_KINDS = ("target", "near-target", "newest", "greedy", "uniform")
@@ -70,6 +71,102 @@ DEFAULT_LOCAL_SCALE = 1.0
 DEFAULT_TARGET_SCALE = 0.1
 #: Scalar feature columns before the per-dimension blocks.
 SCALAR_FEATURES = len(CANDIDATE_KINDS) + 8
+
+
+@njit(cache=True)
+def _nearest_node(p, states, m, periodic, span, weights):
+    """Row of ``states[:m]`` nearest ``p`` under the planner's metric and the distance, in the order
+    of :meth:`CandidateSet._nearest`'s numpy operations (coordinate by coordinate), so bit for bit
+    the same; the first of equal minima, as ``argmin``."""
+    best, j = np.inf, 0
+    for r in range(m):
+        sq = 0.0
+        for i in range(p.shape[0]):
+            diff = p[i] - states[r, i]
+            if periodic[i]:
+                diff = abs(diff)
+                diff = min(diff, span[i] - diff)
+            if weights[i] != 1.0:
+                diff *= weights[i]
+            sq += diff * diff
+        if sq < best:
+            best, j = sq, r
+    return j, np.sqrt(best)
+
+
+@njit(cache=True)
+def _difference(a, b, i, periodic, half, span):
+    """``wrap(a - b)`` of coordinate ``i``: numpy's floored modulo, as :meth:`CandidateSet._difference`."""
+    diff = a - b
+    if periodic[i]:
+        diff = (diff + half[i]) % span[i] - half[i]
+    return diff
+
+
+@njit(cache=True)
+def _assemble(target, noise, uniform, newest, greedy, target_std, local_std, low, span, high, periodic, wraps):
+    """The step's candidates from its draws, as :meth:`CandidateSet.propose` states them in numpy:
+    rows target, near-target, newest + step, greedy + step, uniform; periodic coordinates wrapped
+    (floored modulo), clipped to the box, rounded to float32."""
+    K, d = uniform.shape[0] + 4, target.shape[0]
+    cands = np.empty((K, d), np.float32)
+    row = np.empty(d)
+    for k in range(K):
+        for i in range(d):
+            if k == 0:
+                x = target[i]
+            elif k == 1:
+                x = target[i] + noise[0, i] * target_std[i]
+            elif k == 2:
+                x = noise[1, i] * local_std[i] + newest[i]
+            elif k == 3:
+                x = noise[2, i] * local_std[i] + greedy[i]
+            else:
+                x = low[i] + span[i] * uniform[k - 4, i]
+            if wraps and periodic[i]:
+                x = (x - low[i]) % span[i] + low[i]
+            row[i] = x
+        for i in range(d):
+            cands[k, i] = np.float32(min(max(row[i], low[i]), high[i]))
+    return cands
+
+
+@njit(cache=True)
+def _features(cands, kinds, states, rows, to_target, m, other_states, other_m, target, n, best_dist, scale,
+              step, children, failures, periodic, span, half, center, weights, out, near):
+    """:meth:`CandidateSet.features` without the prior's column, compiled: ``out (K, F)`` float64 and
+    each candidate's nearest active-tree row in ``near``."""
+    K, d = cands.shape
+    c = kinds.shape[1]
+    s = c + 8
+    for k in range(K):
+        p = cands[k]
+        j, reach = _nearest_node(p, states, m, periodic, span, weights)
+        node = rows[j]
+        near[k] = node
+        for col in range(c):
+            out[k, col] = kinds[k, col]
+        out[k, c] = np.log1p(reach / step)
+        sq = 0.0
+        for i in range(d):
+            diff = _difference(p[i], target[i], i, periodic, half, span)
+            if weights[i] != 1.0:
+                diff *= weights[i]
+            sq += diff * diff
+        out[k, c + 1] = np.sqrt(sq) / scale
+        out[k, c + 2] = to_target[j] / scale
+        out[k, c + 3] = (to_target[j] - best_dist) / scale
+        out[k, c + 4] = np.log1p(float(n - 1 - node))
+        out[k, c + 5] = np.log1p(float(children[node]))
+        out[k, c + 6] = np.log1p(float(failures[node]))
+        out[k, c + 7] = _nearest_node(p, other_states, other_m, periodic, span, weights)[1] / scale \
+            if other_m > 0 else 0.0
+        for i in range(d):
+            out[k, s + i] = (p[i] - center[i]) / half[i]
+            out[k, s + d + i] = (states[j, i] - center[i]) / half[i]
+            out[k, s + 2 * d + i] = min(max(_difference(p[i], states[j, i], i, periodic, half, span) / step, -4.0),
+                                        4.0)
+            out[k, s + 3 * d + i] = _difference(target[i], states[j, i], i, periodic, half, span) / span[i]
 
 
 def wrap_into_box(x: np.ndarray, low: np.ndarray, span: np.ndarray, periodic: np.ndarray) -> np.ndarray:
@@ -274,6 +371,22 @@ class CandidateSet:
         target = self._start if active == 1 else self._goal
         m = self._tree_size[active]
         best = self._best[active][1]
+        noise = rng.standard_normal((3, d))
+        uniform = rng.random((K - 4, d))
+        newest = self._tree_states[active][m - 1] if m else target
+        greedy = np.asarray(obs["nodes"][best], np.float64) if best >= 0 else target
+        cands32 = _assemble(target, noise, uniform, newest, greedy, self.target_std, self.local_std, self.low,
+                            self.span, self.high, self.periodic, self._wraps)
+        return cands32, self.features(cands32.astype(np.float64), n, active, target)
+
+    def propose_reference(self, obs: Mapping, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`propose` in numpy operations (the same draws, candidates and features)."""
+        n = self._ingest(obs)
+        d, K = self.state_dim, self.count
+        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+        target = self._start if active == 1 else self._goal
+        m = self._tree_size[active]
+        best = self._best[active][1]
         cands = np.empty((K, d), np.float64)
         cands[0] = target
         noise = rng.standard_normal((3, d))
@@ -285,12 +398,29 @@ class CandidateSet:
         if self._wraps:
             cands = wrap_into_box(cands, self.low, self.span, self.periodic)
         cands32 = np.minimum(np.maximum(cands, self.low), self.high).astype(np.float32)
-        return cands32, self.features(cands32.astype(np.float64), n, active, target)
+        return cands32, self.features_reference(cands32.astype(np.float64), n, active, target)
 
     def features(self, cands: np.ndarray, n: int, active: int, target: np.ndarray) -> np.ndarray:
         """Features ``(K, F)`` of candidate states ``cands`` for the active tree (see the module
         docstring) of the observation ingested last; remembers each candidate's
-        nearest node for :meth:`record`."""
+        nearest node for :meth:`record`. One compiled pass (:func:`_features`); the same values, bit
+        for bit, as :meth:`features_reference`, the numpy statement of them."""
+        K = cands.shape[0]
+        out = np.empty((K, self.width), np.float64)
+        near = np.empty(K, np.int64)
+        other = 1 - active
+        _features(np.ascontiguousarray(cands, np.float64), self._kinds[:K], self._tree_states[active],
+                  self._tree_rows[active], self._tree_to_target[active], self._tree_size[active],
+                  self._tree_states[other], self._tree_size[other], np.asarray(target, np.float64), int(n),
+                  float(self._best[active][0]), float(self._scale), self.step, self._children, self._failures,
+                  self.periodic, self.span, self.half, self.center, self.weights, out, near)
+        self._near = near
+        if self.prior is not None:
+            out[:, -1] = self.prior(self._obs, cands, active)
+        return out.astype(np.float32)
+
+    def features_reference(self, cands: np.ndarray, n: int, active: int, target: np.ndarray) -> np.ndarray:
+        """:meth:`features` in numpy operations: what the columns are (tests hold the two equal)."""
         K, d = cands.shape
         D = self._scale
         j, reach = self._nearest(cands, active)

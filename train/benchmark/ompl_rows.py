@@ -81,11 +81,21 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
         raise BenchmarkError(f"the OMPL log writer is not available in this checkout ({exc})") from None
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{args.task}.log"
-    results_by_planner = {name: [_as_ompl_run(r, args.ompl_time_limit) for r in report["runs"][name]]
+    from gnn_mp_envs.registration import task_spec
+    control = task_spec(args.task).ompl_control_setup is not None
+    # the log's planner names: OMPL's control-based planners say so (ompl-rrt of maze2d is geometric RRT)
+    log_name = {name: ("ompl-control-" + name[len(OMPL_PREFIX):] if control and is_ompl(name) else name)
+                for name in args.samplers}
+    results_by_planner = {log_name[name]: [_as_ompl_run(r, args.ompl_time_limit) for r in report["runs"][name]]
                           for name in args.samplers}
     total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
-    settings = {name: {"max_nodes": report["max_nodes"]} for name in args.samplers if not is_ompl(name)}
-    experiment = f"gnn-mp {report['env_id']}" + (f" scene {args.scene}" if args.scene else "")
+    settings = {log_name[name]: ({"time_limit": args.ompl_time_limit, "seed": args.seed + 1} if is_ompl(name)
+                                 else {"max_nodes": report["max_nodes"]})
+                for name in args.samplers}
+    # one word: OMPL's ompl_benchmark_statistics.py names the experiment by the line's last word
+    experiment = ":".join(["gnn-mp", report["env_id"], *(f"{k}={v}" for k, v in
+                                                          (("scene", args.scene), ("checker", report.get("checker")))
+                                                          if v)])
     write_ompl_log(path, experiment, results_by_planner, time_limit=args.ompl_time_limit, seed=args.seed,
                    total_time=total_time, planner_settings=settings)
     return path
