@@ -179,6 +179,39 @@ def test_users_own_sb3_ppo_from_the_docs_improves():
     assert after < before, out.stdout
 
 
+def test_users_own_torchrl_ppo_from_the_docs_grows_trees():
+    """The TorchRL block of docs/rl.md as written, on TorchRL's default (one-hot) action encoding:
+    the actor acts in that encoding, so its trees grow (an index read as one-hot picks the target
+    every step: trees of a few nodes)."""
+    block = next(b for b in re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "rl.md").read_text(), re.S)
+                 if "ClipPPOLoss" in b)
+    out = subprocess.run([sys.executable, "-c", block], cwd=ROOT, capture_output=True, text=True, timeout=600,
+                         env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 0, out.stderr[-2000:]
+    nodes = int(re.search(r"largest tree: (\d+) nodes", out.stdout).group(1))
+    assert nodes > 20, out.stdout
+
+
+def test_a_picker_actor_given_the_one_hot_spec_plans_as_with_indices():
+    """The same seeds through TorchRL's one-hot encoding (actor given the spec) and the index
+    encoding: the same trees, step by step."""
+    from torchrl.envs import GymEnv
+
+    from agents.rl.torchrl import make_pick_actor
+    spaces = gym.make("GNNMP/Maze2DRRT-RLPick-v0").observation_space
+    sizes = []
+    for categorical in (False, True):
+        torch.manual_seed(0)
+        env = GymEnv("GNNMP/Maze2DRRT-RLPick-v0", categorical_action_encoding=categorical)
+        env.set_seed(0)
+        actor = make_pick_actor(spaces, action_spec=env.action_spec)
+        sizes.append(env.rollout(40, actor)["next", "num_nodes"])
+    assert torch.equal(sizes[0], sizes[1]) and sizes[0].max() > 10
+    with pytest.raises(ValueError, match="Discrete"):
+        from torchrl.data import Bounded
+        make_pick_actor(spaces, action_spec=Bounded(-1.0, 1.0, shape=(2,)))
+
+
 @pytest.mark.parametrize("name", ["rl-ppo", "rl-ppo-torchrl"])
 def test_shipped_arm_pickers_beat_uniform_on_val_collision_checks(name):
     """The shipped SB3 and TorchRL arm pickers (docs/rl.md: 199.5 and 367.5 median val checks on 50

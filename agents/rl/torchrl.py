@@ -110,22 +110,31 @@ class CandidateValue(nn.Module):
         return self.mlp(self.encoder.flat(obs))
 
 
-def make_pick_actor(observation_space: spaces.Dict, *, head_hidden: list[int] | tuple[int, ...] = (),
+def make_pick_actor(observation_space: spaces.Dict, *, action_spec=None, head_hidden: list[int] | tuple[int, ...] = (),
                     head: str = "linear", **encoder_kw) -> ProbabilisticActor:
     """A candidate picker: ``PickPolicy`` -> ``"logits"`` -> a categorical over the candidates.
 
-    For envs wrapped as ``GymWrapper(env, categorical_action_encoding=True)`` (integer actions);
-    ``return_log_prob=True`` as ``ClipPPOLoss`` needs; ``head``: :class:`~agents.rl.pick.PickPolicy`'s.
-    ``encoder_kw`` go to
+    The action is the candidate's index, as an env wrapped with
+    ``GymEnv(id, categorical_action_encoding=True)`` takes it; pass the TorchRL env's
+    ``action_spec`` to act in its encoding (TorchRL's default for a ``Discrete`` space is one-hot:
+    ``GymEnv(id)`` gets one-hot actions, and an index would be misread). ``return_log_prob=True``
+    as ``ClipPPOLoss`` needs; ``head``: :class:`~agents.rl.pick.PickPolicy`'s. ``encoder_kw`` go to
     ``CandidateEncoder.from_space`` (``hidden``, ``embed``, ``tree_context``, ...).
     """
+    from torchrl.data import Categorical as IndexSpec
+    from torchrl.data import OneHot
+    from torchrl.modules import OneHotCategorical
+    if action_spec is not None and not isinstance(action_spec, (OneHot, IndexSpec)):
+        raise ValueError(f"a picker acts in a Discrete action space (one-hot or index), not {type(action_spec).__name__}")
+    one_hot = isinstance(action_spec, OneHot)
     from agents.rl.pick import PickPolicy
     encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
     policy = PickPolicy(encoder.config(), hidden=list(head_hidden), activation="tanh", head=head)
     policy.encoder.load_state_dict(encoder.state_dict())
     module = PickModule(policy, "logits", policy.reads_tree)
-    return ProbabilisticActor(module, in_keys=["logits"], out_keys=["action"],
-                              distribution_class=torch.distributions.Categorical, return_log_prob=True)
+    return ProbabilisticActor(module, in_keys=["logits"], out_keys=["action"], spec=action_spec,
+                              distribution_class=OneHotCategorical if one_hot else torch.distributions.Categorical,
+                              return_log_prob=True)
 
 
 def make_pick_value(observation_space: spaces.Dict, *, head_hidden: list[int] | tuple[int, ...] = (64, 64),

@@ -363,37 +363,37 @@ class CandidateSet:
         return j, np.sqrt(sq[np.arange(len(points)), j])
 
     # ------------------------------------------------------------------ per step
-    def propose(self, obs: Mapping, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """The step's candidates ``(K, d)`` and features ``(K, F)`` (float32); draws from ``rng``."""
+    def _step_context(self, obs: Mapping) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:
+        """Ingest the observation: ``(num_nodes, active tree, its target, its newest node, its node
+        nearest the target)`` (the target where the tree has none)."""
         n = self._ingest(obs)
-        d, K = self.state_dim, self.count
         active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
         target = self._start if active == 1 else self._goal
-        m = self._tree_size[active]
-        best = self._best[active][1]
-        noise = rng.standard_normal((3, d))
-        uniform = rng.random((K - 4, d))
+        m, best = self._tree_size[active], self._best[active][1]
         newest = self._tree_states[active][m - 1] if m else target
         greedy = np.asarray(obs["nodes"][best], np.float64) if best >= 0 else target
+        return n, active, target, newest, greedy
+
+    def propose(self, obs: Mapping, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """The step's candidates ``(K, d)`` and features ``(K, F)`` (float32); draws from ``rng``."""
+        n, active, target, newest, greedy = self._step_context(obs)
+        noise = rng.standard_normal((3, self.state_dim))
+        uniform = rng.random((self.count - 4, self.state_dim))
         cands32 = _assemble(target, noise, uniform, newest, greedy, self.target_std, self.local_std, self.low,
                             self.span, self.high, self.periodic, self._wraps)
         return cands32, self.features(cands32.astype(np.float64), n, active, target)
 
     def propose_reference(self, obs: Mapping, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`propose` in numpy operations (the same draws, candidates and features)."""
-        n = self._ingest(obs)
+        n, active, target, newest, greedy = self._step_context(obs)
         d, K = self.state_dim, self.count
-        active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
-        target = self._start if active == 1 else self._goal
-        m = self._tree_size[active]
-        best = self._best[active][1]
         cands = np.empty((K, d), np.float64)
         cands[0] = target
         noise = rng.standard_normal((3, d))
         cands[1] = target + noise[0] * self.target_std
         cands[2:4] = noise[1:] * self.local_std
-        cands[2] += self._tree_states[active][m - 1] if m else target
-        cands[3] += np.asarray(obs["nodes"][best], np.float64) if best >= 0 else target
+        cands[2] += newest
+        cands[3] += greedy
         cands[4:] = self.low + self.span * rng.random((K - 4, d))
         if self._wraps:
             cands = wrap_into_box(cands, self.low, self.span, self.periodic)

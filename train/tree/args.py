@@ -32,11 +32,14 @@ class TrainArgs(RunFlags):
                              "gnn and gnn-cvae 64, cvae 128)", parse=positive_int)
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
                     "start + path prefix)", choices=VIEWS)
-    minutes: float = arg(10.0, "training time budget of the first phase (minutes)", parse=positive_float)
+    minutes: float = arg(10.0, "gradient-step budget of the first training phase (minutes); planning the dataset, "
+                                   "each DAgger round (--dagger-minutes plus its planning) and the final evaluation "
+                                   "come on top", parse=positive_float)
     dagger_rounds: int = arg(1, "DAgger rounds: plan with the sampler, relabel its own trees, fine-tune",
                              parse=non_negative_int)
     dagger_problems: int = arg(400, "fresh training problems planned per DAgger round", parse=positive_int)
-    dagger_minutes: float = arg(6.0, "fine-tuning time per DAgger round (minutes)", parse=positive_float)
+    dagger_minutes: float = arg(6.0, "gradient-step budget per DAgger round (minutes), on top of --minutes; the "
+                                         "round's planning comes on top", parse=positive_float)
     batch_size: int = arg(8, "runs (solved problems) per optimisation step", parse=positive_int)
     lr: float = arg(2e-3, "Adam learning rate (cosine-annealed)", parse=positive_float)
     max_snapshots: int = arg(96, "snapshots per run in an epoch (the scorer: negative samples per run)",
