@@ -163,6 +163,33 @@ def test_sb3_run_saves_a_zip_and_resumes(tmp_path):
     assert (tmp_path / "run" / "best_model.zip").is_file()
 
 
+@pytest.mark.parametrize("changed", [["--lr", "0.001"], ["--gamma", "0.9"], ["--candidates", "12"],
+                                     ["--action", "box"], ["--algo", "sac"], ["--task", "pendulum"]])
+def test_a_resume_with_other_flags_is_refused_in_one_line(tmp_path, changed, capsys):
+    """`train rl --resume` with a flag that differs from the run's config.json (other than the step
+    budget and where it runs) is one line naming the flag; nothing is trained or overwritten."""
+    from train.cli import main
+    base = ["train", "rl", "--task", "maze2d", "--n-envs", "2", "--n-steps", "64", "--batch-size", "32",
+            "--eval-problems", "1", "--eval-max-steps", "200", "--out", str(tmp_path / "run"), "--no-progress"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(base + ["--total-steps", "64"]) == 0
+    model = (tmp_path / "run" / "model.zip").read_bytes()
+    capsys.readouterr()
+    argv = list(base)
+    if changed[0] in argv:
+        argv[argv.index(changed[0]) + 1] = changed[1]
+    else:
+        argv += changed
+    try:
+        code = main(argv + ["--total-steps", "128", "--resume"])
+    except SystemExit as exit_:         # a flag combination argparse's checks refuse first
+        code = exit_.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and changed[0] in err[0], err
+    assert (tmp_path / "run" / "model.zip").read_bytes() == model
+
+
 def snippet() -> str:
     """docs/rl.md's own-agent snippet (the python block that builds a PPO on an RL id)."""
     text = (ROOT / "docs" / "rl.md").read_text()

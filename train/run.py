@@ -116,6 +116,21 @@ class TrainingRun:
     def path(self, name: str) -> Path:
         return self.dir / name
 
+    def check_resumed_flags(self, current: Mapping[str, Any], free: Sequence[str]) -> None:
+        """Refuse, in one line, a ``--resume`` whose flags differ from the run's ``config.json``
+        (other than the ``free`` ones, e.g. the step budget): the saved weights may not fit, and a
+        changed learning rate or discount would otherwise be ignored without a word."""
+        path = self.path("config.json")
+        try:
+            stored = json.loads(path.read_text())
+        except (OSError, ValueError):
+            raise RunError(f"--resume: {path} is missing or unreadable; start a new --out") from None
+        for key, value in _jsonable(dict(current)).items():
+            if key not in free and key in stored and stored[key] != value:
+                flag = "--" + key.replace("_", "-")
+                raise RunError(f"--resume: {flag} is {value!r} here but {stored[key]!r} in {path}; resume with the "
+                               f"run's flags or start a new --out")
+
     # ------------------------------------------------------------------ files
     def write_config(self, config: Mapping[str, Any], name: str = "config.json") -> Path:
         """``config`` (plain values: paths become strings) as indented JSON, atomically."""

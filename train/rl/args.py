@@ -370,6 +370,11 @@ def memory_bytes() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
+#: Flags a resumed run may change: the step budget, where and how it runs, what it reports.
+RESUME_FREE_FLAGS = ("total_steps", "resume", "overwrite", "ship", "threads", "progress", "out", "device",
+                     "parallel", "modules")
+
+
 def run_config(args: RLArgs) -> dict[str, Any]:
     """What ``config.json`` records: every flag, the library versions and the start time."""
     import time
@@ -383,5 +388,5 @@ def run_config(args: RLArgs) -> dict[str, Any]:
             "started": time.strftime("%Y-%m-%dT%H:%M:%S")}
 
 
-__all__ = ["ALGOS", "HYPERPARAMS_DIR", "LIBS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args",
+__all__ = ["ALGOS", "HYPERPARAMS_DIR", "LIBS", "RESUME_FREE_FLAGS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args",
            "hyperparams_file", "read_hyperparams", "run_config", "torch_device"]

@@ -15,6 +15,7 @@ every ``--eval-every`` steps: checkpoint ``policy.pt``/``best.pt`` in the one ch
 from __future__ import annotations
 
 import time
+from dataclasses import asdict
 
 import torch
 from stable_baselines3 import PPO, SAC
@@ -27,7 +28,7 @@ from tqdm import tqdm
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
 from agents.rl.sb3 import CandidateFeaturesExtractor, CandidatePickPolicy, TreeFeaturesExtractor
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl.args import RLArgs, RunResult, check_args, run_config, torch_device
+from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
 from train.run import RunError, TrainingRun
@@ -112,6 +113,8 @@ def train(args: RLArgs) -> RunResult:
                              resume=args.resume)
     if args.resume and not run.path("model.zip").is_file():
         raise RunError(f"--resume: {run.dir} holds no SB3 model (model.zip) to continue")
+    if args.resume:
+        run.check_resumed_flags(asdict(args), RESUME_FREE_FLAGS)
     run.write_config(run_config(args), "config.json" if not args.resume else "config_resumed.json")
 
     # 1. environments: n_envs copies of make_rl_env (the registered RL ids' MDP), seeded

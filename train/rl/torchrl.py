@@ -17,6 +17,7 @@ import multiprocessing
 import signal
 import threading
 import time
+from dataclasses import asdict
 from functools import partial
 
 import torch
@@ -32,7 +33,7 @@ from agents.checkpoints import load_training_state, save_training_state
 from agents.rl.policies import policy_from_torchrl, warm_start_encoder
 from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
-from train.rl.args import RLArgs, RunResult, check_args, run_config, torch_device
+from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.run import RunError, TrainingRun
 
@@ -111,6 +112,8 @@ def train(args: RLArgs) -> RunResult:
     state_path = run.path("training_state.pt")
     if args.resume and not state_path.is_file():
         raise RunError(f"--resume: {run.dir} holds no TorchRL training state (training_state.pt) to continue")
+    if args.resume:
+        run.check_resumed_flags(asdict(args), RESUME_FREE_FLAGS)
     run.write_config(run_config(args), "config.json" if not args.resume else "config_resumed.json")
     device = torch.device(torch_device(args.device))
 
