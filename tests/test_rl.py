@@ -257,9 +257,9 @@ def test_compiled_target_map_is_the_numpy_expressions_bit_for_bit():
 
 
 def box_policy_sampler(task: str, seed: int = 0, **settings):
-    """A continuous (box) SB3 PPO policy sampler of ``task`` in the target frame: the shipped ``rl-ppo``
-    for maze2d; for the pendulum, whose shipped ``rl-ppo`` is a picker, a random policy of the same
-    kind (a wide Gaussian, so its states wrap around the angle often), saved and loaded by name."""
+    """A continuous (box) SB3 PPO policy sampler of ``task`` in the target frame (the shipped ``rl-ppo``
+    are pickers): a random policy of that kind (a wide Gaussian, so the pendulum's states wrap around
+    the angle often), saved and loaded by name."""
     import tempfile
 
     from agents.encoders import TreeEncoder
@@ -267,8 +267,6 @@ def box_policy_sampler(task: str, seed: int = 0, **settings):
     from agents.rl.policies import SB3PPOPolicy, encoder_config
     from agents.rl.sampler import save_policy
     from gnn_mp_envs.registration import task_spec
-    if task == "maze2d":
-        return load_sampler("rl-ppo", task, seed=seed, **settings)
     spec = task_spec(task)
     low, high = spec.state_bounds()
     enc = encoder_config(TreeEncoder.from_space(make_rl_env(task, view_nodes=64, action="box").observation_space,
@@ -286,7 +284,7 @@ def box_policy_sampler(task: str, seed: int = 0, **settings):
 
 @pytest.mark.parametrize("task", ["maze2d", "pendulum"])
 def test_the_box_policy_acts_alike_with_and_without_the_compiled_map(task):
-    """A box ``rl-ppo`` sampler (maze2d: the shipped one) plans a validation problem with the same
+    """A box ``rl-ppo`` sampler plans a validation problem with the same
     actions, bit for bit, whether its state map is the compiled call or the numpy expressions."""
     from gnn_mp_envs.evaluation import evaluation_env
     runs = []

@@ -22,7 +22,7 @@ SHIPPED_SAMPLERS = {
     ("cvae", "maze2d"): "tree/cvae", ("cvae", "pendulum"): "tree/cvae", ("cvae", "arm"): "tree/cvae",
     ("gnn-cvae", "maze2d"): "tree/gnn-cvae", ("gnn-cvae", "pendulum"): "tree/gnn-cvae",
     ("gnn-cvae", "arm"): "tree/gnn-cvae",
-    ("rl-ppo", "maze2d"): "rl/sb3-ppo", ("rl-ppo", "pendulum"): "rl/sb3-ppo-pick",
+    ("rl-ppo", "maze2d"): "rl/sb3-ppo-pick", ("rl-ppo", "pendulum"): "rl/sb3-ppo-pick",
     ("rl-ppo", "arm"): "rl/sb3-ppo-pick", ("rl-ppo-torchrl", "arm"): "rl/torchrl-ppo-pick",
     ("rl-ppo-torchrl", "pendulum"): "rl/torchrl-ppo-pick",
     ("gnn", "panda-mbm"): "tree/gnn", ("cvae", "panda-mbm"): "tree/cvae",

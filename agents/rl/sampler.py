@@ -265,15 +265,38 @@ def numpy_tree_params(twin: Mapping[str, Any], view: Mapping[str, np.ndarray]) -
     return _numpy_mlp(twin["body"], embed), twin["scale"]
 
 
+@njit(cache=True)
+def _shared_head_logits(h, x, score, bias, slot_bias, prior_scale, has_prior):
+    """:class:`~agents.rl.pick.SharedCandidateHead` over the candidates' embeddings ``h (K, E)``,
+    compiled: ``logit_k = score . [h_k, mean h, max h] + bias + slot_bias_k (+ prior_scale x_k,-1)``
+    (the per-candidate MLP stays in numpy: its matrix products and vector tanh are faster there)."""
+    K, E = h.shape
+    shared = bias
+    for j in range(E):
+        total, top = np.float32(0.0), h[0, j]
+        for k in range(K):
+            total += h[k, j]
+            top = max(top, h[k, j])
+        shared += total / np.float32(K) * score[E + j] + top * score[2 * E + j]
+    logits = np.empty(K, np.float32)
+    for k in range(K):
+        acc = shared + slot_bias[k]
+        for j in range(E):
+            acc += h[k, j] * score[j]
+        if has_prior:
+            acc += prior_scale * x[k, x.shape[1] - 1]
+        logits[k] = acc
+    return logits
+
+
 def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarray:
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
     features = np.asarray(features, np.float32)
     h = _numpy_mlp(twin["candidate"], features)
     if twin["shared"]:           # SharedCandidateHead: w . [e_k, mean, max] + b + bias_k (+ scale * prior_k)
-        E = h.shape[1]
-        w = twin["score"]
-        logits = h @ w[:E] + (h.mean(0) @ w[E:2 * E] + h.max(0) @ w[2 * E:] + twin["bias"][0]) + twin["slot_bias"]
-        return logits + twin["prior_scale"][0] * features[:, -1] if twin["prior"] else logits
+        prior_scale = np.float32(twin["prior_scale"][0]) if twin["prior"] else np.float32(0.0)
+        return _shared_head_logits(np.ascontiguousarray(h, np.float32), features, twin["score"],
+                                   np.float32(twin["bias"][0]), twin["slot_bias"], prior_scale, bool(twin["prior"]))
     parts = [h.reshape(-1), h.mean(0), h.max(0)] + ([features[:, -1]] if twin["prior"] else [])
     x = _numpy_mlp(twin["body"], np.concatenate(parts))
     return _numpy_mlp([twin["logits"]], x)

@@ -104,6 +104,40 @@ def _difference(a, b, i, periodic, half, span):
 
 
 @njit(cache=True)
+def _ingest_rows(first, parent, tree, states, targets, children, rows0, rows1, states0, states1, columns0,
+                 columns1, to_target0, to_target1, size, best_dist, best_row, periodic, half, span, weights):
+    """The tree statistics of new observation rows ``first..``: children counts, each node in its
+    tree's lists (``*0``: tree 0, ``*1``: tree 1) with its distance to the tree's target (the metric
+    of :meth:`CandidateSet._distance`, summed in its order), the node nearest the target (the first of
+    equal distances). Arrays one by one, not in tuples: numba's dispatch of tuples costs more than
+    the work."""
+    d = states.shape[1]
+    for r in range(states.shape[0]):
+        p = parent[r]
+        if p >= 0:
+            children[p] += 1
+        t = tree[r]
+        sq = 0.0
+        for i in range(d):
+            diff = _difference(states[r, i], targets[t, i], i, periodic, half, span)
+            if weights[i] != 1.0:
+                diff *= weights[i]
+            sq += diff * diff
+        dist = np.sqrt(sq)
+        m = size[t]
+        rows, tree_states, columns, to_target = (rows0, states0, columns0, to_target0) if t == 0 else \
+            (rows1, states1, columns1, to_target1)
+        rows[m] = first + r
+        for i in range(d):
+            tree_states[m, i] = states[r, i]
+            columns[i, m] = states[r, i]
+        to_target[m] = dist
+        size[t] = m + 1
+        if dist < best_dist[t]:
+            best_dist[t], best_row[t] = dist, first + r
+
+
+@njit(cache=True)
 def _assemble(target, noise, uniform, newest, greedy, target_std, local_std, low, span, high, periodic, wraps):
     """The step's candidates from its draws, as :meth:`CandidateSet.propose` states them in numpy:
     rows target, near-target, newest + step, greedy + step, uniform; periodic coordinates wrapped
@@ -265,9 +299,10 @@ class CandidateSet:
         self._tree_states = [np.zeros((0, self.state_dim)), np.zeros((0, self.state_dim))]
         self._tree_columns = [np.zeros((self.state_dim, 0)), np.zeros((self.state_dim, 0))]   # the same, by coordinate
         self._tree_to_target = [np.zeros(0), np.zeros(0)]                  # each node's distance to its target
-        self._tree_size = [0, 0]
+        self._tree_size = np.zeros(2, np.int64)
         self._near = np.zeros(0, np.int64)                                   # the last proposal's nearest nodes
-        self._best: list[tuple[float, int]] = [(np.inf, -1), (np.inf, -1)]
+        self._best_dist = np.full(2, np.inf)                # per tree: the distance of its node nearest its target
+        self._best_row = np.full(2, -1, np.int64)           # ... and that node's row
         self._pending: tuple[int, int] | None = None       # (num_nodes when sent, nearest node)
         if self.prior is not None:
             self.prior.reset()
@@ -296,26 +331,21 @@ class CandidateSet:
             self._start = np.asarray(obs["start"], np.float64).copy()
             self._goal = np.asarray(obs["goal"], np.float64).copy()
             self._scale = max(float(self._distance(self._start, self._goal)), 1e-9)
+            self._targets = np.stack([self._goal, self._start])     # tree 0 grows toward the goal, tree 1 the start
         if n > self._children.shape[0]:
             grow = max(n, 2 * self._children.shape[0], 64)
             self._children = np.concatenate([self._children, np.zeros(grow - self._children.shape[0], np.int64)])
             self._failures = np.concatenate([self._failures, np.zeros(grow - self._failures.shape[0], np.int64)])
         if n > self._seen:
-            rows = np.arange(self._seen, n)
-            parent = np.asarray(obs["parent"][self._seen:n]).astype(np.int64)
-            tree = np.asarray(obs["node_features"][self._seen:n, -1]).round().astype(np.int64)
-            has_parent = parent >= 0
-            np.add.at(self._children, parent[has_parent], 1)
-            states = np.asarray(obs["nodes"][self._seen:n], np.float64)
+            k = n - self._seen
             for t in (0, 1):
-                mine = tree == t
-                if not mine.any():
-                    continue
-                dist = self._distance(states[mine], self._goal if t == 0 else self._start)
-                self._append(t, rows[mine], states[mine], dist)
-                i = int(np.argmin(dist))
-                if dist[i] < self._best[t][0]:
-                    self._best[t] = (float(dist[i]), int(rows[mine][i]))
+                self._reserve(t, int(self._tree_size[t]) + k)
+            _ingest_rows(self._seen, np.asarray(obs["parent"][self._seen:n]).astype(np.int64),
+                         np.asarray(obs["node_features"][self._seen:n, -1]).round().astype(np.int64),
+                         np.asarray(obs["nodes"][self._seen:n], np.float64), self._targets, self._children,
+                         *self._tree_rows, *self._tree_states, *self._tree_columns, *self._tree_to_target,
+                         self._tree_size, self._best_dist, self._best_row, self.periodic, self.half, self.span,
+                         self.weights)
         if self._pending is not None:
             sent_at, near = self._pending
             if n == sent_at:                        # the sample did not grow the tree: blocked
@@ -324,30 +354,27 @@ class CandidateSet:
         self._seen = n
         return n
 
-    def _append(self, tree: int, rows: np.ndarray, states: np.ndarray, to_target: np.ndarray) -> None:
-        m, k = self._tree_size[tree], len(rows)
-        if m + k > len(self._tree_rows[tree]):
-            cap = max(2 * (m + k), 64)
-            self._tree_rows[tree] = np.resize(self._tree_rows[tree], cap)
-            self._tree_to_target[tree] = np.resize(self._tree_to_target[tree], cap)
-            grown = np.zeros((cap, self.state_dim))
-            grown[:m] = self._tree_states[tree][:m]
-            self._tree_states[tree] = grown
-            columns = np.zeros((self.state_dim, cap))
-            columns[:, :m] = self._tree_columns[tree][:, :m]
-            self._tree_columns[tree] = columns
-        self._tree_rows[tree][m:m + k] = rows
-        self._tree_states[tree][m:m + k] = states
-        self._tree_columns[tree][:, m:m + k] = states.T
-        self._tree_to_target[tree][m:m + k] = to_target
-        self._tree_size[tree] = m + k
+    def _reserve(self, tree: int, size: int) -> None:
+        """Room for ``size`` nodes in ``tree``'s lists (doubling)."""
+        m = int(self._tree_size[tree])
+        if size <= len(self._tree_rows[tree]):
+            return
+        cap = max(2 * size, 64)
+        self._tree_rows[tree] = np.resize(self._tree_rows[tree], cap)
+        self._tree_to_target[tree] = np.resize(self._tree_to_target[tree], cap)
+        grown = np.zeros((cap, self.state_dim))
+        grown[:m] = self._tree_states[tree][:m]
+        self._tree_states[tree] = grown
+        columns = np.zeros((self.state_dim, cap))
+        columns[:, :m] = self._tree_columns[tree][:, :m]
+        self._tree_columns[tree] = columns
 
     def _nearest(self, points: np.ndarray, tree: int) -> tuple[np.ndarray, np.ndarray]:
         """Position in ``tree``'s node list of each point's nearest node under the planner's metric, and
         the distance; ``tree`` must hold a node. One coordinate at a time over contiguous columns
         (a wrapped coordinate as ``min(|a - b|, span - |a - b|)``): a fraction of the cost of a
         ``(P, m, d)`` difference with a wrap on every entry."""
-        m = self._tree_size[tree]
+        m = int(self._tree_size[tree])
         columns = self._tree_columns[tree]
         sq = None
         for i in range(self.state_dim):
@@ -369,7 +396,7 @@ class CandidateSet:
         n = self._ingest(obs)
         active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
         target = self._start if active == 1 else self._goal
-        m, best = self._tree_size[active], self._best[active][1]
+        m, best = int(self._tree_size[active]), int(self._best_row[active])
         newest = self._tree_states[active][m - 1] if m else target
         greedy = np.asarray(obs["nodes"][best], np.float64) if best >= 0 else target
         return n, active, target, newest, greedy
@@ -410,9 +437,9 @@ class CandidateSet:
         near = np.empty(K, np.int64)
         other = 1 - active
         _features(np.ascontiguousarray(cands, np.float64), self._kinds[:K], self._tree_states[active],
-                  self._tree_rows[active], self._tree_to_target[active], self._tree_size[active],
-                  self._tree_states[other], self._tree_size[other], np.asarray(target, np.float64), int(n),
-                  float(self._best[active][0]), float(self._scale), self.step, self._children, self._failures,
+                  self._tree_rows[active], self._tree_to_target[active], int(self._tree_size[active]),
+                  self._tree_states[other], int(self._tree_size[other]), np.asarray(target, np.float64), int(n),
+                  float(self._best_dist[active]), float(self._scale), self.step, self._children, self._failures,
                   self.periodic, self.span, self.half, self.center, self.weights, out, near)
         self._near = near
         if self.prior is not None:
@@ -434,7 +461,7 @@ class CandidateSet:
         out[:, c] = np.log1p(reach / self.step)
         out[:, c + 1] = self._distance(cands, target) / D
         out[:, c + 2] = n_goal / D
-        out[:, c + 3] = (n_goal - self._best[active][0]) / D
+        out[:, c + 3] = (n_goal - self._best_dist[active]) / D
         out[:, c + 4] = np.log1p(n - 1 - near)
         out[:, c + 5] = np.log1p(self._children[near])
         out[:, c + 6] = np.log1p(self._failures[near])
