@@ -197,7 +197,7 @@ def validate_args(args: BenchmarkArgs) -> None:
             check_output_path(flag, Path(path), is_dir)
     if any(is_ompl(n) for n in args.samplers):
         check_ompl()
-    if args.ray not in (None, "local", "auto"):
+    if args.ray not in (None, "local"):
         check_ray_address(args.ray)
 
 
@@ -205,6 +205,15 @@ def check_ray_address(address: str, timeout: float = 5.0) -> None:
     """Fail at once when nothing listens at a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``):
     ``ray.init`` would retry for many minutes before giving up."""
     import socket
+    if address == "auto":            # what ray.init("auto") joins: RAY_ADDRESS, else this machine's running head
+        import os
+        address = os.environ.get("RAY_ADDRESS", "")
+        if not address:
+            try:
+                address = Path("/tmp/ray/ray_current_cluster").read_text().strip()
+            except OSError:
+                raise BenchmarkError("--ray auto: no running Ray instance on this machine (start one with `ray "
+                                     "start --head`, or give its address)") from None
     host, _, port = address.removeprefix("ray://").rpartition(":")
     try:
         with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):

@@ -86,8 +86,8 @@ SUITES: dict[str, list[SuiteEntry]] = {
     # the sphere checker (the default) and, for the Panda, the same rows with pybullet's. The learned
     # rows trained on five scenes: bookshelf_thin and cage are their held-out scenes.
     "mbm": [
-        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
-                   field=True),
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae", "rl-ppo"], problems=210,
+                   ompl=("rrtconnect",), field=True),
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
                    field=True, checker="pybullet"),
         # the UR5's and the Fetch's test splits without the problems their checkers call invalid (docs/mbm.md)
