@@ -28,3 +28,22 @@ def report_sigint_ignored(queue: Any) -> None:
     """A worker process's target: put whether it ignores Ctrl-C (SIGINT disposition SIG_IGN)."""
     import signal
     queue.put(signal.getsignal(signal.SIGINT) == signal.SIG_IGN)
+
+
+def assert_problem_equals_yaml(doc: dict, robot: str, scene: str, file: int, start: list, goal: list,
+                               objects: list) -> None:
+    """A shipped MotionBenchMaker problem (``doc``: the robot's converted JSON) against values
+    transcribed by hand from its YAML files: start, goal and object poses exactly, and the record
+    the task plans."""
+    from gnn_mp_envs.tasks.mbm import data as mbm_data
+    shipped = doc["scenes"][scene]["problems"][file - 1]
+    assert shipped["file"] == file
+    assert shipped["start"] == start and shipped["goal"] == goal       # exact: the YAML's floats
+    layout = doc["scenes"][scene]["objects"]
+    for oid, kind, dims, position, orientation in objects:
+        k = [row[0] for row in layout].index(oid)
+        assert layout[k][1:] == [kind, dims]
+        assert shipped["poses"][k] == position + orientation
+    record = mbm_data.scene_records(scene, robot)[file - 1]
+    assert record.robot == robot and record.file == file
+    assert record.start == tuple(start) and record.goal == tuple(goal)

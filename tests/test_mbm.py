@@ -66,17 +66,9 @@ def test_the_data_file_ships_and_names_its_source():
 
 @pytest.mark.parametrize("scene,file,start,goal,objects", HAND_TRANSCRIBED, ids=lambda v: str(v)[:20])
 def test_shipped_problems_equal_the_yaml(scene, file, start, goal, objects):
-    doc = json.loads(mbm_data.DATA_FILE.read_text())
-    shipped = doc["scenes"][scene]["problems"][file - 1]
-    assert shipped["file"] == file
-    assert shipped["start"] == start and shipped["goal"] == goal       # exact: the YAML's floats
-    layout = doc["scenes"][scene]["objects"]
-    for oid, kind, dims, position, orientation in objects:
-        k = [row[0] for row in layout].index(oid)
-        assert layout[k][1:] == [kind, dims]
-        assert shipped["poses"][k] == position + orientation
-    record = mbm_data.scene_records(scene)[file - 1]
-    assert record.start == tuple(start) and record.goal == tuple(goal)
+    from tests.helpers import assert_problem_equals_yaml
+    assert_problem_equals_yaml(json.loads(mbm_data.DATA_FILE.read_text()), "panda", scene, file, start, goal,
+                               objects)
 
 
 def test_moveit_primitives_become_obstacles():

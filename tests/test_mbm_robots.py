@@ -136,19 +136,8 @@ def test_the_robots_facts():
 
 @pytest.mark.parametrize("robot,scene,file,start,goal,objects", HAND_TRANSCRIBED, ids=lambda v: str(v)[:20])
 def test_shipped_problems_equal_the_yaml(robot, scene, file, start, goal, objects):
-    doc = _doc(robot)
-    shipped = doc["scenes"][scene]["problems"][file - 1]
-    assert shipped["file"] == file
-    assert shipped["start"] == start and shipped["goal"] == goal       # exact: the YAML's floats
-    layout = doc["scenes"][scene]["objects"]
-    for oid, kind, dims, position, orientation in objects:
-        k = [row[0] for row in layout].index(oid)
-        assert layout[k][1:] == [kind, dims]
-        assert shipped["poses"][k] == position + orientation
-    record = mbm_data.scene_records(scene, robot)[file - 1]
-    assert record.robot == robot and record.file == file
-    assert record.start == tuple(start) and record.goal == tuple(goal)
-    assert len(record.obstacles) == len(layout)
+    from tests.helpers import assert_problem_equals_yaml
+    assert_problem_equals_yaml(_doc(robot), robot, scene, file, start, goal, objects)
 
 
 def test_object_poses_are_composed_with_the_primitive_poses():
