@@ -47,3 +47,14 @@ def assert_problem_equals_yaml(doc: dict, robot: str, scene: str, file: int, sta
     record = mbm_data.scene_records(scene, robot)[file - 1]
     assert record.robot == robot and record.file == file
     assert record.start == tuple(start) and record.goal == tuple(goal)
+
+
+def solve_job_dying_on_problem_one(job: tuple):
+    """The dataset's ``_solve_job``, except that the worker planning problem 1 is killed (SIGKILL)."""
+    import os
+    import signal
+
+    from train.tree.data import solve_problem
+    if job[1] == 1:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return solve_problem(*job)

@@ -372,7 +372,8 @@ def memory_bytes() -> int:
 
 #: Flags a resumed run may change: the step budget, where and how it runs, what it reports.
 RESUME_FREE_FLAGS = ("total_steps", "resume", "overwrite", "ship", "threads", "progress", "out", "device",
-                     "parallel", "modules")
+                     "parallel", "modules",
+                     "hyperparams")      # the file's path (the checkout may have moved); its values are compared
 
 
 def run_config(args: RLArgs) -> dict[str, Any]:

@@ -23,6 +23,8 @@ version (:mod:`gnn_mp_envs.utils.npz`).
 
 from __future__ import annotations
 
+from concurrent.futures.process import BrokenProcessPool
+
 import json
 import logging
 from dataclasses import asdict, dataclass
@@ -232,6 +234,11 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
         else:
             for i in indices:
                 finished(solve_problem(config, i, checkpoint))
+    except BrokenProcessPool:            # a worker process or Ray actor was killed (a signal, out of memory)
+        from train.benchmark.args import BenchmarkError
+        raise BenchmarkError(f"a worker died while planning the {config.task} training problems ({len(solved)} of "
+                             f"{config.problems} planned; no dataset was written): rerun, with fewer --workers if "
+                             "memory ran out") from None
     finally:
         bar.close()
         for env, _ in _SOLVERS.values():
