@@ -173,12 +173,16 @@ register_sampler("cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "cva
                  settings=None, learned=True)
 register_sampler("gnn-cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn-cvae"),
                  "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True)
-for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum and arm"),
+for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum, arm and panda-mbm"),
                              ("rl-sac", "SB3 SAC", "no shipped weights"),
                              ("rl-ppo-torchrl", "TorchRL PPO", "shipped for pendulum and arm")):
     register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),
                      f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
                      settings=("uniform_mix", "deterministic", "proposals"), learned=True)
+register_sampler("gnn-pick", _lazy("agents.rl.sampler", "load_rl_sampler", "gnn-pick"),
+                 "the shipped rl-ppo picker's candidates, picked by its supervised scorer prior alone (what RL adds "
+                 "over its prior; tasks whose picker has one: pendulum)",
+                 settings=("uniform_mix", "deterministic", "proposals"), learned=True)
 
 
 __all__ = ["SAMPLERS", "SamplerEntry", "available_samplers", "descriptions", "load_sampler", "register_sampler"]

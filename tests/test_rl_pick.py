@@ -420,3 +420,21 @@ def test_prior_flags_are_refused_where_they_cannot_work(capsys):
     assert args.prior is None and args.candidates == 8 and args.n_envs == 16
     args = parse(["--task", "pendulum"])                # the task's YAML file: the prior picker
     assert args.prior.name == "gnn_pendulum.pt" and args.candidates == 20 and args.pi_arch == []
+
+
+def test_gnn_pick_scores_the_pickers_candidates_by_its_prior_alone():
+    """`gnn-pick` (the prior-only row): the shipped pendulum picker's candidate sets, scored by the
+    supervised scorer prior it carries (the features' last column), not by the policy; a picker
+    without a prior (maze2d's) is refused in one line."""
+    from agents.registry import load_sampler
+    env, obs, _ = grown_env("pendulum", 40)
+    prior_only = load_sampler("gnn-pick", task="pendulum", seed=3)
+    policy = load_sampler("rl-ppo", task="pendulum", seed=3)
+    cands, feats = prior_only.candidate_set.propose(obs, np.random.default_rng(0))
+    _, same = policy.candidate_set.propose(obs, np.random.default_rng(0))
+    assert np.array_equal(feats, same)                          # the same candidates and features
+    assert np.array_equal(prior_only.logits(obs, feats), feats[:, -1])
+    assert not np.allclose(policy.logits(obs, feats), feats[:, -1])
+    with pytest.raises(ValueError, match="without a candidate prior"):
+        load_sampler("gnn-pick", task="maze2d", seed=0)
+    env.close()

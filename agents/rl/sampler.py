@@ -52,6 +52,8 @@ RL_SAMPLERS: dict[str, tuple[str, ...]] = {"rl-ppo": ("rl/sb3-ppo", "rl/sb3-ppo-
 TRAIN_FLAGS: dict[str, str] = {"rl-ppo": "", "rl-sac": " --algo sac --action box", "rl-ppo-torchrl": " --lib torchrl"}
 #: checkpoint kind -> sampler name
 SAMPLER_OF_KIND = {kind: name for name, kinds in RL_SAMPLERS.items() for kind in kinds}
+#: prior-only sampler -> the picker whose candidates and supervised prior it uses (no weights of its own)
+PRIOR_OF = {"gnn-pick": "rl-ppo"}
 
 
 class RLSampler(ModelSampler):
@@ -325,7 +327,7 @@ class PickSampler(ModelSampler):
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: PickPolicy,
                  view_nodes: int, candidates: Mapping[str, Any], uniform_mix: float = 0.0, goal_bias: float = 0.0,
-                 deterministic: bool = False, proposals: int = 1) -> None:
+                 deterministic: bool = False, proposals: int = 1, prior_only: bool = False) -> None:
         config = dict(candidates)
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=config.get("periodic"), proposals=proposals)
@@ -338,6 +340,10 @@ class PickSampler(ModelSampler):
         self.deterministic = boolean_setting("deterministic", deterministic)
         self._picked: int | None = None
         self._twin = None if policy.reads_tree else numpy_pick_layers(policy)
+        #: Pick by the candidate prior's logits alone (the ``gnn-pick`` row: what RL adds over its prior).
+        self.prior_only = bool(prior_only)
+        if self.prior_only and self.candidate_set.prior is None:
+            raise ValueError("this picker was trained without a candidate prior: there is no prior to pick by")
 
     def new_prior(self):
         """A fresh copy of the candidate prior the policy was trained with (its own caches), rebuilt from
@@ -365,7 +371,10 @@ class PickSampler(ModelSampler):
 
     def logits(self, obs: Mapping, features: np.ndarray) -> np.ndarray:
         """The policy's logits ``(K,)`` for one full observation and its candidates' features (a
-        policy without a tree context runs as its numpy twin, :func:`numpy_pick_logits`)."""
+        policy without a tree context runs as its numpy twin, :func:`numpy_pick_logits`; with
+        ``prior_only``, the prior's logits, the features' last column)."""
+        if self.prior_only:
+            return features[:, -1].copy()
         if self._twin is not None:
             return numpy_pick_logits(self._twin, features)
         inputs = {"candidate_features": torch.from_numpy(features)}
@@ -420,9 +429,11 @@ def save_policy(path: str | Path, policy: RLPolicy, kind: str, ctor_args: Mappin
 def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray, *, seed: int | None = None,
                             kind: str | tuple[str, ...] | None = None, task: str | None = None,
                             uniform_mix: float | None = None, deterministic: bool = False,
-                            proposals: int | None = None, goal_bias: float | None = None) -> RLSampler | PickSampler:
+                            proposals: int | None = None, goal_bias: float | None = None,
+                            prior_only: bool = False) -> RLSampler | PickSampler:
     """The sampler of a policy checkpoint: an :class:`RLSampler` (continuous actions) or a
-    :class:`PickSampler` (candidate selection); settings None: the file's."""
+    :class:`PickSampler` (candidate selection; ``prior_only``: picking by its candidate prior alone);
+    settings None: the file's."""
     policy, record = load_checkpoint(path, expected_kind=kind or [*POLICY_KINDS, *PICK_KINDS])
     meta, spec = record["meta"], record["obs_spec"] or {}
     check_trained_for(path, meta.get("task"), task)
@@ -436,7 +447,9 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
         goal_bias = float(stored.get("goal_bias", 0.0)) if goal_bias is None else goal_bias
         return PickSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
                            candidates=spec["candidates"], uniform_mix=uniform_mix, goal_bias=goal_bias,
-                           deterministic=deterministic, proposals=proposals)
+                           deterministic=deterministic, proposals=proposals, prior_only=prior_only)
+    if prior_only:
+        raise ValueError(f"{path}: a continuous policy has no candidate prior (a picker's checkpoint is needed)")
     if goal_bias not in (None, 0.0):
         raise ValueError("goal_bias is a setting of candidate pickers; a continuous policy has uniform_mix")
     return RLSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
@@ -450,10 +463,12 @@ def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | No
                     goal_bias: float | None = None) -> RLSampler | PickSampler:
     """The registry factory of ``rl-ppo``, ``rl-sac`` and ``rl-ppo-torchrl`` (the registry applies the
     thread policy: measured 0.8 ms per ``act`` with 1 thread against 12 ms with 2)."""
-    path = resolve_checkpoint(name, task, checkpoint, f"gnn-mp train rl{TRAIN_FLAGS[name]} --task {task}")
-    return sampler_from_checkpoint(path, low, high, seed=seed, kind=RL_SAMPLERS[name], task=task,
+    source = PRIOR_OF.get(name, name)           # gnn-pick: the shipped rl-ppo picker's candidates and prior
+    path = resolve_checkpoint(source, task, checkpoint, f"gnn-mp train rl{TRAIN_FLAGS[source]} --task {task}")
+    kinds = tuple(k for k in RL_SAMPLERS[source] if k in PICK_KINDS) if name in PRIOR_OF else RL_SAMPLERS[name]
+    return sampler_from_checkpoint(path, low, high, seed=seed, kind=kinds, task=task,
                                    uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
-                                   goal_bias=goal_bias)
+                                   goal_bias=goal_bias, prior_only=name in PRIOR_OF)
 
 
-__all__ = ["PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]
+__all__ = ["PRIOR_OF", "PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]
