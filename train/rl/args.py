@@ -356,7 +356,7 @@ def init_from_path(value: str | Path, task: str, flag: str = "--init-from") -> P
     from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
     path = Path(value)
     if path.is_file():
-        return path
+        return path.resolve()           # stored absolute: a resumed run or PPO.load elsewhere finds it
     if "/" not in str(value) and shipped_checkpoint(str(value), task).is_file():
         return shipped_checkpoint(str(value), task)
     names = sorted(p.stem[:-len(task) - 1] for p in SHIPPED_DIR.glob(f"*_{task}.pt"))

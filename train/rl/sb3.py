@@ -87,6 +87,32 @@ def policy_kwargs_of(args: RLArgs) -> dict:
     return kwargs
 
 
+def load_weights_only(model: PPO | SAC, path: Path) -> None:
+    """Continue ``model`` from an SB3 ``.zip`` without unpickling anything: the policy's and the
+    optimizers' tensors (SB3 reads its ``.pth`` members with ``weights_only=True``) and the step
+    count from the plain JSON of its ``data`` member; the pickled entries of ``data`` (policy
+    keywords, spaces, schedules), which could run code, are never loaded: the model was built from
+    the run's own flags, checked against its ``config.json``."""
+    import json
+    import zipfile
+
+    from stable_baselines3.common.save_util import load_from_zip_file, recursive_setattr
+    try:
+        _, params, variables = load_from_zip_file(path, device=model.device, load_data=False)
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+        model.set_parameters(params, exact_match=True, device=model.device)
+        for name, tensor in (variables or {}).items():     # SAC's entropy coefficient: a tensor, as SB3's load does
+            recursive_setattr(model, f"{name}.data", tensor.data)
+    except (OSError, ValueError, KeyError, RuntimeError, zipfile.BadZipFile) as exc:
+        raise RunError(f"--resume: {path} does not hold this run's model ({str(exc).splitlines()[0]})") from None
+    steps = data.get("num_timesteps")
+    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+        raise RunError(f"--resume: {path} holds no step count")
+    model.num_timesteps = steps
+    model._n_updates = int(data.get("_n_updates", 0)) if isinstance(data.get("_n_updates", 0), int) else 0
+
+
 def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:
     """PPO or SAC over the env with the tree encoder (or the candidate extractor) as features extractor."""
     policy_kwargs = policy_kwargs_of(args)
@@ -124,9 +150,8 @@ def train(args: RLArgs) -> RunResult:
 
     # 2. the agent (or the saved one, --resume), the optional warm start of its encoder(s)
     if args.resume:
-        cls = PPO if args.algo == "ppo" else SAC
-        model = cls.load(run.path("model.zip"), env=vec_env, device=torch_device(args.device),
-                         tensorboard_log=str(run.path("tb")))
+        model = build_model(args, vec_env, run.dir)          # the run's architecture, from its (checked) flags
+        load_weights_only(model, run.path("model.zip"))
         print(f"resuming {run.dir} at step {model.num_timesteps:,}")
     else:
         model = build_model(args, vec_env, run.dir)
