@@ -49,9 +49,9 @@ SAMPLER_IN_KEYS: tuple[str, ...] = OBSERVATION_KEYS
 SAMPLER_OUT_KEYS: tuple[str, ...] = ("action",)
 #: Threads of torch and of numpy's BLAS in a process that runs a sampler's per-step forward. A
 #: step's forward is a few dozen small operations, where a second thread only adds synchronisation:
-#: measured on the 2-core machine, arm gnn-cvae's decode took ~15 ms per step with torch's default
-#: of 2 threads and ~0.2 ms with 1, and two benchmark workers running the numpy GNN engines with
-#: OpenBLAS's default thread pools were 2.1x slower than with one BLAS thread each (issue #17).
+#: torch's default thread pool costs far more than it saves on one small forward per step, and
+#: numpy's BLAS pools of two benchmark workers compete for the same cores (``python -m
+#: tools.bench_sampler`` measures a sampler's step with either setting).
 #: ``load_sampler`` applies it; ``threads=None`` opts out.
 INFERENCE_THREADS = 1
 

@@ -6,7 +6,7 @@ message-passing layer its parent's and neighbours' cached sender terms, two smal
 LayerNorm: a few thousand multiply-adds and a few hundred ``erf``s. In numpy that is ~90 small
 array operations per batch of new nodes (~0.15 ms of dispatch, about as much as the arithmetic
 of a dozen nodes), which made the GNN samplers slower than uniform sampling in wall time on
-cheap planning steps (issue #17). Here it is one compiled function per batch of new nodes, in
+cheap planning steps. Here it is one compiled function per batch of new nodes, in
 float64, the math of :class:`agents.tree.models.TreeGNN` (``tests/test_tree_engine.py`` compares
 the engine's outputs with the torch model's to 1e-5): the k-NN and the messages row by row, the
 products with the weight matrices one BLAS call per layer for the whole batch, the GELUs' ``erf``

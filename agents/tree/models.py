@@ -136,7 +136,7 @@ class TreeGNN(nn.Module):
         use_parent / use_knn / use_context: ablations (message sources, global tree context).
         relative_inputs: read no absolute position: a node's inputs are the environment's features
             (its offsets to start and goal) only, the context's start and goal their difference. The
-            model is then unchanged by moving a whole problem (issue #18: features that generalise).
+            model is then unchanged by moving a whole problem (features that generalise).
     """
 
     def __init__(self, state_dim: int, hidden_channels: int = 64, num_layers: int = 2, knn: int = 6, *,

@@ -93,8 +93,9 @@ def _wrapped(theta: float) -> float:
 def _steer_loop(th0: float, om0: float, tth: float, tom: float, controls: np.ndarray, steps: int
                 ) -> tuple[int, int, bool, float, float]:
     """:meth:`PendulumProblem.steer`'s arithmetic in one loop, the same operations in the same order
-    as :func:`integrate` and the steer's floats (compiled by numba when it is installed: 60 -> 7 us
-    per steer, measured at `e9339ee`; ``tests/test_envs.py`` holds the two to equality).
+    as :func:`integrate` and the steer's floats (compiled by numba: a steer's dozens of small
+    operations cost more in numpy calls than in arithmetic; ``python -m tools.bench_env`` measures
+    it, ``tests/test_envs.py`` holds the two to equality).
     Returns ``(best control, checks counted, valid, end angle wrapped, end speed)``."""
     h = EDGE_DURATION / steps
     half, sixth = 0.5 * h, h / 6.0

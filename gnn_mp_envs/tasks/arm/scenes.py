@@ -9,7 +9,7 @@ family's ``layout`` names the generator in :data:`LAYOUTS` that turns the ranges
 (``z = 0``), facing ``+x``.
 
 ``train-a`` and ``train-b`` are the training families; ``test`` is held out: different
-obstacle types (cylinders, a thin wall, a closed cubby) and counts. Beyond them (issue #18):
+obstacle types (cylinders, a thin wall, a closed cubby) and counts. Beyond them:
 ``pillars`` is a validation kind held out from training (for decisions), and ``tall-clutter``,
 ``shelves`` and ``bins`` are out-of-distribution test kinds, layouts no generator above makes
 (never trained or tuned on).
