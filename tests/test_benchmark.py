@@ -241,3 +241,16 @@ def test_every_suite_entry_fits_its_split():
             finally:
                 task.close()
             assert size is None or entry.problems <= size, (name, entry.name, entry.problems, size)
+
+
+def test_box_plots_show_wall_time_and_colour_rows_by_kind(tmp_path):
+    """The box plots have a wall-time panel beside the paper's three, the success rates in the
+    title, and one colour per kind of sampler; an .svg suffix writes SVG."""
+    from train.benchmark.plots import KIND_COLOURS, plot_report, sampler_kind
+    report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "goal-bias"]))
+    plot_report(report, tmp_path / "boxes.svg")
+    svg = (tmp_path / "boxes.svg").read_text()
+    assert svg.lstrip().startswith("<?xml") and "wall time" in svg and "success" in svg
+    assert [sampler_kind(n) for n in ("uniform", "gnn", "rl-ppo", "ompl-rrt", "gnn-pick")] == \
+        ["classical", "supervised", "rl", "ompl", "supervised"]
+    assert KIND_COLOURS["classical"].lstrip("#") in svg or KIND_COLOURS["classical"].upper().lstrip("#") in svg

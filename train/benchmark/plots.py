@@ -12,8 +12,31 @@ from train.benchmark.args import BenchmarkArgs, env_kwargs_for, is_ompl, task_sp
 from train.benchmark.runs import checkpoint_of, run_episode
 
 
+#: Box colours by the kind of sampler: classical, supervised (learned from planned trees), RL, OMPL.
+KIND_COLOURS = {"classical": "#d9d9d9", "supervised": "#9ecae1", "rl": "#fdae6b", "ompl": "#a1d99b"}
+
+
+def sampler_kind(name: str) -> str:
+    """The kind of a benchmark row, for its colour: ``ompl-*``, ``rl-*``, the classical samplers, or
+    a learned (supervised) one."""
+    if name.startswith("ompl-"):
+        return "ompl"
+    if name.startswith("rl-"):
+        return "rl"
+    return "classical" if name in ("uniform", "goal-bias") else "supervised"
+
+
+def _value(run: dict[str, Any], metric: str) -> float | None:
+    """A run's figure for a panel (wall time in milliseconds)."""
+    if metric == "wall_time_ms":
+        return None if run.get("wall_time_s") is None else 1000.0 * run["wall_time_s"]
+    return run[metric]
+
+
 def plot_report(report: dict[str, Any], path: Path) -> None:
-    """Box plots per sampler in the style of the paper: nodes expanded, collision checks, path length.
+    """Box plots per sampler in the style of the paper: nodes expanded, collision checks, path length,
+    and the wall time (inference included); boxes coloured by the kind of sampler, success rates in
+    the title; the format follows the file's suffix (``.png``, ``.svg``, ``.pdf``).
 
     Counts that spread over more than a decade and a half get a log axis (a learned row's box
     would otherwise be squashed under uniform's long tail)."""
@@ -26,7 +49,8 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
     unit = spec.path_unit if spec is not None else "state-space length"
     panels = [("nodes_expanded", "nodes expanded", "nodes", False),
               ("collision_checks", "collision checks", "checks", False),
-              ("path_length", "path length (solved runs)", unit, True)]
+              ("path_length", "path length (solved runs)", unit, True),
+              ("wall_time_ms", "wall time, inference included", "ms", False)]
     names = list(report["results"])
     width = max(3.4, 0.45 * len(names) + 1.2)
     fig, axes = plt.subplots(1, len(panels), figsize=(width * len(panels), 3.9), squeeze=False)
@@ -34,9 +58,12 @@ def plot_report(report: dict[str, Any], path: Path) -> None:
         data = []
         for name in names:
             runs = report["runs"][name]
-            values = [r[metric] for r in runs if r[metric] is not None and (r["success"] or not success_only)]
+            values = [_value(r, metric) for r in runs if _value(r, metric) is not None and
+                      (r["success"] or not success_only)]
             data.append(values if values else [np.nan])
-        ax.boxplot(data, showfliers=True)
+        boxes = ax.boxplot(data, showfliers=True, patch_artist=True)
+        for box, name in zip(boxes["boxes"], names):
+            box.set_facecolor(KIND_COLOURS[sampler_kind(name)])
         ax.set_xticks(range(1, len(names) + 1), names, rotation=30, ha="right")
         finite = [v for d in data for v in d if np.isfinite(v) and v > 0]
         if not success_only and finite and max(finite) / min(finite) > 30:
