@@ -712,3 +712,40 @@ def test_rl_sampler_target_map_is_policy_action_to_state_bit_for_bit():
             break
     assert wrapped > 10         # the wrap was exercised
     env.close()
+
+
+def test_torchrl_training_on_ray_actors_writes_a_local_runs_directory(tmp_path):
+    """`train rl --lib torchrl --ray` (a local Ray instance, two actors collecting) runs to the end
+    and writes the files a local run writes; the learner's policy is what the actors step."""
+    pytest.importorskip("ray")
+    from train.rl.torchrl import train as train_torchrl
+    runs = {}
+    for mode, extra in (("local", {}), ("ray", {"ray": "local", "ray_workers": 2})):
+        args = tiny_args(tmp_path, "torchrl", "ppo", "maze2d", out=tmp_path / mode, eval_every=128, **extra)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = train_torchrl(args)
+        assert result.steps >= 256
+        runs[mode] = sorted(p.name for p in (tmp_path / mode).iterdir())
+    assert runs["ray"] == runs["local"] and "best.pt" in runs["ray"] and "training_state.pt" in runs["ray"]
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--lib", "torchrl", "--ray", "127.0.0.1:1"], "cannot reach Ray at 127.0.0.1:1"),
+    (["--ray"], "--lib torchrl"),
+    (["--lib", "torchrl", "--ray", "--parallel"], "choose one"),
+    (["--lib", "torchrl", "--ray", "--ray-workers", "8", "--n-envs", "4"], "--ray-workers 8 > --n-envs 4"),
+])
+def test_train_rl_ray_flags_are_refused_in_one_line_before_any_work(argv, fragment, tmp_path, capsys):
+    """An unreachable Ray address fails at once (a socket check, not Ray's minutes of retries), and
+    --ray combinations that cannot work are one line; no run directory is made."""
+    import time as _time
+
+    from train.cli import main
+    started = _time.perf_counter()
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "rl", "--task", "maze2d", "--out", str(tmp_path / "run"), *argv])
+    assert exc.value.code == 2 and _time.perf_counter() - started < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
+    assert not (tmp_path / "run").exists()

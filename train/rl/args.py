@@ -81,6 +81,11 @@ class RLArgs(RunFlags):
     # --- environment (make_rl_env)
     n_envs: int = arg(4, "environments stepped together (vectorised)", parse=worker_count)
     parallel: bool = arg(False, "one process per env (SB3 SubprocVecEnv / TorchRL ParallelEnv; default: serial)")
+    ray: str | None = arg(None, "--lib torchrl: collect experience on --ray-workers Ray actors (TorchRL's "
+                          "RayCollector), the learner here: no ADDRESS starts a local Ray instance; HOST:PORT, "
+                          "ray://HOST:10001 or auto joins a running cluster", metavar="ADDRESS", const="local")
+    ray_workers: int = arg(2, "--ray: Ray actors collecting experience, each stepping its share of --n-envs",
+                           parse=worker_count)
     view_nodes: int = arg(_ENV_DEFAULTS["view_nodes"], "rows of the tree view the policy sees (roots + most recent "
                           "nodes)", parse=positive_int)
     max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)", parse=positive_int)
@@ -282,6 +287,20 @@ def check_args(args: RLArgs) -> None:
         raise ValueError(f"--device must be cpu, cuda, cuda:N or auto, got {args.device!r}")
     if args.resume and args.out is None:
         raise ValueError("--resume needs --out RUN_DIR (the run to continue)")
+    if args.ray is not None:
+        if args.lib != "torchrl":
+            raise ValueError("--ray collects with TorchRL's RayCollector: use --lib torchrl")
+        if args.parallel:
+            raise ValueError("--ray and --parallel both place the envs in other processes: choose one")
+        if args.ray_workers > args.n_envs:
+            raise ValueError(f"--ray-workers {args.ray_workers} > --n-envs {args.n_envs}: every actor steps at "
+                             "least one env")
+        if args.ray != "local":
+            from train.benchmark.args import BenchmarkError, check_ray_address
+            try:
+                check_ray_address(args.ray)
+            except BenchmarkError as exc:
+                raise ValueError(str(exc)) from None
     if args.clip_range >= 1.0:
         raise ValueError(f"--clip-range must be in (0, 1), got {args.clip_range}")
     if not args.net_arch or any(w < 1 or w > 65536 for w in args.net_arch):
@@ -372,7 +391,7 @@ def memory_bytes() -> int:
 
 #: Flags a resumed run may change: the step budget, where and how it runs, what it reports.
 RESUME_FREE_FLAGS = ("total_steps", "resume", "overwrite", "ship", "threads", "progress", "out", "device",
-                     "parallel", "modules",
+                     "parallel", "modules", "ray", "ray_workers",
                      "hyperparams")      # the file's path (the checkout may have moved); its values are compared
 
 

@@ -101,6 +101,56 @@ def make_batched_env(args: RLArgs):
     return env
 
 
+def make_env_group(args: RLArgs, seeds: list[int]) -> SerialEnv:
+    """The envs of seeds ``seeds`` stepped together (one Ray actor's share of ``--n-envs``)."""
+    return SerialEnv(len(seeds), [partial(make_env, args, s) for s in seeds])
+
+
+def make_collector(args: RLArgs, env, actor, frames_per_batch: int, total_frames: int):
+    """TorchRL's ``Collector`` over the local batched env, or with ``--ray`` a ``RayCollector``:
+    ``--ray-workers`` actors, actor ``w`` stepping envs ``w, w + workers, ...`` of ``--n-envs`` (the same
+    seeds as a local run), a synchronous batch of ``frames_per_batch`` frames, the policy's weights
+    sent to the actors after every update."""
+    if args.ray is None:
+        return Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
+                         auto_register_policy_transforms=False)
+    from torchrl.collectors.distributed import RayCollector
+    local = args.ray == "local"
+    groups = [[args.seed + i for i in range(w, args.n_envs, args.ray_workers)] for w in range(args.ray_workers)]
+    init = {"address": None if local else args.ray, "include_dashboard": False, "log_to_driver": False,
+            "configure_logging": False, **({"num_cpus": args.ray_workers} if local else {})}
+    try:
+        collector = RayCollector([partial(make_env_group, args, g) for g in groups], actor,
+                                 frames_per_batch=frames_per_batch, total_frames=total_frames, sync=True,
+                                 ray_init_config=init)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise RunError(f"--ray {args.ray}: cannot start the collectors ({str(exc).splitlines()[0]})") from None
+    collector.update_policy_weights_(actor)    # the actors start from this policy (a resumed run's too)
+    return collector
+
+
+def collected(collector, args: RLArgs, state_path):
+    """The collector's batches; with ``--ray``, an actor that dies (killed, out of memory, its node
+    lost) ends the run in one line naming the checkpoint that ``--resume`` continues."""
+    iterator = iter(collector)
+    while True:
+        try:
+            batch = next(iterator)
+        except StopIteration:
+            return
+        except Exception as exc:
+            if args.ray is None or not type(exc).__module__.startswith("ray"):
+                raise
+            kept = f"{state_path} is kept: continue with --resume" if state_path.is_file() else \
+                "no evaluation had saved a checkpoint yet"
+            try:
+                collector.shutdown()
+            except Exception:           # the actors are already gone
+                pass
+            raise RunError(f"--ray: a collector actor died ({type(exc).__name__}); {kept}") from None
+        yield batch
+
+
 def train(args: RLArgs) -> RunResult:
     check_args(args)
     if args.algo != "ppo":
@@ -121,7 +171,7 @@ def train(args: RLArgs) -> RunResult:
     probe = make_rl_env(args.task, split="train", **args.env_kwargs())
     observation_space, action_space = probe.observation_space, probe.action_space
     probe.close()
-    env = make_batched_env(args)
+    env = make_batched_env(args) if args.ray is None else None      # --ray: the actors build their own
 
     # 2. actor and critic, each over its own encoder: a categorical over the candidates (pick) or a
     #    TanhNormal on [-1, 1] over a TreeEncoder (box)
@@ -154,8 +204,7 @@ def train(args: RLArgs) -> RunResult:
         optimiser_state, steps = state["optimiser"], int(state["steps"])
         print(f"resuming {run.dir} at step {steps:,}")
     total_frames = max(total_frames - steps, frames_per_batch)
-    collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
-                          auto_register_policy_transforms=False)
+    collector = make_collector(args, env, actor, frames_per_batch, total_frames)
     # deactivate_vmap: the graph conversion has data-dependent shapes, which vmap cannot batch
     advantage = GAE(gamma=args.gamma, lmbda=args.gae_lambda, value_network=value, average_gae=True,
                     deactivate_vmap=True)
@@ -184,7 +233,7 @@ def train(args: RLArgs) -> RunResult:
         row = evaluator(steps)
         bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
                   f"({row['eval_wall_s']:.0f} s)")
-    for batch in collector:
+    for batch in collected(collector, args, state_path):
         if steps >= args.total_steps:
             break
         keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
@@ -221,7 +270,7 @@ def train(args: RLArgs) -> RunResult:
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(steps)
     save_state(steps)
-    if not env.is_closed:
+    if env is not None and not env.is_closed:
         env.close()
     keep_threads(args.threads)
     print(f"trained {steps:,} steps in {tqdm.format_interval(train_time)} (batches of "
