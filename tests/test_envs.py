@@ -266,3 +266,24 @@ def test_compiled_pendulum_steer_is_the_python_steer_bit_for_bit():
                 assert fast.state.tobytes() == slow.state.tobytes() and fast.cost == slow.cost
                 assert fast.control.tobytes() == slow.control.tobytes(), (a, b)
     assert outcomes == {True, False}      # both valid and blocked edges were compared
+
+
+@pytest.mark.parametrize("env_id", ["GNNMP/PandaMBM-v0", "GNNMP/ArmBiRRT-v0"])
+def test_an_empty_scene_name_is_refused_not_the_default(env_id):
+    """``scene=""`` is an unknown scene (it used to fall back to the split's default scene)."""
+    import gymnasium as gym
+    with pytest.raises(ValueError, match="unknown scene ''"):
+        gym.make(env_id, scene="", disable_env_checker=True)
+
+
+@pytest.mark.parametrize("bad", ["0.5", True, float("nan"), -1.0, None])
+def test_a_pendulum_problem_dict_takes_a_number_as_max_torque(bad):
+    """``max_torque`` of a hand-made pendulum problem is a finite positive number: a string or a
+    bool (which float() would take) is refused in one line."""
+    import gymnasium as gym
+
+    from gnn_mp_envs.core.problem import InvalidProblemError
+    env = gym.make("GNNMP/PendulumRRT-v0", disable_env_checker=True)
+    with pytest.raises(InvalidProblemError, match="max_torque"):
+        env.reset(options={"problem": {"start": [3.0, 0.0], "goal": [0.0, 0.0], "max_torque": bad}})
+    env.reset(options={"problem": {"start": [3.0, 0.0], "goal": [0.0, 0.0], "max_torque": 2}})

@@ -129,7 +129,7 @@ class TreePlanningEnv(gym.Env):
                 raise ValueError(f"scene={scene!r} and task_kwargs['scene']={task_kwargs['scene']!r} disagree")
             # Held-out problems come from the held-out scene family, training and validation
             # problems from the training families, unless a scene is named.
-            task_kwargs.setdefault("scene", scene or spec.default_scene(split))
+            task_kwargs.setdefault("scene", spec.default_scene(split) if scene is None else scene)
             if task_kwargs["scene"] not in spec.scenes:
                 raise ValueError(f"unknown scene {task_kwargs['scene']!r} for task {task!r}; "
                                  f"known: {', '.join(spec.scenes)}")

@@ -146,7 +146,9 @@ class PendulumProblem(Problem):
         super().__init__(start, goal, low=np.array([-np.pi, -MAX_SPEED]),
                          high=np.array([np.pi, MAX_SPEED]), step_size=EDGE_DURATION,
                          resolution=EDGE_DURATION / INTEGRATION_STEPS)
-        if not (math.isfinite(float(max_torque)) and float(max_torque) > 0):
+        # a number, not a string or a bool that float() would take ("0.5", True)
+        if isinstance(max_torque, (bool, np.bool_)) or not isinstance(max_torque, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(float(max_torque)) and float(max_torque) > 0):
             raise InvalidProblemError(f"max_torque must be a finite number > 0, got {max_torque!r}")
         self.max_torque = float(max_torque)
         self.start = self.normalize(self.start)
