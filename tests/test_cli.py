@@ -127,6 +127,9 @@ def test_bad_input_exits_with_one_line(args: list[str], fragments: list[str]):
     (["benchmark", "--problems", "1", "--plot", "boxes"], ["--plot", "suffix"]),
     (["benchmark", "--problems", "1", "--plot", "boxes.txt"], ["--plot", "suffix"]),
     (["critical", "evaluate", "--plot", "fig.txt"], ["--plot", "suffix"]),
+    # one task's flags with --suite are refused, not ignored
+    (["benchmark", "--suite", "smoke", "--task", "arm"], ["--suite smoke", "--task"]),
+    (["benchmark", "--suite", "smoke", "--problems", "3", "--samplers", "gnn"], ["--samplers", "--problems"]),
     # an empty path is refused, not taken as the current directory
     (["benchmark", "--render", ""], ["--render", "expected a path"]),
     (["benchmark", "--out", ""], ["--out", "expected a path"]),

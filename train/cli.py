@@ -139,6 +139,11 @@ def cmd_samplers() -> int:
     return 0
 
 
+#: One-task flags a suite would not use (it keeps --seed, --workers, --render and --import).
+SUITE_IGNORED = ("task", "samplers", "problems", "split", "max_nodes", "scene", "checker", "ray", "json", "plot",
+                 "ompl_log", "ompl_time_limit", "checkpoints", "settings")
+
+
 def cmd_benchmark(ns: argparse.Namespace) -> int:
     from train import benchmark as bm
     from train.benchmark.suites import SuiteOptions
@@ -152,6 +157,17 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         # a one-task run writes only what --json / --plot / --render ask for: refuse rather than write nothing
         return fail("benchmark: --out, --no-ompl and --no-render apply to --suite only; for one task give "
                     "--json FILE, --plot FILE or --render DIR (OMPL rows: --samplers ompl-rrt,...)")
+    if suite.suite is not None:
+        # a suite names its own tasks, samplers, problems and outputs: refuse one task's flags, not ignore them
+        import dataclasses
+        defaults = bm.BenchmarkArgs()
+        ignored = [f"--{f.name.replace('_', '-')}".replace("--checkpoints", "--checkpoint").replace("--settings",
+                                                                                                      "--setting")
+                   for f in dataclasses.fields(bm.BenchmarkArgs)
+                   if f.name in SUITE_IGNORED and getattr(args, f.name) != getattr(defaults, f.name)]
+        if ignored:
+            return fail(f"benchmark: --suite {suite.suite} plans its own tasks, samplers, problems and outputs; "
+                        f"{', '.join(ignored)} apply to one task (drop --suite or those flags)")
     try:
         if suite.suite is not None:
             out = suite.out or SuiteOptions.DEFAULT_OUT
