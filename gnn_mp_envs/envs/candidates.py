@@ -109,8 +109,7 @@ def _ingest_rows(first, parent, tree, states, targets, children, rows0, rows1, s
     """The tree statistics of new observation rows ``first..``: children counts, each node in its
     tree's lists (``*0``: tree 0, ``*1``: tree 1) with its distance to the tree's target (the metric
     of :meth:`CandidateSet._distance`, summed in its order), the node nearest the target (the first of
-    equal distances). Arrays one by one, not in tuples: numba's dispatch of tuples costs more than
-    the work."""
+    equal distances)."""
     d = states.shape[1]
     for r in range(states.shape[0]):
         p = parent[r]
