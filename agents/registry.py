@@ -180,8 +180,8 @@ for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum
                      f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
                      settings=("uniform_mix", "deterministic", "proposals"), learned=True)
 register_sampler("gnn-pick", _lazy("agents.rl.sampler", "load_rl_sampler", "gnn-pick"),
-                 "the shipped rl-ppo picker's candidates, picked by its supervised scorer prior alone (what RL adds "
-                 "over its prior; tasks whose picker has one: pendulum)",
+                 "the shipped rl-ppo picker's candidates, picked by the supervised model alone (what RL adds over "
+                 "it): the picker's own scorer prior, or the task's gnn mixture density",
                  settings=("uniform_mix", "deterministic", "proposals"), learned=True)
 
 

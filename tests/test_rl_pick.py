@@ -424,8 +424,9 @@ def test_prior_flags_are_refused_where_they_cannot_work(capsys):
 
 def test_gnn_pick_scores_the_pickers_candidates_by_its_prior_alone():
     """`gnn-pick` (the prior-only row): the shipped pendulum picker's candidate sets, scored by the
-    supervised scorer prior it carries (the features' last column), not by the policy; a picker
-    without a prior (maze2d's) is refused in one line."""
+    supervised scorer prior it carries (the features' last column), not by the policy. The maze2d
+    picker was trained without a prior: its `gnn-pick` scores the same candidates by the shipped
+    supervised `gnn`'s mixture density; a picker without a prior and no prior given is refused."""
     from agents.registry import load_sampler
     env, obs, _ = grown_env("pendulum", 40)
     prior_only = load_sampler("gnn-pick", task="pendulum", seed=3)
@@ -435,8 +436,22 @@ def test_gnn_pick_scores_the_pickers_candidates_by_its_prior_alone():
     assert np.array_equal(feats, same)                          # the same candidates and features
     assert np.array_equal(prior_only.logits(obs, feats), feats[:, -1])
     assert not np.allclose(policy.logits(obs, feats), feats[:, -1])
+    env.close()
+    from agents.checkpoints import shipped_checkpoint
+    from agents.rl.prior import MixturePrior
+    from agents.rl.sampler import sampler_from_checkpoint
+    env, obs, _ = grown_env("maze2d", 40)
+    prior_only = load_sampler("gnn-pick", task="maze2d", seed=3)
+    policy = load_sampler("rl-ppo", task="maze2d", seed=3)
+    assert isinstance(prior_only.candidate_set.prior, MixturePrior) and policy.candidate_set.prior is None
+    cands, feats = prior_only.candidate_set.propose(obs, np.random.default_rng(0))
+    same, plain = policy.candidate_set.propose(obs, np.random.default_rng(0))
+    assert np.array_equal(cands, same) and np.array_equal(feats[:, :-1], plain)   # + the prior's column
+    expected = MixturePrior.__call__(prior_only.candidate_set.prior, obs, cands.astype(np.float64), 0)
+    np.testing.assert_allclose(prior_only.logits(obs, feats), expected, rtol=1e-5, atol=1e-4)   # float32 column
+    low, high = env.action_space.low, env.action_space.high
     with pytest.raises(ValueError, match="without a candidate prior"):
-        load_sampler("gnn-pick", task="maze2d", seed=0)
+        sampler_from_checkpoint(shipped_checkpoint("rl-ppo", "maze2d"), low, high, task="maze2d", prior_only=True)
     env.close()
 
 

@@ -439,3 +439,48 @@ def test_compiled_gelu_over_many_rows_equals_one_call_per_row():
         whole(flat[:rows * 64 - 3], np.full(rows * 64 + 4, np.nan))     # a length not a multiple of 4, dirty scratch
         per_row(a)
         assert np.array_equal(flat[:rows * 64 - 3], a.reshape(-1)[:rows * 64 - 3])
+
+
+@pytest.mark.parametrize("task,min_nodes", [("maze2d", 200), ("arm", 60)])
+def test_mixture_prior_is_the_torch_models_log_density(task, min_nodes):
+    """``MixturePrior`` (``gnn-pick``'s prior where the picker has none): each candidate's logit is
+    its log-density under the GNN's mixture: the torch model's ``-run_nll`` with the candidates as
+    labels (temperature and sigma scale 1), and a brute-force sum over nodes and Gaussians at the
+    shipped settings."""
+    from agents.rl.prior import MixturePrior
+    model, record = load_checkpoint(shipped_checkpoint("gnn", task), expected_kind="tree/gnn")
+    model = model.double()
+    settings = record["meta"]["sampler"]
+    snapshots = grown(task, min_nodes)
+    rng = np.random.default_rng(0)
+    plain = MixturePrior(model)
+    shipped = MixturePrior(model, settings["temperature"], settings["sigma_scale"])
+    for obs in (snapshots[len(snapshots) // 2], snapshots[-1]):
+        n, nodes, feats, parent, tid = prefix(obs, model)
+        active = int(obs["active_tree"][0])
+        low, high = obs["nodes"][:n].min(0), obs["nodes"][:n].max(0)
+        cands = np.concatenate([low + (high - low) * rng.random((6, model.state_dim)),
+                                obs["nodes"][:2] + 0.01]).astype(np.float64)
+        knn = causal_knn(nodes, tid, model.knn, model.step_scale, model.periodic)
+        K = len(cands)
+        with torch.no_grad():
+            nll = model.run_nll(nodes, feats, parent, tid, knn, torch.as_tensor(obs["start"], dtype=torch.float64)[None],
+                                torch.as_tensor(obs["goal"], dtype=torch.float64)[None], torch.full((K,), n),
+                                torch.full((K,), active), torch.as_tensor(cands))
+        np.testing.assert_allclose(plain(obs, cands, active), -nll.numpy(), rtol=1e-7, atol=1e-6)
+        ref = torch_mixture(model, obs, settings["temperature"])
+        mu = obs["nodes"][:n].astype(np.float64) + ref["offset"][:, active] + ref["shift"]
+        sigma = settings["sigma_scale"] * np.exp(ref["log_sigma"][:, active])
+        periodic = model.periodic.numpy()
+        brute = []
+        for c in cands:
+            total = 0.0
+            for m in range(n):
+                delta = c - mu[m]
+                delta = np.where(periodic, (delta + np.pi) % (2 * np.pi) - np.pi, delta)
+                total += ref["weights"][m] * np.prod(np.exp(-0.5 * (delta / sigma[m]) ** 2) / (np.sqrt(2 * np.pi) * sigma[m]))
+            brute.append(np.log(total) if total > 0 else -np.inf)
+        mine = shipped(obs, cands, active)
+        finite = np.isfinite(brute)
+        assert finite.sum() >= 2
+        np.testing.assert_allclose(mine[finite], np.array(brute)[finite], rtol=1e-7, atol=1e-6)

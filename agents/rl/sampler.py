@@ -29,7 +29,8 @@ are ``agents/checkpoints/<name>_<task>.pt``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Mapping
+from functools import partial
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import torch
@@ -327,11 +328,17 @@ class PickSampler(ModelSampler):
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, policy: PickPolicy,
                  view_nodes: int, candidates: Mapping[str, Any], uniform_mix: float = 0.0, goal_bias: float = 0.0,
-                 deterministic: bool = False, proposals: int = 1, prior_only: bool = False) -> None:
+                 deterministic: bool = False, proposals: int = 1, prior_only: bool = False,
+                 prior: Any = None) -> None:
         config = dict(candidates)
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=config.get("periodic"), proposals=proposals)
         self.policy = policy.eval()
+        #: ``prior`` (a CandidatePrior): scores candidates in place of the policy's own prior (``gnn-pick``
+        #: on a picker trained without one: the task's supervised ``gnn``); only with ``prior_only``.
+        if prior is not None and not prior_only:
+            raise ValueError("an outside candidate prior is only read with prior_only=True (the policy was not trained on it)")
+        self._outside_prior = prior
         self.candidate_set = CandidateSet(low, high, prior=self.new_prior(), **config)
         if self.candidate_set.count != policy.count:
             raise ValueError(f"the policy picks among {policy.count} candidates, the candidate set has "
@@ -347,7 +354,9 @@ class PickSampler(ModelSampler):
 
     def new_prior(self):
         """A fresh copy of the candidate prior the policy was trained with (its own caches), rebuilt from
-        the scorer weights the policy carries; None for a policy without one."""
+        the scorer weights the policy carries (or the outside prior given); None for a policy without one."""
+        if self._outside_prior is not None:
+            return self._outside_prior
         encoder = self.policy.encoder
         if encoder.prior_model is None:
             return None
@@ -430,10 +439,11 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
                             kind: str | tuple[str, ...] | None = None, task: str | None = None,
                             uniform_mix: float | None = None, deterministic: bool = False,
                             proposals: int | None = None, goal_bias: float | None = None,
-                            prior_only: bool = False) -> RLSampler | PickSampler:
+                            prior_only: bool = False, prior_source: Callable[[], Any] | None = None
+                            ) -> RLSampler | PickSampler:
     """The sampler of a policy checkpoint: an :class:`RLSampler` (continuous actions) or a
-    :class:`PickSampler` (candidate selection; ``prior_only``: picking by its candidate prior alone);
-    settings None: the file's."""
+    :class:`PickSampler` (candidate selection; ``prior_only``: picking by its candidate prior alone,
+    or, for a picker trained without one, by the prior ``prior_source()`` makes); settings None: the file's."""
     policy, record = load_checkpoint(path, expected_kind=kind or [*POLICY_KINDS, *PICK_KINDS])
     meta, spec = record["meta"], record["obs_spec"] or {}
     check_trained_for(path, meta.get("task"), task)
@@ -445,9 +455,12 @@ def sampler_from_checkpoint(path: str | Path, low: np.ndarray, high: np.ndarray,
     proposals = int(stored.get("proposals", 1)) if proposals is None else proposals
     if record["kind"] in PICK_KINDS:
         goal_bias = float(stored.get("goal_bias", 0.0)) if goal_bias is None else goal_bias
+        outside = None
+        if prior_only and policy.encoder.prior_model is None and prior_source is not None:
+            outside = prior_source()
         return PickSampler(low, high, seed, policy=policy, view_nodes=int(meta.get("view_nodes", spec.get("view_nodes"))),
                            candidates=spec["candidates"], uniform_mix=uniform_mix, goal_bias=goal_bias,
-                           deterministic=deterministic, proposals=proposals, prior_only=prior_only)
+                           deterministic=deterministic, proposals=proposals, prior_only=prior_only, prior=outside)
     if prior_only:
         raise ValueError(f"{path}: a continuous policy has no candidate prior (a picker's checkpoint is needed)")
     if goal_bias not in (None, 0.0):
@@ -468,7 +481,21 @@ def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | No
     kinds = tuple(k for k in RL_SAMPLERS[source] if k in PICK_KINDS) if name in PRIOR_OF else RL_SAMPLERS[name]
     return sampler_from_checkpoint(path, low, high, seed=seed, kind=kinds, task=task,
                                    uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
-                                   goal_bias=goal_bias, prior_only=name in PRIOR_OF)
+                                   goal_bias=goal_bias, prior_only=name in PRIOR_OF,
+                                   prior_source=partial(supervised_prior, task) if name in PRIOR_OF else None)
 
 
-__all__ = ["PRIOR_OF", "PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint", "save_policy"]
+def supervised_prior(task: str | None):
+    """The candidate prior of ``gnn-pick`` for a picker trained without one: the task's shipped
+    supervised ``gnn`` (a ``tree/gnn-scorer``'s scores, or a ``tree/gnn`` mixture's log-density)."""
+    from agents.rl.prior import MixturePrior, ScorerPrior
+    path = resolve_checkpoint("gnn", task, None, f"gnn-mp train sampler --task {task} --model gnn")
+    model, record = load_checkpoint(path, expected_kind=["tree/gnn", "tree/gnn-scorer"])
+    stored = record["meta"].get("sampler", {})
+    if record["kind"] == "tree/gnn-scorer":
+        return ScorerPrior(model, float(stored.get("temperature", 1.0)))
+    return MixturePrior(model, float(stored.get("temperature", 1.0)), float(stored.get("sigma_scale", 1.0)))
+
+
+__all__ = ["PRIOR_OF", "PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint",
+           "save_policy", "supervised_prior"]

@@ -67,17 +67,17 @@ class SuiteEntry:
         return "-".join([self.task] + [v for v in (self.scene, self.checker) if v is not None])
 
 #: ``--suite default``: what ``make benchmark`` runs, a few minutes on 2 cores. The learned rows
-#: (``gnn``, ``cvae``, ``gnn-cvae``: Algorithm 1; ``rl-ppo``: the RL policy; ``gnn-pick``: the pendulum
-#: picker's supervised prior alone, what RL adds over it) use the shipped weights;
+#: (``gnn``, ``cvae``, ``gnn-cvae``: Algorithm 1; ``rl-ppo``: the RL policy; ``gnn-pick``: the
+#: picker's candidates ranked by the supervised model alone, what RL adds over it) use the shipped weights;
 #: problem counts follow what separates the samplers beyond noise (pendulum medians need about 60).
 LEARNED = ["gnn", "cvae", "gnn-cvae"]
 SUITES: dict[str, list[SuiteEntry]] = {
     "default": [
-        SuiteEntry("maze2d", ["uniform", "goal-bias", *LEARNED, "rl-ppo"], problems=60,
+        SuiteEntry("maze2d", ["uniform", "goal-bias", *LEARNED, "gnn-pick", "rl-ppo"], problems=60,
                    ompl=("rrt", "rrtconnect")),
         SuiteEntry("pendulum", ["uniform", "goal-bias", *LEARNED, "gnn-pick", "rl-ppo"], problems=60,
                    ompl=("rrt", "kpiece")),
-        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED, "rl-ppo"], problems=40, ompl=("rrtconnect",)),
+        SuiteEntry("arm", ["uniform", "goal-bias", *LEARNED, "gnn-pick", "rl-ppo"], problems=40, ompl=("rrtconnect",)),
     ],
     "smoke": [
         SuiteEntry("maze2d", ["uniform", "goal-bias"], problems=3, max_nodes=300),
