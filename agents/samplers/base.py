@@ -206,7 +206,9 @@ class ModelSampler(Sampler):
     """The one uniform / goal / model mixture (see the module docstring).
 
     Args:
-        low, high, seed: as for every :class:`Sampler`.
+        low: the lower sampling bounds, as for every :class:`Sampler`.
+        high: the upper sampling bounds, as for every :class:`Sampler`.
+        seed: the seed of ``self.rng``, as for every :class:`Sampler`.
         uniform_mix: probability of a uniform sample.
         goal_bias: probability of the active tree's target.
         periodic: ``(d,)`` bool, coordinates wrapped into ``[-pi, pi)`` before clipping.

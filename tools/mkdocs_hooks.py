@@ -1,0 +1,165 @@
+"""MkDocs hooks of the docs site (``mkdocs.yml``: ``hooks:``; ``make docs`` builds it).
+
+* **Nav globs.** A nav entry whose file is a glob (``Journal: journal/*.md``) becomes the pages
+  that match it, in name order, titled by their file name (``2026-12-04-sphere-checker.md`` ->
+  "2026-12-04 sphere checker"): a new journal page is in the nav without editing ``mkdocs.yml``.
+* **Links to repository files.** Pages link to source files outside ``docs/`` (``../train/cli.py``),
+  which are not part of the site. MkDocs reports such a link as "not found among documentation
+  files", a warning that fails ``mkdocs build --strict``. Such a report is lowered to INFO when
+  the link leaves ``docs/`` *and* names a file that exists in the repository; every other
+  missing target (a page or an image under ``docs/``, a repository file that is not there) stays
+  a warning, and so do missing anchors (``validation: anchors: warn``).
+* **Sections of other pages.** ``<!-- include ../results.md json-schema -->`` in a page becomes
+  the part of ``docs/results.md`` between ``<!-- section: json-schema -->`` and
+  ``<!-- /section: json-schema -->``, its relative links rewritten for the including page (the API
+  pages show the JSON schema and the ``gym.make`` kwargs where they are written, once).
+* **The ``gym.make`` ids.** The marker ``<!-- gym-make-ids -->`` of ``docs/api/environments.md``
+  becomes a table of every environment id ``gnn_mp_envs`` registers, read from Gymnasium's
+  registry at build time: entry point, the kwargs the id passes, its episode limit.
+
+Nothing here imports torch: importing ``gnn_mp_envs`` registers the ids (numpy and gymnasium).
+"""
+
+from __future__ import annotations
+
+import glob
+import logging
+import os
+import posixpath
+import re
+from pathlib import Path
+from urllib.parse import unquote, urlsplit
+
+from mkdocs.exceptions import PluginError
+
+IDS_MARKER = "<!-- gym-make-ids -->"
+INCLUDE = re.compile(r"^<!-- include (?P<path>\S+) (?P<name>[\w-]+) -->$", re.M)
+LINK = re.compile(r"(\]\()(?P<target>[^)\s]+)(\))")
+NOT_FOUND = re.compile(r"^Doc file '(?P<page>[^']+)' contains a link '(?P<link>[^']+)', but the target"
+                       r"(?: '[^']*')? is not found among documentation files\.")
+
+
+def _title(path: str) -> str:
+    """``journal/2026-12-04-sphere-checker.md`` -> ``2026-12-04 sphere checker``."""
+    stem = Path(path).stem
+    match = re.match(r"(\d{4}-\d{2}-\d{2})-(.*)", stem)
+    return f"{match.group(1)} {match.group(2).replace('-', ' ')}" if match else stem.replace("-", " ")
+
+
+def _expand(nav, docs_dir: str):
+    """The nav with every glob entry (a string with ``*``) replaced by its matching pages."""
+    if isinstance(nav, list):
+        out = []
+        for item in nav:
+            if isinstance(item, str) and "*" in item:
+                out.extend({_title(p): p} for p in _matches(item, docs_dir))
+            else:
+                out.append(_expand(item, docs_dir))
+        return out
+    if isinstance(nav, dict):
+        return {key: (_expand([value], docs_dir) if isinstance(value, str) and "*" in value
+                      else _expand(value, docs_dir)) for key, value in nav.items()}
+    return nav
+
+
+def _matches(pattern: str, docs_dir: str) -> list[str]:
+    found = sorted(Path(p).relative_to(docs_dir).as_posix()
+                   for p in glob.glob(os.path.join(docs_dir, pattern)) if p.endswith(".md"))
+    if not found:
+        raise PluginError(f"mkdocs.yml nav: no page matches {pattern!r} under {docs_dir}")
+    return found
+
+
+class _RepositoryLinks(logging.Filter):
+    """Lowers "not found among documentation files" to INFO for links to files of the repository
+    outside ``docs/`` (see the module docstring)."""
+
+    def __init__(self, docs_dir: str) -> None:
+        super().__init__()
+        self.docs_dir = Path(docs_dir).resolve()
+        self.root = self.docs_dir.parent
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno < logging.WARNING:
+            return True
+        match = NOT_FOUND.match(record.getMessage())
+        if match:
+            path = unquote(urlsplit(match.group("link")).path)
+            target = posixpath.normpath(posixpath.join(posixpath.dirname(match.group("page")), path))
+            resolved = (self.docs_dir / target).resolve()
+            if (target.startswith("../") and resolved.is_relative_to(self.root)
+                    and not resolved.is_relative_to(self.docs_dir) and resolved.exists()):
+                record.levelno, record.levelname = logging.INFO, "INFO"
+                record.msg, record.args = (f"{record.getMessage()} (a repository file outside docs/: "
+                                           f"linked, not part of the site)"), None
+        return True
+
+
+def on_config(config):
+    config["nav"] = _expand(config["nav"], config["docs_dir"])
+    logger = logging.getLogger("mkdocs.structure.pages")
+    for old in [f for f in logger.filters if isinstance(f, _RepositoryLinks)]:    # `mkdocs serve` rebuilds
+        logger.removeFilter(old)
+    logger.addFilter(_RepositoryLinks(config["docs_dir"]))
+    return config
+
+
+def gym_ids_table() -> str:
+    """Markdown table of every ``gym.make`` id that ``gnn_mp_envs`` registers."""
+    import gymnasium as gym
+
+    import gnn_mp_envs
+    rows = ["| id | task | entry point | kwargs of the id | `max_episode_steps` |", "|---|---|---|---|---|"]
+    for spec in gnn_mp_envs.TASK_SPECS.values():
+        ids = [i for i in gym.registry if i in spec.envs or gym.spec(i).kwargs.get("task") == spec.name]
+        for env_id in sorted(ids, key=lambda i: (i not in spec.envs, i)):
+            registered = gym.spec(env_id)
+            kwargs = ", ".join(f"`{k}={v!r}`" for k, v in registered.kwargs.items())
+            rows.append(f"| `{env_id}` | `{spec.name}` | `{registered.entry_point}` | {kwargs} | "
+                        f"{registered.max_episode_steps} |")
+    return "\n".join(rows)
+
+
+def section(source: Path, name: str) -> str:
+    """The text of ``source`` between its ``<!-- section: NAME -->`` and ``<!-- /section: NAME -->``."""
+    text = source.read_text()
+    begin, end = f"<!-- section: {name} -->", f"<!-- /section: {name} -->"
+    if text.count(begin) != 1 or text.count(end) != 1 or text.index(begin) > text.index(end):
+        raise PluginError(f"{source}: no section {name!r} (one {begin!r}, then one {end!r})")
+    return text[text.index(begin) + len(begin):text.index(end)].strip("\n")
+
+
+def rebase_links(text: str, source: str, page: str) -> str:
+    """``text`` of the page ``source`` (a path under docs/) with its relative links and images
+    pointing at the same files from the page ``page``."""
+    def rebase(match: re.Match) -> str:
+        target = match.group("target")
+        if re.match(r"[a-z]+:", target) or target.startswith("/"):
+            return match.group(0)
+        path, hash_, anchor = target.partition("#")
+        resolved = posixpath.normpath(posixpath.join(posixpath.dirname(source), path)) if path else source
+        rebased = posixpath.relpath(resolved, posixpath.dirname(page) or ".")
+        return f"{match.group(1)}{rebased}{hash_}{anchor}{match.group(3)}"
+
+    fence = re.compile(r"^( *)```.*?^\1```", re.M | re.S)
+    out, last = [], 0
+    for block in fence.finditer(text):                  # not inside code blocks
+        out += [LINK.sub(rebase, text[last:block.start()]), block.group(0)]
+        last = block.end()
+    return "".join([*out, LINK.sub(rebase, text[last:])])
+
+
+def include_sections(markdown: str, page: str, docs_dir: str) -> str:
+    def include(match: re.Match) -> str:
+        source = posixpath.normpath(posixpath.join(posixpath.dirname(page), match.group("path")))
+        return rebase_links(section(Path(docs_dir) / source, match.group("name")), source, page)
+    return INCLUDE.sub(include, markdown)
+
+
+def on_page_markdown(markdown, page, config, files):
+    markdown = include_sections(markdown, page.file.src_uri, config["docs_dir"])
+    if page.file.src_uri == "api/environments.md":
+        if IDS_MARKER not in markdown:
+            raise PluginError(f"docs/api/environments.md lost its marker {IDS_MARKER}")
+        markdown = markdown.replace(IDS_MARKER, gym_ids_table())
+    return markdown
