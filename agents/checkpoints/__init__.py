@@ -21,7 +21,8 @@ model (``agents.critical.models`` registers ``critical/<name>`` on import); the 
 imports :data:`BUILTIN_KIND_MODULES` first, so every built-in kind is known. Anything wrong with a
 file (missing, empty, truncated, random bytes, not a checkpoint, newer format, unknown kind,
 another kind than expected, weights that do not fit) raises :class:`CheckpointError` with
-one line naming the file. Files are written atomically (a temporary file beside the target,
+one line naming the file. An SB3 ``.zip`` of a ``gnn-mp train rl`` run reads as the record of its
+policy, weights only (:data:`FOREIGN_READERS`, :mod:`agents.rl.sb3_files`). Files are written atomically (a temporary file beside the target,
 then a rename), see :mod:`gnn_mp_envs.utils.io`.
 
 :func:`save_training_state` / :func:`load_training_state` store resume states (optimizer
@@ -53,6 +54,10 @@ RECORD_KEYS = ("format_version", "kind", "ctor_args", "obs_spec", "state_dict", 
 SHIPPED_DIR = Path(__file__).resolve().parent
 #: Modules imported before a kind is looked up; each registers its kinds on import.
 BUILTIN_KIND_MODULES = ("agents.tree.models", "agents.tree.scorer", "agents.rl.policies", "agents.critical.models")
+
+#: Files of other libraries read as checkpoints, weights only: format -> ``module:function`` turning the
+#: file into a record (imported when such a file is read; :func:`foreign_format` recognises them).
+FOREIGN_READERS = {"sb3-zip": "agents.rl.sb3_files:sb3_zip_record"}
 
 _KINDS: dict[str, Callable[..., nn.Module]] = {}
 
@@ -199,17 +204,9 @@ def _write(record: Mapping[str, Any], path: Path) -> None:
         _save_named(record, tmp, path)
 
 
-def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tensor], kind: str,
-                    ctor_args: Mapping[str, Any], *, obs_spec: Mapping[str, Any] | None = None,
-                    meta: Mapping[str, Any] | None = None) -> Path:
-    """Write ``model`` (a module or its state dict) as a ``kind`` checkpoint; returns the path.
-
-    ``ctor_args`` must rebuild the model with the registered constructor of ``kind``; the
-    constructor's defaults are stored too, so a later change of a default does not change
-    what the file loads as. ``ctor_args``, ``obs_spec`` and ``meta`` must be plain values
-    (:func:`plain`). The file is written to a temporary name in the same directory and
-    renamed into place.
-    """
+def checkpoint_record(model: nn.Module | Mapping[str, torch.Tensor], kind: str, ctor_args: Mapping[str, Any], *,
+                      obs_spec: Mapping[str, Any] | None = None, meta: Mapping[str, Any] | None = None) -> dict:
+    """The record :func:`save_checkpoint` writes (what :func:`read_checkpoint` returns), in memory."""
     _import_builtin_kinds()
     if kind not in _KINDS:
         raise ValueError(f"unknown model kind {kind!r}; known: {', '.join(sorted(_KINDS))}")
@@ -222,7 +219,7 @@ def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tens
         state = model
     if not all(isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state.items()):
         raise TypeError("the state dict must map names to tensors")
-    record = {
+    return {
         "format_version": FORMAT_VERSION,
         "kind": kind,
         "ctor_args": plain(_complete_ctor_args(cls, plain(dict(ctor_args), "ctor_args"), kind), "ctor_args"),
@@ -230,6 +227,20 @@ def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tens
         "state_dict": {k: v.detach().cpu() for k, v in state.items()},
         "meta": plain(dict(meta or {}), "meta"),
     }
+
+
+def save_checkpoint(path: str | Path, model: nn.Module | Mapping[str, torch.Tensor], kind: str,
+                    ctor_args: Mapping[str, Any], *, obs_spec: Mapping[str, Any] | None = None,
+                    meta: Mapping[str, Any] | None = None) -> Path:
+    """Write ``model`` (a module or its state dict) as a ``kind`` checkpoint; returns the path.
+
+    ``ctor_args`` must rebuild the model with the registered constructor of ``kind``; the
+    constructor's defaults are stored too, so a later change of a default does not change
+    what the file loads as. ``ctor_args``, ``obs_spec`` and ``meta`` must be plain values
+    (:func:`plain`). The file is written to a temporary name in the same directory and
+    renamed into place.
+    """
+    record = checkpoint_record(model, kind, ctor_args, obs_spec=obs_spec, meta=meta)
     path = Path(path)
     _write(record, path)
     return path
@@ -258,15 +269,33 @@ def _one_line(exc: BaseException) -> str:
     return f"{name}: {first}" if first else name
 
 
+def foreign_format(path: str | Path) -> str | None:
+    """``"sb3-zip"`` for a Stable-Baselines3 ``.zip`` (``model.save``: members ``data`` and
+    ``policy.pth``), None for anything else (a ``torch.save`` file is a zip too, laid out otherwise)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return None
+    return "sb3-zip" if {"data", "policy.pth"} <= names else None
+
+
 def _read(path: Path) -> Any:
-    """``torch.load(weights_only=True)`` with every failure turned into one CheckpointError line."""
+    """``torch.load(weights_only=True)`` with every failure turned into one CheckpointError line (a
+    file of :data:`FOREIGN_READERS`, an SB3 ``.zip``, is turned into a record by its reader, weights only)."""
     if not path.exists():
         raise CheckpointError(f"{path}: no such checkpoint file")
     if path.is_dir():
         raise CheckpointError(f"{path}: is a directory, not a checkpoint file")
+    if not path.is_file():
+        raise CheckpointError(f"{path}: not a regular file, not a checkpoint")
     size = path.stat().st_size
     if size == 0:
         raise CheckpointError(f"{path}: empty file, not a checkpoint")
+    foreign = foreign_format(path)
+    if foreign is not None:
+        module, function = FOREIGN_READERS[foreign].split(":")
+        return getattr(importlib.import_module(module), function)(path)
     try:
         return torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as exc:
@@ -393,6 +422,7 @@ def count_parameters(state: Mapping[str, torch.Tensor]) -> int:
     return int(sum(math.prod(v.shape) for v in state.values()))
 
 
-__all__ = ["FORMAT_VERSION", "SHIPPED_DIR", "CheckpointError", "count_parameters", "load_checkpoint",
+__all__ = ["FORMAT_VERSION", "FOREIGN_READERS", "SHIPPED_DIR", "CheckpointError", "checkpoint_record", "count_parameters",
+           "foreign_format", "load_checkpoint",
            "load_training_state", "model_kinds", "plain", "read_checkpoint", "register_model_kind",
            "resolve_checkpoint", "save_checkpoint", "save_training_state", "shipped_checkpoint"]

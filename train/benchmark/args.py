@@ -77,7 +77,8 @@ class BenchmarkArgs:
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
     ompl_time_limit: float = arg(10.0, "seconds per problem for OMPL rows", parse=positive_float)
-    checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable)",
+    checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable): a .pt, or the SB3 .zip of a "
+                                       "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it)",
                                        flag="--checkpoint", metavar="SAMPLER=PATH", parse=checkpoint_pair,
                                        append=True)
     settings: list[tuple] = arg([], "a sampler setting instead of the one stored with its weights, e.g. "

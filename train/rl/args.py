@@ -16,7 +16,7 @@ the evaluation on validation problems (:mod:`train.rl.evaluation`) and the run s
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -170,56 +170,30 @@ class RLArgs(RunFlags):
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`gnn_mp_envs.envs.wrappers.make_rl_env` (besides task, split)."""
-        kw: dict[str, Any] = {"view_nodes": self.view_nodes, "planner": self.planner, "action": self.action,
-                              "candidates": self.candidates, "local_scale": self.local_scale,
-                              "target_scale": self.target_scale, "action_frame": self.action_frame,
-                              "uniform_mix": self.uniform_mix, "progress_reward": self.progress_reward,
-                              "gamma": self.gamma, "reward_scale": self.reward_scale,
-                              "max_episode_steps": self.max_episode_steps}
-        for name in ("step_penalty", "node_cost", "collision_check_cost", "success_reward"):
-            if getattr(self, name) is not None:
-                kw[name] = getattr(self, name)
-        if self.max_nodes is not None:
-            kw["max_nodes"] = self.max_nodes
-        if self.prior is not None:
-            from functools import partial
-
-            from agents.rl.prior import ScorerPrior
-            kw["candidate_prior"] = partial(ScorerPrior.from_checkpoint, str(self.prior), self.prior_temperature)
-        return kw
+        from agents.rl.run_config import env_kwargs
+        return env_kwargs(asdict(self))
 
     @property
     def sampler_uniform_mix(self) -> float:
         """The uniform mixture of the run's sampler (the flag, else the action's default)."""
-        from gnn_mp_envs.envs.wrappers import DEFAULT_UNIFORM_MIX
-        return DEFAULT_UNIFORM_MIX[self.action] if self.uniform_mix is None else float(self.uniform_mix)
+        from agents.rl.run_config import sampler_uniform_mix
+        return sampler_uniform_mix(asdict(self))
 
     def candidate_settings(self) -> dict[str, Any]:
         """The run's ``CandidateSet`` configuration (pick): what its env and its sampler use."""
-        from gnn_mp_envs.envs.wrappers import candidate_settings
-        return candidate_settings(self.task, self.candidates, self.local_scale, self.target_scale)
+        from agents.rl.run_config import candidate_settings
+        return candidate_settings(asdict(self))
 
     def candidate_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of the pick policy's ``CandidateEncoder.from_space``."""
-        kw: dict[str, Any] = {"hidden": self.candidate_hidden, "embed": self.candidate_embed,
-                              "tree_context": self.tree_context}
-        if self.tree_context:
-            kw["tree_kwargs"] = self.encoder_kwargs()
-        if self.prior is not None:
-            kw.update(prior_checkpoint=str(self.prior), prior_temperature=self.prior_temperature)
-        return kw
+        from agents.rl.run_config import candidate_kwargs
+        return candidate_kwargs(asdict(self))
 
     def encoder_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of ``agents.encoders.encoder_from_space``."""
-        if self.encoder == "tree-gnn":   # the supervised GNN sampler's architecture, so its weights fit
-            from train.tree.adapters import GNNAdapter, task_scales
-            scales = task_scales(self.task)
-            spec = scales.spec
-            return {"backbone": "tree-gnn", "hidden_channels": GNNAdapter.hidden_channels,
-                    "num_layers": GNNAdapter.num_layers, "knn": GNNAdapter.knn, "step_scale": scales.step_scale,
-                    "periodic": list(spec.periodic), "num_trees": spec.num_trees(spec.env_id_for(self.planner))}
-        return {"hidden_channels": self.hidden_channels, "num_layers": self.num_layers,
-                "out_channels": self.out_channels, "conv": self.conv, "knn": self.knn}
+        """Keyword arguments of ``agents.rl.backbones.encoder_from_space`` (the reading of the flags shared
+        with whatever rebuilds a run from its ``config.json``: :mod:`agents.rl.run_config`)."""
+        from agents.rl.run_config import encoder_kwargs
+        return encoder_kwargs(asdict(self))
 
     @property
     def sampler_name(self) -> str:

@@ -25,8 +25,10 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from tqdm import tqdm
 
+from agents.checkpoints import CheckpointError
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
-from agents.rl.sb3 import CandidateFeaturesExtractor, CandidatePickPolicy, TreeFeaturesExtractor
+from agents.rl.sb3 import CandidatePickPolicy
+from agents.rl.sb3_files import read_sb3_zip, sb3_policy_kwargs
 from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
@@ -75,42 +77,31 @@ class ProgressCallback(BaseCallback):
 
 def policy_kwargs_of(args: RLArgs) -> dict:
     """SB3's ``policy_kwargs``: the candidate extractor with the picker's head (``pick``,
-    :class:`~agents.rl.sb3.CandidatePickPolicy`) or the tree encoder with a Gaussian head (``box``)."""
-    if args.action == "pick":
-        return {"features_extractor_class": CandidateFeaturesExtractor,
-                "features_extractor_kwargs": args.candidate_kwargs(), "pick_head": args.pick_head,
-                "net_arch": {"pi": list(args.pi_arch), "vf": list(args.net_arch)}}
-    kwargs = {"features_extractor_class": TreeFeaturesExtractor, "features_extractor_kwargs": args.encoder_kwargs(),
-              "net_arch": list(args.net_arch)}
-    if args.algo == "ppo":
-        kwargs["log_std_init"] = args.log_std_init
-    return kwargs
+    :class:`~agents.rl.sb3.CandidatePickPolicy`) or the tree encoder with a Gaussian head (``box``);
+    the reading of the flags an SB3 zip is rebuilt with too (:func:`agents.rl.sb3_files.sb3_policy_kwargs`)."""
+    return sb3_policy_kwargs(asdict(args))
 
 
 def load_weights_only(model: PPO | SAC, path: Path) -> None:
     """Continue ``model`` from an SB3 ``.zip`` without unpickling anything: the policy's and the
-    optimizers' tensors (SB3 reads its ``.pth`` members with ``weights_only=True``) and the step
-    count from the plain JSON of its ``data`` member; the pickled entries of ``data`` (policy
-    keywords, spaces, schedules), which could run code, are never loaded: the model was built from
-    the run's own flags, checked against its ``config.json``."""
-    import json
-    import zipfile
-
-    from stable_baselines3.common.save_util import load_from_zip_file, recursive_setattr
+    optimizers' tensors and the step count from the plain JSON of its ``data`` member
+    (:func:`agents.rl.sb3_files.read_sb3_zip`); the pickled entries of ``data`` (policy keywords,
+    spaces, schedules), which could run code, are never loaded: the model was built from the run's
+    own flags, checked against its ``config.json``."""
+    from stable_baselines3.common.save_util import recursive_setattr
     try:
-        _, params, variables = load_from_zip_file(path, device=model.device, load_data=False)
-        with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data"))
-        model.set_parameters(params, exact_match=True, device=model.device)
-        for name, tensor in (variables or {}).items():     # SAC's entropy coefficient: a tensor, as SB3's load does
+        contents = read_sb3_zip(path, device=model.device)
+        model.set_parameters(contents.params, exact_match=True, device=model.device)
+        for name, tensor in (contents.variables or {}).items():   # SAC's entropy coefficient, as SB3's load does
             recursive_setattr(model, f"{name}.data", tensor.data)
-    except (OSError, ValueError, KeyError, RuntimeError, zipfile.BadZipFile) as exc:
+    except (CheckpointError, OSError, ValueError, KeyError, RuntimeError) as exc:
         raise RunError(f"--resume: {path} does not hold this run's model ({str(exc).splitlines()[0]})") from None
-    steps = data.get("num_timesteps")
-    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+    steps = contents.num_timesteps
+    if steps is None:
         raise RunError(f"--resume: {path} holds no step count")
     model.num_timesteps = steps
-    model._n_updates = int(data.get("_n_updates", 0)) if isinstance(data.get("_n_updates", 0), int) else 0
+    updates = contents.data.get("_n_updates", 0)
+    model._n_updates = updates if isinstance(updates, int) and not isinstance(updates, bool) else 0
 
 
 def build_model(args: RLArgs, env, run_dir) -> PPO | SAC:

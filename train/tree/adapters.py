@@ -19,6 +19,7 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
+from agents.rl.run_config import TREE_GNN_ARCH
 from agents.tree.models import TreeCVAE, TreeGNN, TreeGNNCVAE
 from agents.tree.scorer import TreeGNNScorer
 from gnn_mp_envs.registration import TaskSpec, task_spec
@@ -79,7 +80,7 @@ class GNNAdapter:
     kind = "tree/gnn"
     model_class = TreeGNN
     #: The shipped architecture (also what RL's ``--encoder tree-gnn`` builds, to warm-start from it).
-    hidden_channels, num_layers, knn = 64, 2, 6
+    hidden_channels, num_layers, knn = (TREE_GNN_ARCH[k] for k in ("hidden_channels", "num_layers", "knn"))
 
     def ctor_args(self, scales: TaskScales, **overrides) -> dict:
         d, spec = scales.state_dim, scales.spec
