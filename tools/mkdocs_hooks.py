@@ -13,6 +13,10 @@
   the part of ``docs/results.md`` between ``<!-- section: json-schema -->`` and
   ``<!-- /section: json-schema -->``, its relative links rewritten for the including page (the API
   pages show the JSON schema and the ``gym.make`` kwargs where they are written, once).
+* **Docstrings written for Sphinx** (:class:`SphinxDocstrings`, a griffe extension that
+  ``mkdocs.yml`` loads): ``#:`` comments above an attribute become its docstring (the fields of
+  ``TaskSpec``), a role such as ``:class:`~pkg.mod.Name``` becomes ``Name`` in code, linked when
+  the site documents it, and a paragraph's closing ``::`` one colon.
 * **The ``gym.make`` ids.** The marker ``<!-- gym-make-ids -->`` of ``docs/api/environments.md``
   becomes a table of every environment id ``gnn_mp_envs`` registers, read from Gymnasium's
   registry at build time: entry point, the kwargs the id passes, its episode limit.
@@ -30,6 +34,7 @@ import re
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
+from griffe import Docstring, Extension
 from mkdocs.exceptions import PluginError
 
 IDS_MARKER = "<!-- gym-make-ids -->"
@@ -37,6 +42,64 @@ INCLUDE = re.compile(r"^<!-- include (?P<path>\S+) (?P<name>[\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()(?P<target>[^)\s]+)(\))")
 NOT_FOUND = re.compile(r"^Doc file '(?P<page>[^']+)' contains a link '(?P<link>[^']+)', but the target"
                        r"(?: '[^']*')? is not found among documentation files\.")
+
+
+ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|data|attr|exc|obj|const):`(?P<tilde>~?)(?P<target>[\w.]+)`")
+
+
+class SphinxDocstrings(Extension):
+    """Docstrings written for Sphinx, as mkdocstrings shows them (see the module docstring)."""
+
+    def on_package(self, *, pkg, loader, **kwargs) -> None:
+        for obj in _objects(pkg):
+            if obj.is_attribute and obj.docstring is None:
+                comment = _comment_above(obj)
+                if comment:
+                    obj.docstring = Docstring(comment, lineno=obj.lineno, parent=obj)
+            if obj.docstring is not None:
+                obj.docstring.value = sphinx_to_markdown(obj.docstring.value, obj)
+
+
+def _objects(obj):
+    yield obj
+    for member in list(obj.members.values()):
+        if not member.is_alias:
+            yield from _objects(member)
+
+
+def _comment_above(attr) -> str:
+    """The ``#:`` comment lines right above an attribute's first line, without their ``#:``."""
+    lines = attr.lines_collection[attr.filepath] if attr.lineno and attr.filepath in attr.lines_collection else None
+    comment: list[str] = []
+    index = (attr.lineno or 0) - 2
+    while lines and index >= 0 and lines[index].strip().startswith("#:"):
+        comment.insert(0, lines[index].strip()[2:].strip())
+        index -= 1
+    return "\n".join(comment)
+
+
+def _identifier(target: str, obj) -> str:
+    """The full path a role's target names, as seen from ``obj`` (a guess is harmless: an
+    unresolved optional reference shows as plain code)."""
+    module = obj if obj.is_module else obj.module
+    if target.startswith("."):                     # relative to the package: :mod:`.base`
+        package = module.path if module.is_init_module else module.parent.path
+        return package + target
+    head, _, rest = target.partition(".")
+    try:
+        full = obj.resolve(head)
+    except Exception:                              # a full path already, or a name out of reach
+        return target
+    return f"{full}.{rest}" if rest else full
+
+
+def sphinx_to_markdown(text: str, obj) -> str:
+    def role(match: re.Match) -> str:
+        target = match.group("target")
+        title = target.rsplit(".", 1)[-1] if match.group("tilde") else target
+        return f'<autoref identifier="{_identifier(target, obj)}" optional><code>{title}</code></autoref>'
+    text = ROLE.sub(role, text)
+    return re.sub(r"(\S)::$", r"\1:", text, flags=re.M)        # reST's "paragraph::" before a code block
 
 
 def _title(path: str) -> str:
