@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -749,3 +750,44 @@ def test_train_rl_ray_flags_are_refused_in_one_line_before_any_work(argv, fragme
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("checkpoint", [True, False])
+def test_a_dead_ray_actor_ends_the_run_in_one_line_naming_what_is_kept(tmp_path, checkpoint):
+    """`collected` (the --ray training loop's batches): an actor that dies mid-run (Ray raises
+    ActorDiedError out of the collector's iterator) ends the run with one RunError line that names the
+    kept checkpoint (or says none was saved yet); the batches before it are delivered and the
+    collector is shut down. Without --ray the same exception is not swallowed."""
+    pytest.importorskip("ray")
+    from ray.exceptions import ActorDiedError
+
+    from train.rl.torchrl import collected
+    from train.run import RunError
+
+    class DyingCollector:
+        shut = False
+
+        def __iter__(self):
+            yield "batch-0"
+            yield "batch-1"
+            raise ActorDiedError()
+
+        def shutdown(self):
+            self.shut = True
+            raise RuntimeError("the actors are already gone")    # a failing shutdown is tolerated
+
+    state = tmp_path / "training_state.pt"
+    if checkpoint:
+        state.write_bytes(b"kept")
+    collector, seen = DyingCollector(), []
+    with pytest.raises(RunError) as exc:
+        for batch in collected(collector, SimpleNamespace(ray="local"), state):
+            seen.append(batch)
+    message = str(exc.value)
+    assert seen == ["batch-0", "batch-1"] and collector.shut and "\n" not in message
+    assert "a collector actor died (ActorDiedError)" in message
+    assert (f"{state} is kept: continue with --resume" in message) if checkpoint else \
+        ("no evaluation had saved a checkpoint yet" in message)
+    assert state.exists() == checkpoint
+    with pytest.raises(ActorDiedError):
+        list(collected(DyingCollector(), SimpleNamespace(ray=None), state))
