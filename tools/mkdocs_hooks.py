@@ -42,8 +42,7 @@ INCLUDE = re.compile(r"^<!-- include (?P<path>\S+) (?P<name>[\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()(?P<target>[^)\s]+)(\))")
 NOT_FOUND = re.compile(r"^Doc file '(?P<page>[^']+)' contains a link '(?P<link>[^']+)', but the target"
                        r"(?: '[^']*')? is not found among documentation files\.")
-
-
+#: A Sphinx role in a docstring: ``:class:`~pkg.mod.Name``` and the like.
 ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|data|attr|exc|obj|const):`(?P<tilde>~?)(?P<target>[\w.]+)`")
 
 
