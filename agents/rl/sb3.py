@@ -1,4 +1,4 @@
-"""Stable-Baselines3 features extractor: the same :class:`agents.encoders.TreeEncoder`.
+"""Stable-Baselines3 features extractor: the same :class:`agents.nn.encoders.TreeEncoder`.
 
     from stable_baselines3 import PPO
     from agents.rl.sb3 import TreeFeaturesExtractor
@@ -7,7 +7,7 @@
         "features_extractor_kwargs": {"hidden_channels": 64, "num_layers": 3, "out_channels": 128}})
 
 SB3 hands over the observation as a dict of float tensors with a leading batch dimension
-(every Box, ``mask`` included, is cast to float); :func:`agents.graph.to_pyg` accepts that.
+(every Box, ``mask`` included, is cast to float); :func:`agents.nn.graph.to_pyg` accepts that.
 """
 
 from __future__ import annotations
@@ -17,8 +17,7 @@ from gymnasium import spaces
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from agents.encoders import CandidateEncoder, prior_head_init
-from agents.rl.backbones import encoder_from_space
+from agents.nn.encoders import CandidateEncoder, encoder_from_space, prior_head_init
 from agents.rl.pick import PICK_HEADS, SharedCandidateHead
 
 
@@ -26,7 +25,7 @@ class TreeFeaturesExtractor(BaseFeaturesExtractor):
     """Observation dict -> the :class:`TreeEncoder` graph embedding ``(batch, out_channels)``.
 
     ``features_extractor_kwargs`` go to ``TreeEncoder.from_space`` (``backbone="tree-gnn"``: the
-    GNN sampler's backbone, :class:`agents.rl.backbones.TreeGNNEncoder`) (``hidden_channels``,
+    GNN sampler's backbone, :class:`agents.tree.backbone.TreeGNNEncoder`) (``hidden_channels``,
     ``num_layers``, ``out_channels``, ``conv``, ``knn``, ...).
     """
 
@@ -43,7 +42,7 @@ class CandidateFeaturesExtractor(BaseFeaturesExtractor):
     """Candidate-selection observation -> ``[per-candidate embeddings, their mean and max]``.
 
     For the ``Discrete(K)`` envs (``GNNMP/*-RLPick-v0``): one MLP shared by the ``K`` candidates
-    reads each one's features relative to the tree (:class:`agents.encoders.CandidateEncoder`);
+    reads each one's features relative to the tree (:class:`agents.nn.encoders.CandidateEncoder`);
     the flattened embeddings let ``action_net`` score each candidate slot, the mean and max
     summarise the step for the value head. ``features_extractor_kwargs``: ``hidden``, ``embed``,
     ``act``, ``tree_context`` (add a ``TreeEncoder`` embedding of the tree view; ``tree_kwargs``
@@ -70,14 +69,21 @@ class CandidatePickPolicy(MultiInputActorCriticPolicy):
     score for all candidates, a bias per slot, the prior's scale); ``"linear"``: SB3's own slot-wise
     layer. SB3's orthogonal initialisation re-draws every linear layer under the features
     extractor, the frozen prior scorer's too: its weights are re-loaded from their checkpoint, and
-    the head starts as the prior (:func:`~agents.encoders.prior_head_init`). Use with
-    :class:`CandidateFeaturesExtractor` and ``net_arch={"pi": [], ...}``.
+    the head starts as the prior (:func:`~agents.nn.encoders.prior_head_init`). Its features
+    extractor is a :class:`CandidateFeaturesExtractor` and its ``net_arch`` ``{"pi": [], "vf": [64,
+    64]}`` (``gnn-mp train rl``'s defaults) unless ``policy_kwargs`` say otherwise, so that
+    ``PPO(CandidatePickPolicy, env)`` and RL Zoo's ``policy: agents.rl.sb3.CandidatePickPolicy``
+    (whose YAML cannot name a class) build the picker.
     """
 
     def __init__(self, *args, pick_head: str = "linear", **kwargs) -> None:
         if pick_head not in PICK_HEADS:
             raise ValueError(f"pick_head must be one of {PICK_HEADS}, got {pick_head!r}")
         self.pick_head = pick_head
+        if kwargs.get("features_extractor_class") is None:
+            kwargs["features_extractor_class"] = CandidateFeaturesExtractor
+        if kwargs.get("net_arch") is None:
+            kwargs["net_arch"] = {"pi": [], "vf": [64, 64]}
         super().__init__(*args, **kwargs)
 
     def _build(self, lr_schedule) -> None:

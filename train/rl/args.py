@@ -29,7 +29,7 @@ from train.run import RunFlags
 #: registered RL ids (``GNNMP/<Env>-RLPick-v0``) unless told otherwise.
 _ENV_DEFAULTS = {name: p.default for name, p in inspect.signature(make_rl_env).parameters.items()
                  if p.default is not inspect.Parameter.empty}
-#: Where the per-task hyperparameter files live (``<task>.yml``, RL Zoo style: a section per algorithm).
+#: Where the per-task hyperparameter files live (``<task>.yml``, in RL Zoo's format: :func:`read_hyperparams`).
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 
 LIBS = ("sb3", "torchrl")
@@ -71,10 +71,10 @@ class RLArgs(RunFlags):
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
-    hyperparams: Path | None = arg(None, "YAML hyperparameter file (RL Zoo style: a section per <lib>-<algo> of flag "
-                                   "values; explicit flags win); default: the task's shipped "
-                                   "train/rl/hyperparams/<task>.yml when there is one; none: no file, the flags' "
-                                   "own defaults", metavar="FILE")
+    hyperparams: Path | None = arg(None, "YAML hyperparameter file in RL Zoo's format (a section per RL env id; "
+                                   "gnn-mp: holds the flags RL Zoo has no key for; explicit flags win); default: the "
+                                   "task's shipped train/rl/hyperparams/<task>.yml when there is one; none: no file, "
+                                   "the flags' own defaults", metavar="FILE")
     resume: bool = arg(False, "continue the run in --out from its last saved SB3 model (model.zip) or TorchRL "
                        "state (training_state.pt), up to --total-steps")
     device: str = arg("cpu", "torch device of the networks (cpu, cuda, auto: cuda when available)")
@@ -310,36 +310,142 @@ def hyperparams_file(args: RLArgs) -> Path | None:
     return shipped if shipped.is_file() else None
 
 
-#: RL Zoo's names of flags that are spelled otherwise here.
-ZOO_ALIASES = {"n_timesteps": "total_steps", "learning_rate": "lr"}
+#: The section of a hyperparameter file RL Zoo does not read: ``algo`` (what its env sections are for,
+#: ``rl_zoo3.train --algo``) and the flags of ``gnn-mp train rl`` RL Zoo has no key for.
+OWN_SECTION = "gnn-mp"
+#: RL Zoo's keys of an env section -> the flags they are.
+ZOO_KEYS = {"n_timesteps": "total_steps", "learning_rate": "lr", "n_envs": "n_envs", "n_steps": "n_steps",
+            "batch_size": "batch_size", "n_epochs": "n_epochs", "ent_coef": "ent_coef", "clip_range": "clip_range",
+            "gamma": "gamma", "gae_lambda": "gae_lambda", "buffer_size": "buffer_size",
+            "learning_starts": "learning_starts"}
+#: ``env_kwargs`` of an env section: keywords of ``make_rl_env`` that are flags of the same name.
+ZOO_ENV_KWARGS = ("view_nodes", "max_nodes", "candidates", "local_scale", "target_scale", "action_frame",
+                  "uniform_mix", "progress_reward", "reward_scale", "max_episode_steps", "step_penalty", "node_cost",
+                  "collision_check_cost", "success_reward")
+#: ``policy_kwargs.features_extractor_kwargs`` of an env section -> flags.
+ZOO_EXTRACTOR_KWARGS = {"hidden": "candidate_hidden", "embed": "candidate_embed", "tree_context": "tree_context",
+                        "hidden_channels": "hidden_channels", "num_layers": "num_layers",
+                        "out_channels": "out_channels", "conv": "conv", "knn": "knn"}
+#: RL Zoo's ``policy`` of a picker and of a box policy.
+ZOO_POLICIES = ("agents.rl.sb3.CandidatePickPolicy", "MultiInputPolicy")
 
 
-def read_hyperparams(path: Path, section: str) -> dict[str, Any]:
-    """The ``section`` (``<lib>-<algo>``) of a YAML hyperparameter file as flag values (field names;
-    RL Zoo's ``n_timesteps`` and ``learning_rate`` accepted); one-line ``ValueError`` otherwise."""
+def _mapping(path: Path, value: Any, where: str) -> dict:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"--hyperparams {path}: {where} is not a mapping")
+    return value
+
+
+def _zoo_values(path: Path, name: str, section: dict) -> dict[str, Any]:
+    """An RL Zoo env section as flag values (RL Zoo's keys this command has a flag for)."""
+    out: dict[str, Any] = {}
+    for key, value in section.items():
+        if key in ZOO_KEYS:
+            out[ZOO_KEYS[key]] = value
+        elif key == "policy":
+            if value not in ZOO_POLICIES:
+                raise ValueError(f"--hyperparams {path}: policy {value!r} in section {name!r}; gnn-mp train rl builds "
+                                 f"{' or '.join(ZOO_POLICIES)} (from --action)")
+        elif key == "env_kwargs":
+            for k, v in _mapping(path, value, f"{name}.env_kwargs").items():
+                if k not in ZOO_ENV_KWARGS:
+                    raise ValueError(f"--hyperparams {path}: unknown key {k!r} in {name}.env_kwargs (known: "
+                                     f"{', '.join(ZOO_ENV_KWARGS)})")
+                out[k] = v
+        elif key == "policy_kwargs":
+            for k, v in _mapping(path, value, f"{name}.policy_kwargs").items():
+                if k == "net_arch" and isinstance(v, dict):      # a picker's: {pi: [...], vf: [...]}
+                    unknown = sorted(set(v) - {"pi", "vf"})
+                    if unknown:
+                        raise ValueError(f"--hyperparams {path}: unknown key {unknown[0]!r} in {name}.policy_kwargs."
+                                         "net_arch (pi, vf)")
+                    out.update({flag: v[k2] for k2, flag in (("pi", "pi_arch"), ("vf", "net_arch")) if k2 in v})
+                elif k in ("net_arch", "pick_head", "log_std_init"):
+                    out[k] = v
+                elif k == "features_extractor_kwargs":
+                    for k2, v2 in _mapping(path, v, f"{name}.policy_kwargs.{k}").items():
+                        if k2 not in ZOO_EXTRACTOR_KWARGS:
+                            raise ValueError(f"--hyperparams {path}: unknown key {k2!r} in {name}.policy_kwargs."
+                                             f"{k} (known: {', '.join(ZOO_EXTRACTOR_KWARGS)})")
+                        out[ZOO_EXTRACTOR_KWARGS[k2]] = v2
+                else:
+                    raise ValueError(f"--hyperparams {path}: unknown key {k!r} in {name}.policy_kwargs (known: "
+                                     "net_arch, pick_head, log_std_init, features_extractor_kwargs)")
+        else:
+            raise ValueError(f"--hyperparams {path}: unknown key {key!r} in section {name!r} (RL Zoo's keys gnn-mp "
+                             f"reads: policy, {', '.join(ZOO_KEYS)}, env_kwargs, policy_kwargs)")
+    return out
+
+
+def _flag_values(path: Path, values: dict, name: str, skip: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A section of flag values (field names; dashes accepted)."""
     import dataclasses
-
-    import yaml
-    try:
-        data = yaml.safe_load(Path(path).read_text())
-    except FileNotFoundError:
-        raise ValueError(f"--hyperparams {path}: no such file") from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f"--hyperparams {path}: not YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"--hyperparams {path}: expected a mapping of sections (e.g. sb3-ppo:), got "
-                         f"{type(data).__name__}")
-    values = data.get(section) or {}
-    if not isinstance(values, dict):
-        raise ValueError(f"--hyperparams {path}: section {section!r} is not a mapping")
     fields = {f.name for f in dataclasses.fields(RLArgs)} - {"hyperparams", "lib", "algo", "task", "modules"}
     out = {}
     for key, value in values.items():
-        name = ZOO_ALIASES.get(str(key), str(key).replace("-", "_"))
-        if name not in fields:
-            raise ValueError(f"--hyperparams {path}: unknown key {key!r} in section {section!r}")
-        out[name] = value
+        if key in skip:
+            continue
+        flag = {"n_timesteps": "total_steps", "learning_rate": "lr"}.get(str(key), str(key).replace("-", "_"))
+        if flag not in fields:
+            raise ValueError(f"--hyperparams {path}: unknown key {key!r} in section {name!r}")
+        out[flag] = value
     return out
+
+
+def read_hyperparams(path: Path, lib: str, algo: str, task: str, planner: str | None = None,
+                     action: str = "pick") -> dict[str, Any]:
+    """The flag values a YAML hyperparameter file gives a run; one-line ``ValueError`` otherwise.
+
+    The file is in RL Zoo's format (``rl_zoo3.train -conf FILE`` trains from it): a section per RL
+    env id of RL Zoo's keys (:data:`ZOO_KEYS`, ``policy``, ``env_kwargs``, ``policy_kwargs``), for
+    the algorithm its section ``gnn-mp:`` names (``algo``, default ppo; a run of another algorithm
+    reads nothing), which also holds this command's flags RL Zoo has no key for. The run reads the
+    section of its own env id (``--planner``, ``--action``), else the one of the task's default
+    picker id. A file in the earlier layout, a section per ``<lib>-<algo>`` of flag values, is still
+    read (that section)."""
+    import yaml
+
+    from gnn_mp_envs.registration import rl_env_id, task_spec
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise ValueError(f"--hyperparams {path}: not a regular file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"--hyperparams {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--hyperparams {path}: cannot be read ({type(exc).__name__})") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"--hyperparams {path}: not YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"--hyperparams {path}: expected a mapping of sections (RL Zoo's: an env id, e.g. "
+                         f"GNNMP/Maze2DRRT-RLPick-v0:), got {type(data).__name__}")
+    legacy = f"{lib}-{algo}"
+    if any(f"{l}-{a}" in data for l in LIBS for a in ALGOS):
+        return _flag_values(path, _mapping(path, data.get(legacy), f"section {legacy!r}"), legacy)
+    own = _mapping(path, data.get(OWN_SECTION), f"section {OWN_SECTION!r}")
+    if own.get("algo", "ppo") not in ALGOS:
+        raise ValueError(f"--hyperparams {path}: {OWN_SECTION}.algo must be one of {', '.join(ALGOS)}, got "
+                         f"{own.get('algo')!r}")
+    if own.get("algo", "ppo") != algo:
+        return {}
+    sections = {k: v for k, v in data.items() if k != OWN_SECTION}
+    values: dict[str, Any] = {}
+    if sections:
+        spec = task_spec(task)
+        candidates = [rl_env_id(spec.env_id_for(planner), action), rl_env_id(spec.env_id, "pick")]
+        name = next((k for k in candidates if k in sections), None)
+        if name is None:
+            raise ValueError(f"--hyperparams {path}: no section for task {task!r} ({candidates[0]}); the file has "
+                             f"{', '.join(map(str, sections))}")
+        values = _zoo_values(path, name, _mapping(path, sections[name], f"section {name!r}"))
+    flags = _flag_values(path, own, OWN_SECTION, skip=("algo",))
+    twice = sorted(set(values) & set(flags))
+    if twice:
+        raise ValueError(f"--hyperparams {path}: {twice[0]} is given both in RL Zoo's section and in {OWN_SECTION}:")
+    return {**values, **flags}
 
 
 def init_from_path(value: str | Path, task: str, flag: str = "--init-from") -> Path:
@@ -383,4 +489,4 @@ def run_config(args: RLArgs) -> dict[str, Any]:
 
 
 __all__ = ["ALGOS", "HYPERPARAMS_DIR", "LIBS", "RESUME_FREE_FLAGS", "SAMPLER_NAMES", "RLArgs", "RunResult", "check_args",
-           "hyperparams_file", "read_hyperparams", "run_config", "torch_device"]
+           "hyperparams_file", "OWN_SECTION", "read_hyperparams", "run_config", "torch_device", "ZOO_KEYS"]

@@ -56,7 +56,7 @@ def parse(argv: list[str]) -> RLArgs:
     try:
         import_modules(first.modules)
         path = hyperparams_file(first)
-        values = read_hyperparams(path, f"{first.lib}-{first.algo}") if path else {}
+        values = read_hyperparams(path, first.lib, first.algo, first.task, first.planner, first.action) if path else {}
         explicit_action = any(a == "--action" or a.startswith("--action=") for a in argv)
         action = first.action if explicit_action else values.get("action", first.action)
         if action == "box":
