@@ -49,7 +49,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+from gnn_mp_envs.core.problem import PATH_CHECK_REFINE, verdict
 
 #: Planner name -> OMPL geometric planner class name.
 GEOMETRIC_PLANNERS = {"rrtconnect": "RRTConnect", "rrt": "RRT"}
@@ -307,8 +307,8 @@ def _geometric_setup(problem: Any, planner: str) -> _Setup:
         states = np.array([as_array(path.getState(k)) for k in range(path.getStateCount())])
         return {"path_length": float(path.length()), "path": states.tolist(), "path_states": int(len(states)),
                 "goal_reached": bool(problem.in_goal(states[-1])),
-                "path_valid": bool(problem.path_valid(states)),
-                "path_valid_fine": bool(problem.path_valid(states, refine=PATH_CHECK_REFINE))}
+                "path_valid": verdict(problem.path_valid(states)),
+                "path_valid_fine": verdict(problem.path_valid(states, refine=PATH_CHECK_REFINE))}
 
     return _Setup(ss, plan, f"geometric_{GEOMETRIC_PLANNERS[planner]}", path_result,
                   lambda: {"edges_checked": int(problem.edges_checked), "iterations": samples["n"]},

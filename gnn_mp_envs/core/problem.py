@@ -24,6 +24,15 @@ from gnn_mp_envs.utils.compiled import lazy_njit
 #: many times finer than the planner's collision-checking resolution.
 PATH_CHECK_REFINE = 10
 
+
+
+def verdict(value: Any) -> bool:
+    """A check's answer as a bool that is True only for a real True (``bool`` or numpy's): a
+    task's ``path_valid`` returning NaN, None, a string or an array counts as invalid, not as
+    Python's truthy ``bool(nan)``."""
+    return isinstance(value, (bool, np.bool_)) and bool(value)
+
+
 #: The control of a geometric edge: one shared, read-only empty array (no allocation per edge).
 NO_CONTROL = np.zeros(0)
 NO_CONTROL.setflags(write=False)

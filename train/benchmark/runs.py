@@ -14,7 +14,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+from gnn_mp_envs.core.problem import PATH_CHECK_REFINE, verdict
 from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
@@ -72,9 +72,8 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
 
     try:
         run = plan_problem(env, sampler, index, seed, on_step=snapshot if snapshots_at else None)
-    except (ValueError, TypeError, RuntimeError, IndexError) as exc:   # e.g. a NaN action
-        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {message}") from None
+    except (Exception, SystemExit) as exc:    # a NaN action, a plugin's KeyError or sys.exit: this row fails
+        raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {fault(exc)}") from None
     record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters(),
               "family": getattr(env.problem, "family", None)}   # the problem's scene family (tables per family)
     # every returned path re-checked edge by edge with the problem's own checker (after the counters
@@ -83,10 +82,13 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
     # (what the resolution skipped over shows as path_valid_fine False)
     solution = env.planner.solution if run.success else None
     record["path_valid"] = record["path_valid_fine"] = None
-    if solution is not None:
-        record["path_valid"] = bool(env.problem.path_valid(solution.states, solution.controls))
-        record["path_valid_fine"] = bool(env.problem.path_valid(solution.states, solution.controls,
-                                                                refine=PATH_CHECK_REFINE))
+    if solution is not None:      # only a real True counts (a plugin task's NaN is no verdict)
+        try:
+            record["path_valid"] = verdict(env.problem.path_valid(solution.states, solution.controls))
+            record["path_valid_fine"] = verdict(env.problem.path_valid(solution.states, solution.controls,
+                                                                       refine=PATH_CHECK_REFINE))
+        except (Exception, SystemExit) as exc:
+            raise BenchmarkError(f"task {task}'s path_valid on problem {index}: {fault(exc)}") from None
     # where the planning loop's wall time went: inside env.step (the planner) and outside it (the sampler)
     record["planner_time_s"] = record.pop("env_time_s")
     record["sampler_time_s"] = max(run.wall_time_s - run.env_time_s, 0.0)
@@ -94,6 +96,16 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
         snapshots.append((run.iterations, run.nodes_expanded, env.render()))
         record["snapshots"] = snapshots
     return record
+
+
+def fault(exc: BaseException) -> str:
+    """One line about an exception of plugin code: its message (with its type unless a ValueError,
+    TypeError, RuntimeError or IndexError, whose messages say what is wrong)."""
+    lines = str(exc).strip().splitlines()
+    message = lines[0] if lines else ""
+    if isinstance(exc, (ValueError, TypeError, RuntimeError, IndexError)) and message:
+        return message
+    return f"{type(exc).__name__}: {message}" if message else type(exc).__name__
 
 
 def _run_episode_job(job: tuple) -> dict[str, Any]:
@@ -187,8 +199,10 @@ def check_env_and_samplers(task: str, env_kwargs: dict[str, Any], samplers: list
             cached_sampler(name, task, checkpoint, env, settings)
         except FileNotFoundError as exc:
             raise BenchmarkError(f"sampler {name!r}: missing checkpoint ({exc})") from None
-        except (ValueError, TypeError, OSError, RuntimeError, KeyError) as exc:
+        except (ValueError, TypeError, OSError, RuntimeError) as exc:
             raise BenchmarkError(f"sampler {name!r} cannot be loaded for task {task!r}: {exc}") from None
+        except (Exception, SystemExit) as exc:     # a plugin's factory: its KeyError, sys.exit, ...
+            raise BenchmarkError(f"sampler {name!r} cannot be loaded for task {task!r}: {fault(exc)}") from None
 
 
 def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[str, Any]:
