@@ -6,16 +6,19 @@ Shared floor:
   uniform / goal / model mixture, one seeded stream) and the classical samplers;
 - ``agents.registry``: ``load_sampler(name, task=...)``, bounds from the task's ``TaskSpec``;
 - ``agents.checkpoints``: the one checkpoint format (``weights_only=True``) and the shipped weights;
-- ``agents.graph``: padded observation (any batch shape) -> PyG ``Batch``; k-NN edges;
-- ``agents.encoders``: ``TreeEncoder``, a PyG graph encoder of the tree observation.
+- ``agents.nn``: the shared network pieces: graph conversion (``graph``; also ``agents.graph``),
+  the encoders and their registry by name (``encoders``; also ``agents.encoders``), the causal tree
+  GNN trunk (``causal``), numpy twins of torch layers (``twins``), candidate priors by model kind
+  (``priors``).
 
-One folder per method:
+One folder per method (no method imports another; the shared floor imports no method):
 
 - ``agents.tree``: the tree samplers of Algorithm 1 (GNN, GNN scorer, CVAE, GNN-CVAE): torch
-  models (``models``, ``scorer``), their incremental numpy engines (``engine``, ``kernels``) and
-  the samplers (``samplers``);
-- ``agents.rl``: RL policies (``policies``), backbones, the SB3 features extractor (``sb3``), the
-  TorchRL actor and value (``torchrl``) and the policies as samplers (``sampler``);
+  models (``models``, ``scorer``), their incremental numpy engines (``engine``, ``compiled``), the
+  samplers (``samplers``), the candidate priors (``prior``) and the GNN as an RL backbone (``backbone``);
+- ``agents.rl``: RL policies (``policies``), the TensorDict encoder module (``backbones``), the SB3
+  features extractor (``sb3``), the TorchRL actor and value (``torchrl``) and the policies as
+  samplers (``sampler``);
 - ``agents.critical``: critical-sample models on the fixed Halton graph and their data adapter.
 
 Submodules are imported on use: ``import agents`` pulls in neither PyTorch Geometric nor

@@ -1,6 +1,8 @@
 """The floors of the house, read from the sources (every import, at module level or inside a function):
 no import circle among the package's modules; ``gnn_mp_envs`` imports neither ``agents`` nor
-``train`` nor torch; ``agents`` imports no ``train``; nothing in the packages imports ``tools``."""
+``train`` nor torch; ``agents`` imports no ``train``; nothing in the packages imports ``tools``.
+Inside ``agents``: every module is a method's or the shared floor's, no method imports another
+method, and the shared floor imports no method (``docs/architecture.md``)."""
 
 from __future__ import annotations
 
@@ -12,6 +14,12 @@ import networkx as nx
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("gnn_mp_envs", "agents", "train")
 TORCH_FAMILY = ("torch", "tensordict", "torchrl", "torch_geometric", "stable_baselines3")
+#: The learned methods, one package each: none imports another (they meet on the shared floor).
+METHODS = ("agents.tree", "agents.rl", "agents.critical")
+#: The shared floor under the methods: what any method may import; it imports no method (a registry
+#: may name a method's class as a ``"module:attribute"`` string, resolved on first use).
+SHARED_FLOOR = ("agents", "agents.nn", "agents.samplers", "agents.checkpoints", "agents.registry",
+                "agents.graph", "agents.encoders")
 
 
 def modules() -> dict[str, Path]:
@@ -78,3 +86,40 @@ def test_the_graph_sees_imports_inside_functions():
     graph, _ = import_graph()
     assert graph.has_edge("agents.registry", "agents.samplers.baselines")      # imported inside a factory
     assert graph.has_edge("train.benchmark.runs", "gnn_mp_envs.evaluation")
+
+
+def _part(name: str, parts: tuple[str, ...]) -> str | None:
+    """The entry of ``parts`` that ``name`` is or lies under (the longest; None: none)."""
+    found = [p for p in parts if name == p or name.startswith(p + ".")]
+    return max(found, key=len) if found else None
+
+
+def _method(name: str) -> str | None:
+    return _part(name, METHODS)
+
+
+def test_every_agents_module_is_a_method_or_the_shared_floor():
+    unplaced = sorted(m for m in modules() if m.startswith("agents") and _method(m) is None
+                      and (_part(m, SHARED_FLOOR) in (None, "agents") and m != "agents"))
+    assert unplaced == []
+
+
+def test_no_method_imports_another_method():
+    graph, _ = import_graph()
+    breaks = sorted((a, b) for a, b in graph.edges if _method(a) and _method(b) and _method(a) != _method(b))
+    assert breaks == []
+
+
+def test_the_shared_floor_imports_no_method():
+    graph, _ = import_graph()
+    breaks = sorted((a, b) for a, b in graph.edges if a.startswith("agents") and _method(a) is None
+                    and _method(b) is not None)
+    assert breaks == []
+
+
+def test_the_method_rules_see_a_break():
+    """An oracle for the two rules: the edges they forbid are edges the reader finds and names."""
+    assert _method("agents.rl.sampler") == "agents.rl" and _method("agents.nn.priors") is None
+    assert _method("agents.tree") == "agents.tree" and _method("agents.treelike") is None
+    graph, _ = import_graph()
+    assert graph.has_edge("agents.tree.models", "agents.nn.causal")      # a method on the floor: allowed

@@ -266,7 +266,7 @@ def test_training_refuses_ood_and_validation_scenes(tmp_path):
 def test_symmetry_augmentation_maps_a_run_like_the_raw_states():
     """A training run mapped by a symmetry equals the run built from the mapped tree: states,
     features, start, goal and labels move together; the causal k-NN edges stay valid."""
-    from agents.tree.models import causal_knn
+    from agents.nn.causal import causal_knn
     from train.tree.items import Run, symmetries_of, transformed
     rng = np.random.default_rng(4)
     nodes = torch.as_tensor(rng.random((30, 2)), dtype=torch.float32)

@@ -7,9 +7,9 @@ import torch
 from tensordict import TensorDict
 from torch_geometric.data import Batch, Data
 
-from agents.encoders import CONVS, TreeEncoder
+from agents.nn.encoders import CONVS, TreeEncoder
 from agents.rl.backbones import EncoderModule
-from agents.graph import knn_edge_index, to_pyg
+from agents.nn.graph import knn_edge_index, to_pyg
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS, observation_space
 
 MAZE_SPACE = observation_space(np.zeros(2), np.ones(2), 60)
@@ -218,7 +218,7 @@ def test_encoder_is_equivariant_to_permuting_the_batch(conv, knn):
 def test_encoder_sage_fast_path_is_pygs_sageconv_bit_for_bit(knn, monkeypatch):
     """MeanEdges.conv computes what PyG's SAGEConv (mean) computes, bit for bit, forward and backward:
     the oracle is the same encoder calling the PyG layers themselves."""
-    import agents.encoders as encoders
+    import agents.nn.encoders as encoders
     torch.manual_seed(0)
     enc = TreeEncoder.from_space(ARM_SPACE, hidden_channels=16, num_layers=3, out_channels=8, knn=knn)
     batched = as_tensors(random_tree_obs(ARM_SPACE, [5, 60, 12, None, 1, 30], np.random.default_rng(4)))

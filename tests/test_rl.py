@@ -186,7 +186,7 @@ def test_short_training_runs(tmp_path, lib, algo, task):
 def test_saved_policy_reloads_and_reproduces_actions(tmp_path):
     """Same seed -> same actions, for every policy kind, after a save/load round trip."""
     from agents.rl.policies import SB3PPOPolicy, SB3SACPolicy, TorchRLPPOPolicy, encoder_config
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.samplers import load_sampler
     from agents.rl.sampler import RL_SAMPLERS, save_policy
     env = gym.make("GNNMP/Maze2DRRT-v0", copy_observations=False)
@@ -263,7 +263,7 @@ def box_policy_sampler(task: str, seed: int = 0, **settings):
     the angle often), saved and loaded by name."""
     import tempfile
 
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.registry import load_sampler
     from agents.rl.policies import SB3PPOPolicy, encoder_config
     from agents.rl.sampler import save_policy
@@ -312,7 +312,7 @@ def test_the_box_policy_acts_alike_with_and_without_the_compiled_map(task):
 def test_numpy_twin_of_the_tree_policy_matches_torch(task):
     """The RL sampler's numpy forward (numpy_tree_params) against the torch policy on views of a grown
     tree, a hand-made tree with an orphan row and a one-node tree; unsupported policies stay in torch."""
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.rl.policies import SB3PPOPolicy, SB3SACPolicy, encoder_config
     from agents.rl.sampler import numpy_tree_params, numpy_tree_policy
     view_space = make_rl_env(task, view_nodes=16).observation_space
@@ -346,7 +346,7 @@ def test_numpy_twin_of_the_tree_policy_matches_torch(task):
 
 def test_warm_start_copies_the_encoder(tmp_path):
     from agents.checkpoints import save_checkpoint
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.rl.policies import SB3PPOPolicy, encoder_config, warm_start_encoder
     space = make_rl_env("maze2d", view_nodes=16).observation_space
     source = SB3PPOPolicy(encoder_config(TreeEncoder.from_space(space, hidden_channels=8, num_layers=1,
@@ -385,7 +385,7 @@ def test_cli_train_rl_flags(tmp_path, capsys):
 
 def test_arm_view_and_sampler(tmp_path):
     """BiRRT on the arm: both roots stay in the view, and a policy acts for the active tree."""
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.rl.policies import SB3PPOPolicy, encoder_config
     from agents.rl.sampler import sampler_from_checkpoint, save_policy
     env = make_rl_env("arm", view_nodes=8, max_nodes=300)
@@ -415,7 +415,7 @@ def test_sampler_maps_actions_as_the_training_env(task):
     same state: one map (policy_action_to_state), wrapped and clipped alike."""
     from agents.rl.sampler import RLSampler
     from agents.rl.policies import SB3PPOPolicy, encoder_config
-    from agents.encoders import TreeEncoder
+    from agents.nn.encoders import TreeEncoder
     from agents.samplers import active_target
     from gnn_mp_envs.envs.wrappers import TargetRelativeAction, policy_action_to_state
     from gnn_mp_envs.registration import task_spec

@@ -130,7 +130,7 @@ def test_rl_ids_are_the_training_commands_mdp_with_the_time_limit():
 
 
 def test_pick_sampler_numpy_twin_matches_the_torch_policy():
-    from agents.encoders import CandidateEncoder
+    from agents.nn.encoders import CandidateEncoder
     from agents.rl.pick import PickPolicy
     from agents.rl.sampler import numpy_pick_layers, numpy_pick_logits
     env, obs, cs = grown_env("maze2d", 30)
@@ -296,7 +296,7 @@ def test_a_picker_with_proposals_scores_a_set_for_that_many_samples():
 # ----------------------------------------------------------------------------- the candidate prior
 def scorer_prior():
     from agents.checkpoints import shipped_checkpoint
-    from agents.rl.prior import ScorerPrior
+    from agents.tree.prior import ScorerPrior
     return ScorerPrior.from_checkpoint(shipped_checkpoint("gnn", "pendulum"))
 
 
@@ -330,7 +330,7 @@ def test_prior_picker_starts_as_the_prior_and_its_twin_agrees():
     """A PickPolicy with a prior and its other head weights zeroed gives exactly the prior's logits; with
     any weights, the numpy twin the sampler runs matches the torch policy."""
     from agents.checkpoints import shipped_checkpoint
-    from agents.encoders import CandidateEncoder
+    from agents.nn.encoders import CandidateEncoder
     from agents.rl.pick import PickPolicy
     from agents.rl.sampler import numpy_pick_layers, numpy_pick_logits
     env, obs, _ = grown_env("pendulum", 40)
@@ -438,7 +438,7 @@ def test_gnn_pick_scores_the_pickers_candidates_by_its_prior_alone():
     assert not np.allclose(policy.logits(obs, feats), feats[:, -1])
     env.close()
     from agents.checkpoints import shipped_checkpoint
-    from agents.rl.prior import MixturePrior
+    from agents.tree.prior import MixturePrior
     from agents.rl.sampler import sampler_from_checkpoint
     env, obs, _ = grown_env("maze2d", 40)
     prior_only = load_sampler("gnn-pick", task="maze2d", seed=3)

@@ -6,7 +6,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from agents.graph import to_pyg
+from agents.nn.graph import to_pyg
 from agents.samplers import SAMPLER_IN_KEYS, available_samplers, load_sampler
 
 

@@ -21,7 +21,7 @@ import torch.nn.functional as F
 import gnn_mp_envs  # noqa: F401
 from agents.checkpoints import load_checkpoint, shipped_checkpoint
 from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
-from agents.tree.models import causal_knn
+from agents.nn.causal import causal_knn
 from tests.helpers import uniform_policy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -447,7 +447,7 @@ def test_mixture_prior_is_the_torch_models_log_density(task, min_nodes):
     its log-density under the GNN's mixture: the torch model's ``-run_nll`` with the candidates as
     labels (temperature and sigma scale 1), and a brute-force sum over nodes and Gaussians at the
     shipped settings."""
-    from agents.rl.prior import MixturePrior
+    from agents.tree.prior import MixturePrior
     model, record = load_checkpoint(shipped_checkpoint("gnn", task), expected_kind="tree/gnn")
     model = model.double()
     settings = record["meta"]["sampler"]

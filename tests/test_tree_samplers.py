@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from agents.checkpoints import load_checkpoint, save_checkpoint
-from agents.tree.models import TreeGNN, causal_knn
+from agents.nn.causal import causal_knn
+from agents.tree.models import TreeGNN
 from agents.samplers import load_sampler
 from agents.tree.engine import IncrementalTreeGNN
 from gnn_mp_envs.rollout import rollout

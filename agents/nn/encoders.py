@@ -1,13 +1,16 @@
 """A PyG encoder of the tree observation: padded observation -> node and graph embeddings.
 
-:class:`TreeEncoder` reads the observation through :func:`agents.graph.tree_graph` (so any
+:class:`TreeEncoder` reads the observation through :func:`agents.nn.graph.tree_graph` (so any
 leading batch shape works), runs ``num_layers`` message-passing layers of a PyG convolution
 chosen by name over the tree edges (and optionally k-nearest-neighbour edges between
 states), and pools the node embeddings (mean and max) together with an embedding of
 ``start``, ``goal`` and ``active_tree`` into one graph embedding per observation.
 
-The RL policies build on it (:mod:`agents.rl.backbones`: the encoder by name, as a TensorDict
-module; :mod:`agents.rl.sb3`, :mod:`agents.rl.torchrl`), and so can a sampler of your own.
+The RL policies build on it (:mod:`agents.rl.sb3`, :mod:`agents.rl.torchrl`), and so can a sampler
+of your own. :data:`ENCODERS` is the registry of encoders by name (``backbone=`` of the RL
+policies): ``"tree"``, this one; ``"tree-gnn"``, the GNN sampler's causal backbone
+(:class:`agents.tree.backbone.TreeGNNEncoder`, named here and imported on first use);
+:func:`register_encoder` adds one. :class:`CandidateEncoder` reads a picker's candidates.
 
     encoder = TreeEncoder.from_space(env.observation_space, hidden_channels=64, num_layers=3)
     nodes, graph, batch = encoder(obs_tensors)     # (sum n_b, 64), (*batch_shape, 128), (sum n_b,)
@@ -15,6 +18,7 @@ module; :mod:`agents.rl.sb3`, :mod:`agents.rl.torchrl`), and so can a sampler of
 
 from __future__ import annotations
 
+import importlib
 from typing import Callable, Mapping
 
 import numpy as np
@@ -23,7 +27,7 @@ from gymnasium import spaces
 from torch import nn
 from torch_geometric.nn import GATv2Conv, GCNConv, GraphConv, SAGEConv, global_max_pool, global_mean_pool
 
-from agents.graph import knn_edge_index, tree_graph
+from agents.nn.graph import knn_edge_index, tree_graph
 
 #: Convolution name -> factory(in_channels, out_channels, heads) (``conv=`` of TreeEncoder).
 CONVS: dict[str, Callable[[int, int, int], nn.Module]] = {
@@ -178,6 +182,10 @@ def plain_mean_sage(conv: nn.Module) -> bool:
             and not conv.normalize and conv.root_weight and not conv._forward_hooks and not conv._forward_pre_hooks)
 
 
+#: The checkpoint kind of a :class:`CandidateEncoder`'s prior model (the supervised GNN sample scorer).
+PRIOR_KIND = "tree/gnn-scorer"
+
+
 class CandidateEncoder(nn.Module):
     """Candidate-selection observation -> per-candidate embeddings and a summary.
 
@@ -191,7 +199,8 @@ class CandidateEncoder(nn.Module):
 
     With ``prior`` (``{"scorer": TreeGNNScorer constructor arguments, "temperature": T}``) the
     features' last column is a candidate prior's logit (the supervised GNN sample scorer over the
-    whole tree, computed incrementally by the env and the sampler: ``agents.rl.prior``), and
+    whole tree, a :data:`PRIOR_KIND` model, computed incrementally by the env and the sampler: its
+    candidate prior, :func:`agents.nn.priors.candidate_prior`), and
     :meth:`flat` ends with those ``K`` logits as they are, so that a linear head can start as
     exactly the prior (:func:`prior_head_init`) and training learns what to add. The scorer's
     weights are a frozen submodule (:attr:`prior_model`): they travel with the policy's, and the
@@ -213,8 +222,8 @@ class CandidateEncoder(nn.Module):
         self.prior_model = None
         self.prior_source: str | None = None
         if self.prior_config is not None:
-            from agents.tree.scorer import TreeGNNScorer
-            self.prior_model = TreeGNNScorer(**self.prior_config["scorer"]).eval().requires_grad_(False)
+            from agents.nn.priors import prior_model
+            self.prior_model = prior_model(PRIOR_KIND, self.prior_config["scorer"]).eval().requires_grad_(False)
         extra = 0 if self.tree is None else self.tree.out_channels
         self.net = nn.Sequential(nn.Linear(self.feature_dim + extra, self.hidden), ACTIVATIONS[act](),
                                  nn.Linear(self.hidden, self.embed), ACTIVATIONS[act]())
@@ -291,4 +300,34 @@ def prior_head_init(linear: nn.Linear, count: int) -> None:
         linear.bias.zero_()
 
 
-__all__ = ["ACTIVATIONS", "CONVS", "CandidateEncoder", "TreeEncoder", "plain_mean_sage", "prior_head_init"]
+#: Backbone name -> encoder class (``backbone=`` of the SB3 extractor, the TorchRL modules and RL
+#: policies; ``"class"`` of a stored encoder configuration), or ``"module:attribute"`` of one that a
+#: method provides, imported when first asked for (the floor names it, never imports it).
+ENCODERS: dict[str, type[nn.Module] | str] = {"tree": TreeEncoder, "tree-gnn": "agents.tree.backbone:TreeGNNEncoder"}
+
+
+def register_encoder(name: str, encoder: type[nn.Module] | str) -> None:
+    """Add an encoder (a class with ``from_space``, or its ``"module:attribute"``) under a new name."""
+    if name in ENCODERS:
+        raise ValueError(f"encoder {name!r} is already registered")
+    ENCODERS[name] = encoder
+
+
+def encoder_class(name: str) -> type[nn.Module]:
+    """The encoder class registered as ``name`` (ValueError: an unknown name)."""
+    if name not in ENCODERS:
+        raise ValueError(f"unknown backbone {name!r}; known: {', '.join(ENCODERS)}")
+    entry = ENCODERS[name]
+    if isinstance(entry, str):
+        module, attribute = entry.split(":")
+        entry = ENCODERS[name] = getattr(importlib.import_module(module), attribute)
+    return entry
+
+
+def encoder_from_space(observation_space: spaces.Dict, backbone: str = "tree", **kwargs) -> nn.Module:
+    """The encoder ``backbone`` (a key of :data:`ENCODERS`) sized for an observation space."""
+    return encoder_class(backbone).from_space(observation_space, **kwargs)
+
+
+__all__ = ["ACTIVATIONS", "CONVS", "ENCODERS", "PRIOR_KIND", "CandidateEncoder", "TreeEncoder", "encoder_class",
+           "encoder_from_space", "plain_mean_sage", "prior_head_init", "register_encoder"]

@@ -9,7 +9,7 @@ from typing import Any, Mapping, Sequence
 import torch
 from torch import nn
 
-from agents.encoders import ACTIVATIONS, CandidateEncoder, prior_head_init
+from agents.nn.encoders import ACTIVATIONS, CandidateEncoder, prior_head_init
 
 
 def mlp(in_dim: int, hidden: Sequence[int], activation: str) -> nn.Sequential:
@@ -66,7 +66,7 @@ class PickPolicy(nn.Module):
     ``forward(obs)`` returns the logits ``(*batch, K)`` of a categorical over the candidates.
     ``head="shared"``: a :class:`SharedCandidateHead` (no body) instead of the slot-wise linear layer.
     With a candidate prior (the encoder's ``prior``) the head has no body and starts as the prior's
-    logits (:func:`~agents.encoders.prior_head_init`, or the shared head's own start).
+    logits (:func:`~agents.nn.encoders.prior_head_init`, or the shared head's own start).
     """
 
     def __init__(self, encoder: Mapping[str, Any], hidden: Sequence[int] = (), activation: str = "tanh",

@@ -34,21 +34,21 @@ import torch
 from torch import nn
 
 from agents.checkpoints import CheckpointError, read_checkpoint, register_model_kind
-from agents.encoders import ACTIVATIONS, CandidateEncoder, TreeEncoder
-from agents.rl.backbones import ENCODERS, TreeGNNEncoder
+from agents.nn.encoders import ACTIVATIONS, CandidateEncoder, TreeEncoder, encoder_class
 from agents.rl.pick import PickPolicy, mlp as _mlp
 
 #: SB3 SAC's clamp of the log standard deviation (``stable_baselines3.sac.policies``).
 SAC_LOG_STD_MIN, SAC_LOG_STD_MAX = -20.0, 2.0
-#: SB3's names for activation classes -> keys of :data:`agents.encoders.ACTIVATIONS`.
+#: SB3's names for activation classes -> keys of :data:`agents.nn.encoders.ACTIVATIONS`.
 _ACT_NAMES = {nn.ReLU: "relu", nn.Tanh: "tanh", nn.ELU: "elu", nn.SiLU: "silu"}
 
 
 def encoder_config(encoder: nn.Module) -> dict[str, Any]:
-    """Constructor arguments that rebuild ``encoder`` (plain values, for a checkpoint); a
-    :class:`TreeGNNEncoder`'s carry ``"class": "tree-gnn"``."""
-    if isinstance(encoder, TreeGNNEncoder):
-        return {"class": "tree-gnn", **encoder.gnn_kwargs}
+    """Constructor arguments that rebuild ``encoder`` (plain values, for a checkpoint); an encoder of
+    another registered class (:data:`agents.nn.encoders.ENCODERS`, e.g. ``TreeGNNEncoder``) gives its
+    own, ``config()``, with its ``"class"`` name."""
+    if type(encoder) is not TreeEncoder and callable(getattr(encoder, "config", None)):
+        return encoder.config()
     first = encoder.tree_convs[0] if len(encoder.tree_convs) else None
     return {
         "in_channels": encoder.in_channels, "hidden_channels": encoder.hidden_channels,
@@ -75,7 +75,7 @@ class RLPolicy(nn.Module):
     def __init__(self, encoder: Mapping[str, Any], action_dim: int) -> None:
         super().__init__()
         config = dict(encoder)
-        self.encoder = ENCODERS[config.pop("class", "tree")](**config)
+        self.encoder = encoder_class(config.pop("class", "tree"))(**config)
         self.action_dim = int(action_dim)
 
     def params(self, embed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -236,9 +236,9 @@ def policy_from_torchrl(actor: Any) -> tuple[nn.Module, str, dict[str, Any]]:
 
 # ----------------------------------------------------------------------------- warm start
 def backbone(encoder: nn.Module) -> nn.Module:
-    """The module whose weights a warm start copies: the ``TreeEncoder`` itself, or the
-    ``TreeGNN`` inside a :class:`TreeGNNEncoder` (the supervised GNN sampler's class)."""
-    return encoder.gnn if isinstance(encoder, TreeGNNEncoder) else encoder
+    """The module whose weights a warm start copies: the ``TreeEncoder`` itself, or an encoder's
+    ``backbone`` (the ``TreeGNN`` inside a ``TreeGNNEncoder``, the supervised GNN sampler's class)."""
+    return getattr(encoder, "backbone", encoder)
 
 
 def encoder_state_from(state: Mapping[str, torch.Tensor], encoder: nn.Module) -> tuple[str, dict]:

@@ -38,7 +38,9 @@ from numba import njit
 from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
-from agents.encoders import TreeEncoder, plain_mean_sage
+from agents.nn.encoders import PRIOR_KIND, TreeEncoder, plain_mean_sage
+from agents.nn.priors import candidate_prior, supervised_prior
+from agents.nn.twins import NUMPY_ACTS, numpy_layers, numpy_linear, numpy_mlp
 from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy, SB3PPOPolicy
 from agents.samplers.base import ModelSampler, active_target
 from agents.samplers.streams import TorchCompatibleStream
@@ -167,41 +169,11 @@ def boolean_setting(name: str, value) -> bool:
     return bool(value)
 
 
-_NUMPY_ACTS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0.0)}
-
-
-def _numpy_layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray, Any]]:
-    """An MLP's ``(W^T, b, activation or None)`` per linear layer, float32 arrays (ValueError: an
-    activation without a numpy twin)."""
-    out, mods = [], list(seq)
-    for i, m in enumerate(mods):
-        if isinstance(m, nn.Linear):
-            act = mods[i + 1] if i + 1 < len(mods) and not isinstance(mods[i + 1], nn.Linear) else None
-            if act is not None and type(act) not in _NUMPY_ACTS:
-                raise ValueError(f"no numpy twin for activation {type(act).__name__}")
-            out.append((*_numpy_linear(m)[:2], None if act is None else _NUMPY_ACTS[type(act)]))
-    return out
-
-
-def _numpy_linear(m: nn.Module) -> tuple[np.ndarray, np.ndarray, None]:
-    """``(W^T, b, None)`` of one linear layer (torch's or PyG's; no bias: zeros), float32."""
-    w = m.weight.detach().numpy()
-    bias = np.zeros(w.shape[0], np.float32) if m.bias is None else m.bias.detach().numpy().copy()
-    return w.T.copy(), bias, None
-
-
-def _numpy_mlp(layers: list[tuple[np.ndarray, np.ndarray, Any]], x: np.ndarray) -> np.ndarray:
-    for w, b, act in layers:
-        x = x @ w + b
-        x = act(x) if act is not None else x
-    return x
-
-
 def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
     """A :class:`PickPolicy` without a tree context as numpy arrays (float32): the per-candidate MLP,
     the body and the logits layer, for :func:`numpy_pick_logits` (a forward of ~10 us instead of
     torch's ~300 us of per-call overhead on one step's ``(K, F)`` features)."""
-    twin = {"candidate": _numpy_layers(policy.encoder.net), "body": _numpy_layers(policy.body),
+    twin = {"candidate": numpy_layers(policy.encoder.net), "body": numpy_layers(policy.body),
             "prior": policy.encoder.prior_model is not None, "shared": policy.head == "shared"}
     if twin["shared"]:
         head = policy.logits
@@ -209,12 +181,12 @@ def numpy_pick_layers(policy: PickPolicy) -> dict[str, Any]:
                     slot_bias=head.slot_bias.detach().numpy().copy(),
                     prior_scale=None if head.prior_scale is None else head.prior_scale.detach().numpy().copy())
     else:
-        twin["logits"] = _numpy_layers(nn.Sequential(policy.logits))[0]
+        twin["logits"] = numpy_layers(nn.Sequential(policy.logits))[0]
     return twin
 
 
 def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
-    """An SB3 PPO actor over a :class:`~agents.encoders.TreeEncoder` as numpy arrays (float32), for
+    """An SB3 PPO actor over a :class:`~agents.nn.encoders.TreeEncoder` as numpy arrays (float32), for
     :func:`numpy_tree_params`; ``None`` for any other policy (it runs in torch).
 
     Supported: tree edges only (``knn=0``), plain mean-aggregation ``SAGEConv`` layers, ReLU/Tanh
@@ -224,16 +196,16 @@ def numpy_tree_policy(policy: RLPolicy) -> dict[str, Any] | None:
     summation (``tests/test_rl.py`` compares the two to 1e-5).
     """
     enc = policy.encoder
-    if type(policy) is not SB3PPOPolicy or type(enc) is not TreeEncoder or enc.knn or type(enc.act) not in _NUMPY_ACTS \
+    if type(policy) is not SB3PPOPolicy or type(enc) is not TreeEncoder or enc.knn or type(enc.act) not in NUMPY_ACTS \
             or not all(plain_mean_sage(conv) for conv in enc.tree_convs):
         return None
     try:
-        return {"act": _NUMPY_ACTS[type(enc.act)], "feature_scale": enc.feature_scale.numpy().copy(),
+        return {"act": NUMPY_ACTS[type(enc.act)], "feature_scale": enc.feature_scale.numpy().copy(),
                 "center": enc.state_center.numpy().copy(), "half_span": enc.state_half_span.numpy().copy(),
-                "input": _numpy_linear(enc.input),
-                "convs": [(_numpy_linear(c.lin_l), _numpy_linear(c.lin_r)) for c in enc.tree_convs],
-                "context": _numpy_layers(enc.context), "readout": _numpy_layers(enc.readout),
-                "body": _numpy_layers(nn.Sequential(*policy.body, policy.mu)),
+                "input": numpy_linear(enc.input),
+                "convs": [(numpy_linear(c.lin_l), numpy_linear(c.lin_r)) for c in enc.tree_convs],
+                "context": numpy_layers(enc.context), "readout": numpy_layers(enc.readout),
+                "body": numpy_layers(nn.Sequential(*policy.body, policy.mu)),
                 "scale": policy.log_std.detach().exp().numpy().copy()}
     except ValueError:
         return None
@@ -263,9 +235,9 @@ def numpy_tree_params(twin: Mapping[str, Any], view: Mapping[str, np.ndarray]) -
     center, half = twin["center"], twin["half_span"]
     ends = [(np.asarray(view[k], np.float32).reshape(-1) - center) / half for k in ("start", "goal")]
     active = np.asarray(view["active_tree"], np.float32).reshape(1)
-    ctx = _numpy_mlp(twin["context"], np.concatenate([*ends, active]))
-    embed = _numpy_mlp(twin["readout"], np.concatenate([h.sum(0) / np.float32(n), h.max(0), ctx]))
-    return _numpy_mlp(twin["body"], embed), twin["scale"]
+    ctx = numpy_mlp(twin["context"], np.concatenate([*ends, active]))
+    embed = numpy_mlp(twin["readout"], np.concatenate([h.sum(0) / np.float32(n), h.max(0), ctx]))
+    return numpy_mlp(twin["body"], embed), twin["scale"]
 
 
 @njit(cache=True)
@@ -295,14 +267,14 @@ def _shared_head_logits(h, x, score, bias, slot_bias, prior_scale, has_prior):
 def numpy_pick_logits(twin: Mapping[str, Any], features: np.ndarray) -> np.ndarray:
     """:class:`PickPolicy`'s logits ``(K,)`` in numpy for one step's features ``(K, F)``."""
     features = np.asarray(features, np.float32)
-    h = _numpy_mlp(twin["candidate"], features)
+    h = numpy_mlp(twin["candidate"], features)
     if twin["shared"]:           # SharedCandidateHead: w . [e_k, mean, max] + b + bias_k (+ scale * prior_k)
         prior_scale = np.float32(twin["prior_scale"][0]) if twin["prior"] else np.float32(0.0)
         return _shared_head_logits(np.ascontiguousarray(h, np.float32), features, twin["score"],
                                    np.float32(twin["bias"][0]), twin["slot_bias"], prior_scale, bool(twin["prior"]))
     parts = [h.reshape(-1), h.mean(0), h.max(0)] + ([features[:, -1]] if twin["prior"] else [])
-    x = _numpy_mlp(twin["body"], np.concatenate(parts))
-    return _numpy_mlp([twin["logits"]], x)
+    x = numpy_mlp(twin["body"], np.concatenate(parts))
+    return numpy_mlp([twin["logits"]], x)
 
 
 class PickSampler(ModelSampler):
@@ -360,8 +332,7 @@ class PickSampler(ModelSampler):
         encoder = self.policy.encoder
         if encoder.prior_model is None:
             return None
-        from agents.rl.prior import ScorerPrior
-        return ScorerPrior(encoder.prior_model, encoder.prior_config["temperature"])
+        return candidate_prior(PRIOR_KIND, encoder.prior_model, temperature=encoder.prior_config["temperature"])
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
@@ -483,18 +454,6 @@ def load_rl_sampler(name: str, low: np.ndarray, high: np.ndarray, task: str | No
                                    uniform_mix=uniform_mix, deterministic=deterministic, proposals=proposals,
                                    goal_bias=goal_bias, prior_only=name in PRIOR_OF,
                                    prior_source=partial(supervised_prior, task) if name in PRIOR_OF else None)
-
-
-def supervised_prior(task: str | None):
-    """The candidate prior of ``gnn-pick`` for a picker trained without one: the task's shipped
-    supervised ``gnn`` (a ``tree/gnn-scorer``'s scores, or a ``tree/gnn`` mixture's log-density)."""
-    from agents.rl.prior import MixturePrior, ScorerPrior
-    path = resolve_checkpoint("gnn", task, None, f"gnn-mp train sampler --task {task} --model gnn")
-    model, record = load_checkpoint(path, expected_kind=["tree/gnn", "tree/gnn-scorer"])
-    stored = record["meta"].get("sampler", {})
-    if record["kind"] == "tree/gnn-scorer":
-        return ScorerPrior(model, float(stored.get("temperature", 1.0)))
-    return MixturePrior(model, float(stored.get("temperature", 1.0)), float(stored.get("sigma_scale", 1.0)))
 
 
 __all__ = ["PRIOR_OF", "PickSampler", "RL_SAMPLERS", "RLSampler", "load_rl_sampler", "policy_record", "sampler_from_checkpoint",

@@ -1,4 +1,4 @@
-"""TorchRL actor and value head over the shared :class:`agents.encoders.TreeEncoder`.
+"""TorchRL actor and value head over the shared :class:`agents.nn.encoders.TreeEncoder`.
 
     from torchrl.envs import GymEnv
     env = GymEnv("GNNMP/Maze2DRRT-v0", max_nodes=200)
@@ -22,7 +22,7 @@ from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictModu
 from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
-from agents.encoders import CandidateEncoder
+from agents.nn.encoders import CandidateEncoder
 from agents.rl.backbones import EncoderModule
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 

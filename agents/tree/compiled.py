@@ -555,7 +555,7 @@ def _sin_cos_into(out, r, o, v, cols):
 
 @njit(cache=True, inline="always")
 def _mlp2(x, w1, b1, w2, b2):
-    """``Linear -> GELU -> Linear`` on rows ``x`` (``agents.tree.kernels.mlp`` of two layers)."""
+    """``Linear -> GELU -> Linear`` on rows ``x`` (``agents.nn.twins.mlp`` of two layers)."""
     hid = np.dot(x, w1) + b1
     _gelu_rows(hid)
     return np.dot(hid, w2) + b2

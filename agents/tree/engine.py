@@ -38,7 +38,7 @@ from agents.tree.compiled import (
     scorer_embed_rows,
     tree_context,
 )
-from agents.tree.kernels import linears, mlp, norms_of, vector, wrap_periodic
+from agents.nn.twins import linears, mlp, norms_of, vector, wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 

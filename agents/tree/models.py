@@ -2,7 +2,7 @@
 
 **GNN** (:class:`TreeGNN`). A *causal* graph network over the planner's tree: node ``n``
 receives messages only from its parent and from its ``knn`` nearest *earlier* nodes of the
-same tree (PyG :class:`RelativeConv` layers, messages built from the sender's embedding and
+same tree (PyG :class:`~agents.nn.causal.RelativeConv` layers, messages built from the sender's embedding and
 the relative position ``(x_j - x_n) / step_scale``). A node's embedding is therefore fixed the
 moment it is inserted: training scores every snapshot of a run with one forward pass over
 its final tree, and online inference embeds each new node once and caches it
@@ -35,9 +35,9 @@ from typing import Sequence
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
-from torch_geometric.nn import MessagePassing
 
 from agents.checkpoints import register_model_kind
+from agents.nn.causal import CausalTreeTrunk, mlp, wrap_periodic
 
 #: Clamp of the mixture components' log standard deviations.
 LOG_SIGMA_RANGE = (-4.0, 1.0)
@@ -45,84 +45,9 @@ LOG_SIGMA_RANGE = (-4.0, 1.0)
 MAX_LOGSTD = 10.0
 
 
-def mlp(in_channels: int, hidden_channels: int, out_channels: int, layers: int = 2) -> nn.Sequential:
-    """``layers`` linear layers with GELU between them."""
-    mods: list[nn.Module] = []
-    width = in_channels
-    for _ in range(layers - 1):
-        mods += [nn.Linear(width, hidden_channels), nn.GELU()]
-        width = hidden_channels
-    return nn.Sequential(*mods, nn.Linear(width, out_channels))
-
-
-def fixed_vector(values: Sequence[float] | Tensor | None, default: float, n: int) -> Tensor:
-    """``n`` float32 values (``default`` everywhere when ``values`` is None); refuses another length."""
-    t = torch.full((n,), default) if values is None else torch.as_tensor(values, dtype=torch.float32)
-    if t.shape != (n,):
-        raise ValueError(f"expected {n} values, got {tuple(t.shape)}")
-    return t.float()
-
-
-def wrap_periodic(delta: Tensor, periodic: Tensor) -> Tensor:
-    """Wrap the periodic columns (a bool mask) of a state difference into ``[-pi, pi)``."""
-    if not bool(periodic.any()):
-        return delta
-    wrapped = torch.remainder(delta + math.pi, 2 * math.pi) - math.pi
-    return torch.where(periodic, wrapped, delta)
-
-
-def causal_knn(nodes: Tensor, tree_id: Tensor, k: int, step_scale: Tensor, periodic: Tensor,
-               chunk: int = 1024) -> Tensor:
-    """``(N, k)`` indices of each node's ``k`` nearest *earlier* nodes of its own tree (-1 pads),
-    distances in ``step_scale`` units (periodic columns wrapped), ties to the earlier node.
-    Exact; chunked over rows."""
-    n = nodes.shape[0]
-    out = torch.full((n, k), -1, dtype=torch.long)
-    if n < 2 or k == 0:
-        return out
-    index = torch.arange(n)
-    for lo in range(0, n, chunk):
-        hi = min(n, lo + chunk)
-        diff = wrap_periodic(nodes[None, :hi] - nodes[lo:hi, None], periodic) / step_scale
-        dist = (diff * diff).sum(-1)                                     # (rows, hi)
-        allowed = (index[None, :hi] < index[lo:hi, None]) & (tree_id[None, :hi] == tree_id[lo:hi, None])
-        dist = dist.masked_fill(~allowed, float("inf"))
-        kk = min(k, hi)
-        d, j = torch.sort(dist, dim=1, stable=True)   # ties (duplicate states) go to the earlier node
-        d, j = d[:, :kk], j[:, :kk]
-        out[lo:hi, :kk] = torch.where(torch.isfinite(d), j, torch.full_like(j, -1))
-    return out
-
-
-class RelativeConv(MessagePassing):
-    """Mean of ``MLP([h_j, (x_j - x_i) / step_scale])`` over the incoming edges ``j -> i`` (0 for
-    a node without any).
-
-    The MLP is ``Linear -> GELU -> Linear``; computed as PyG message passing with the same
-    result but less work per edge: the first layer's sender part ``W_h h_j`` is computed once per
-    node (the online sampler caches it), and the second, linear layer is applied after the mean.
-    """
-
-    def __init__(self, hidden_channels: int, state_dim: int) -> None:
-        super().__init__(aggr="mean")
-        self.net = mlp(hidden_channels + state_dim, hidden_channels, hidden_channels)
-
-    def forward(self, h: Tensor, rel: Tensor, edge_index: Tensor) -> Tensor:
-        """``rel`` is ``(E, d)``: the scaled relative position of each edge's sender."""
-        first, second = self.net[0], self.net[2]
-        H = h.shape[-1]
-        sender = F.linear(h, first.weight[:, :H])                                   # (N, H) per node
-        edge = F.linear(rel, first.weight[:, H:], first.bias)                       # (E, H)
-        mean = self.propagate(edge_index, sender=sender, edge=edge, size=(h.shape[0], h.shape[0]))
-        has_edges = torch.zeros(h.shape[0], 1, dtype=h.dtype).index_fill_(0, edge_index[1], 1.0)
-        return second(mean) * has_edges
-
-    def message(self, sender_j: Tensor, edge: Tensor) -> Tensor:
-        return F.gelu(sender_j + edge)
-
-
-class TreeGNN(nn.Module):
-    """The causal tree GNN and its node-mixture head (see the module docstring).
+class TreeGNN(CausalTreeTrunk):
+    """The causal tree GNN (:class:`~agents.nn.causal.CausalTreeTrunk`) and its node-mixture head
+    (see the module docstring).
 
     Args:
         state_dim: ``d``.
@@ -150,19 +75,10 @@ class TreeGNN(nn.Module):
         self.num_trees, self.use_parent, self.use_knn, self.use_context = int(num_trees), use_parent, use_knn, use_context
         self.relative_inputs = bool(relative_inputs)
 
-        self.register_buffer("state_center", fixed_vector(state_center, 0.0, d))
-        self.register_buffer("state_scale", fixed_vector(state_scale, 1.0, d))
-        self.register_buffer("feature_scale", fixed_vector(feature_scale, 1.0, 2 * d + 1))
-        self.register_buffer("step_scale", fixed_vector(step_scale, 1.0, d))
-        mask = torch.zeros(d, dtype=torch.bool)
-        mask[list(periodic)] = True
-        self.register_buffer("periodic", mask)
+        self.build_trunk((2 if self.relative_inputs else 3) * d + 1, state_center=state_center,
+                         state_scale=state_scale, feature_scale=feature_scale, step_scale=step_scale,
+                         periodic=periodic)
         H = self.hidden_channels
-        self.input = mlp((2 if self.relative_inputs else 3) * d + 1, H, H)
-        self.parent_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
-        self.knn_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
-        self.updates = nn.ModuleList(mlp(3 * H, H, H) for _ in range(num_layers))
-        self.norms = nn.ModuleList(nn.LayerNorm(H) for _ in range(num_layers))
         self.query = mlp((1 if self.relative_inputs else 2) * d + num_trees + num_trees * H + num_trees, H, H)
         self.key = nn.Linear(H, H)
         self.node_head = nn.Linear(H, num_trees * 2 * d)     # per active tree: offset (d) + log sigma (d)
@@ -174,29 +90,10 @@ class TreeGNN(nn.Module):
             return features / self.feature_scale
         return torch.cat([features / self.feature_scale, (nodes - self.state_center) / self.state_scale], -1)
 
-    def relative(self, sender: Tensor, receiver: Tensor) -> Tensor:
-        return wrap_periodic(sender - receiver, self.periodic) / self.step_scale
-
-    def edges(self, parent: Tensor, knn: Tensor) -> tuple[Tensor, Tensor]:
-        """Edge indices ``(2, E)`` (sender, receiver) of the parent and the causal k-NN edges."""
-        child = torch.nonzero(parent >= 0).flatten()
-        parent_edges = torch.stack([parent[child], child])
-        rows, cols = torch.nonzero(knn >= 0, as_tuple=True)
-        knn_edges = torch.stack([knn[rows, cols], rows])
-        return parent_edges, knn_edges
-
     def embed(self, nodes: Tensor, features: Tensor, parent: Tensor, knn: Tensor) -> Tensor:
         """Node embeddings ``(N, H)`` of one or more trees (indices global to ``nodes``)."""
         h = self.input(self.node_inputs(nodes, features))
-        parent_edges, knn_edges = self.edges(parent, knn)
-        rel_p = self.relative(nodes[parent_edges[0]], nodes[parent_edges[1]])
-        rel_k = self.relative(nodes[knn_edges[0]], nodes[knn_edges[1]])
-        zero = torch.zeros_like(h)
-        for layer in range(self.num_layers):
-            mp = self.parent_convs[layer](h, rel_p, parent_edges) if self.use_parent else zero
-            mk = self.knn_convs[layer](h, rel_k, knn_edges) if self.use_knn else zero
-            h = self.norms[layer](h + self.updates[layer](torch.cat([h, mp, mk], -1)))
-        return h
+        return self.layers(h, nodes, parent, knn, self.use_parent, self.use_knn)
 
     # ------------------------------------------------------------------ mixture
     def context(self, start: Tensor, goal: Tensor, active: Tensor, means: Tensor, counts: Tensor) -> Tensor:

@@ -1,4 +1,4 @@
-"""Candidate priors for RL pickers: the supervised GNN models over the whole tree.
+"""Candidate priors from the supervised tree models: what a candidate picker ranks its candidates by.
 
 The pendulum's supervised ``gnn`` (:class:`~agents.tree.scorer.TreeGNNScorer`) scores a candidate
 state by the tree around its nearest node; a picker that starts from those scores starts where
@@ -9,6 +9,9 @@ the scorer's incremental engine (each new node embedded once, compiled) and its 
 temperature. :class:`MixturePrior` is the same protocol over a supervised ``tree/gnn`` sampler (the
 maze2d and arm ``gnn``): a candidate's logit is its log-density under the GNN's mixture at the
 current tree, so ``gnn-pick`` ranks the picker's candidates by what supervision learned.
+
+They live with the tree method; the RL picker (:mod:`agents.rl`) reaches them by the model's
+checkpoint kind through the shared floor's registry (:mod:`agents.nn.priors`), never by import.
 """
 
 from __future__ import annotations
@@ -18,14 +21,18 @@ from typing import Mapping
 
 import numpy as np
 
+from agents.nn.twins import wrap_periodic
 from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
-from agents.tree.kernels import wrap_periodic
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import TreeGNNScorer
 
 
 class ScorerPrior:
     """``logits = scorer(candidates | tree) / temperature`` for the active tree of each observation."""
+
+    #: The model it reads, and its settings (read from a checkpoint's ``meta["sampler"]``).
+    model_class = TreeGNNScorer
+    settings = ("temperature",)
 
     def __init__(self, model: TreeGNNScorer, temperature: float = 1.0) -> None:
         if not (np.isfinite(temperature) and temperature > 0):
@@ -52,6 +59,9 @@ class ScorerPrior:
 class MixturePrior:
     """``logits = log q(candidate | tree)``: the density of the supervised GNN sampler's mixture
     (node weights at ``temperature``, Gaussians at ``sigma_scale`` times the learned scales)."""
+
+    model_class = TreeGNN
+    settings = ("temperature", "sigma_scale")
 
     def __init__(self, model: TreeGNN, temperature: float = 1.0, sigma_scale: float = 1.0) -> None:
         for name, value in (("temperature", temperature), ("sigma_scale", sigma_scale)):

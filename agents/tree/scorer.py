@@ -9,7 +9,7 @@ classifier over candidate samples: draw ``M`` uniform candidates, score each, pi
 
 **Static (causal) layers.** As the tree GNN: node ``n`` receives messages from its parent and
 from its ``knn`` nearest *earlier* nodes of its tree (nearest under the planner's metric,
-:data:`metric_weights` times the wrapped difference), PyG :class:`RelativeConv` layers. An
+:data:`metric_weights` times the wrapped difference), PyG :class:`~agents.nn.causal.RelativeConv` layers. An
 embedding is fixed the moment its node is inserted.
 
 **Frontier layer.** Node ``o`` also summarises the *newer* nodes that point at it at the
@@ -40,13 +40,7 @@ from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
 
 from agents.checkpoints import register_model_kind
-from agents.tree.models import (
-    RelativeConv,
-    causal_knn,
-    fixed_vector,
-    mlp,
-    wrap_periodic,
-)
+from agents.nn.causal import CausalTreeTrunk, causal_knn, fixed_vector, mlp, wrap_periodic
 
 #: Edge types of the causal graph: parent -> child, and k-NN (an earlier node -> a later one).
 EDGE_TYPES = 2
@@ -98,7 +92,7 @@ def frontier_edges(parent: Tensor, knn: Tensor, query_node: Tensor, query_time: 
 class FrontierConv(MessagePassing):
     """Sum of ``MLP([h_s, rel, one_hot(type)])`` over the incoming edges, concatenated with the
     number of edges of each type: ``(Q, H + EDGE_TYPES)``. Senders are tree nodes, receivers
-    queries (a bipartite graph, ``size=(N, Q)``). As :class:`RelativeConv`, the MLP's sender
+    queries (a bipartite graph, ``size=(N, Q)``). As :class:`~agents.nn.causal.RelativeConv`, the MLP's sender
     term is computed per node and its second (linear) layer after the sum."""
 
     def __init__(self, hidden_channels: int, state_dim: int) -> None:
@@ -119,8 +113,8 @@ class FrontierConv(MessagePassing):
         return torch.cat([F.gelu(sender_j + edge), onehot], -1)
 
 
-class TreeGNNScorer(nn.Module):
-    """Causal tree GNN + frontier layer + candidate-sample scorer (see the module docstring).
+class TreeGNNScorer(CausalTreeTrunk):
+    """Causal tree GNN (:class:`~agents.nn.causal.CausalTreeTrunk`) + frontier layer + candidate-sample scorer (see the module docstring).
 
     Args:
         state_dim: ``d``.
@@ -146,21 +140,11 @@ class TreeGNNScorer(nn.Module):
         self.num_layers, self.knn = int(num_layers), int(knn)
         self.depth_scale = float(depth_scale)
 
-        self.register_buffer("state_center", fixed_vector(state_center, 0.0, d))
-        self.register_buffer("state_scale", fixed_vector(state_scale, 1.0, d))
-        self.register_buffer("feature_scale", fixed_vector(feature_scale, 1.0, 2 * d + 1))
-        self.register_buffer("step_scale", fixed_vector(step_scale, 1.0, d))
-        self.register_buffer("metric_weights", fixed_vector(metric_weights, 1.0, d))
-        mask = torch.zeros(d, dtype=torch.bool)
-        mask[list(periodic)] = True
-        self.register_buffer("periodic", mask)
         p = len(set(periodic))
+        self.build_trunk(4 * d + 2 + 6 * p, state_center=state_center, state_scale=state_scale,
+                         feature_scale=feature_scale, step_scale=step_scale, periodic=periodic,
+                         extra_buffers={"metric_weights": fixed_vector(metric_weights, 1.0, d)})
         H = self.hidden_channels
-        self.input = mlp(4 * d + 2 + 6 * p, H, H)
-        self.parent_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
-        self.knn_convs = nn.ModuleList(RelativeConv(H, d) for _ in range(num_layers))
-        self.updates = nn.ModuleList(mlp(3 * H, H, H) for _ in range(num_layers))
-        self.norms = nn.ModuleList(nn.LayerNorm(H) for _ in range(num_layers))
         self.frontier = FrontierConv(H, d)
         self.head = mlp(2 * H + EDGE_TYPES + 3 * d + 1 + 4 * p, H, 1, layers=3)
 
@@ -191,9 +175,6 @@ class TreeGNNScorer(nn.Module):
                           *self._angles(to_goal)], -1)
 
     # ------------------------------------------------------------------ graph
-    def relative(self, sender: Tensor, receiver: Tensor) -> Tensor:
-        return wrap_periodic(sender - receiver, self.periodic) / self.step_scale
-
     def causal_knn(self, nodes: Tensor, tree_id: Tensor) -> Tensor:
         """``(N, knn)`` earlier nearest nodes under the planner's metric (ties to the earlier node)."""
         return causal_knn(nodes, tree_id, self.knn, 1.0 / self.metric_weights, self.periodic)
@@ -206,17 +187,7 @@ class TreeGNNScorer(nn.Module):
     def embed(self, nodes: Tensor, features: Tensor, parent: Tensor, knn: Tensor, goal: Tensor) -> Tensor:
         """Static node embeddings ``(N, H)`` (causal: a node reads earlier nodes only)."""
         h = self.input(self.node_inputs(nodes, features, goal, tree_depth(parent)))
-        child = torch.nonzero(parent >= 0).flatten()
-        parent_edges = torch.stack([parent[child], child])
-        rows, cols = torch.nonzero(knn >= 0, as_tuple=True)
-        knn_edges = torch.stack([knn[rows, cols], rows])
-        rel_p = self.relative(nodes[parent_edges[0]], nodes[parent_edges[1]])
-        rel_k = self.relative(nodes[knn_edges[0]], nodes[knn_edges[1]])
-        for layer in range(self.num_layers):
-            mp = self.parent_convs[layer](h, rel_p, parent_edges)
-            mk = self.knn_convs[layer](h, rel_k, knn_edges)
-            h = self.norms[layer](h + self.updates[layer](torch.cat([h, mp, mk], -1)))
-        return h
+        return self.layers(h, nodes, parent, knn)
 
     # ------------------------------------------------------------------ scores
     def score(self, h_near: Tensor, frontier: Tensor, candidate: Tensor) -> Tensor:

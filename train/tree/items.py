@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from agents.tree.models import causal_knn, wrap_periodic
+from agents.nn.causal import causal_knn, wrap_periodic
 from train.tree.data import TreeDataset, reindex
 
 
