@@ -254,3 +254,22 @@ def test_box_plots_show_wall_time_and_colour_rows_by_kind(tmp_path):
     assert [sampler_kind(n) for n in ("uniform", "gnn", "rl-ppo", "ompl-rrt", "gnn-pick")] == \
         ["classical", "supervised", "rl", "ompl", "supervised"]
     assert KIND_COLOURS["classical"].lstrip("#") in svg or KIND_COLOURS["classical"].upper().lstrip("#") in svg
+
+
+def test_the_time_budget_is_the_tasks_unless_given():
+    """`--ompl-time-limit` (OMPL's solve limit and the time of 'solved within the budgets') defaults to
+    the task's `TaskSpec.time_limit_s`: 10 s for most, 30 s with 30,000 nodes for the Fetch; a flag
+    overrides it and a non-positive one is refused."""
+    import gnn_mp_envs
+    assert gnn_mp_envs.task_spec("maze2d").time_limit_s == 10.0
+    fetch = gnn_mp_envs.task_spec("fetch-mbm")
+    assert (fetch.max_nodes, fetch.time_limit_s) == (30000, 30.0)
+    for task, expected in (("maze2d", 10.0), ("fetch-mbm", 30.0)):
+        args = bm.BenchmarkArgs(task=task, samplers=["uniform"], problems=1)
+        bm.validate_args(args)
+        assert args.ompl_time_limit == expected
+    args = bm.BenchmarkArgs(task="fetch-mbm", samplers=["uniform"], problems=1, ompl_time_limit=5.0)
+    bm.validate_args(args)
+    assert args.ompl_time_limit == 5.0
+    with pytest.raises(bm.BenchmarkError, match="--ompl-time-limit must be > 0"):
+        bm.validate_args(bm.BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=1, ompl_time_limit=0.0))

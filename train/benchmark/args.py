@@ -76,7 +76,9 @@ class BenchmarkArgs:
     render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
-    ompl_time_limit: float = arg(10.0, "seconds per problem for OMPL rows", parse=positive_float)
+    ompl_time_limit: float | None = arg(None, "seconds per problem: OMPL's solve limit, and the time budget of "
+                                        "'solved within the budgets' (default: the task's, 10 s for most)",
+                                        parse=positive_float)
     checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable): a .pt, or the SB3 .zip of a "
                                        "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it)",
                                        flag="--checkpoint", metavar="SAMPLER=PATH", parse=checkpoint_pair,
@@ -165,7 +167,9 @@ def validate_args(args: BenchmarkArgs) -> None:
         raise BenchmarkError(f"--workers must be >= 1, got {args.workers}")
     if args.max_nodes is not None and args.max_nodes < 2:
         raise BenchmarkError(f"--max-nodes must be >= 2, got {args.max_nodes}")
-    if args.ompl_time_limit <= 0:
+    if args.ompl_time_limit is None:
+        args.ompl_time_limit = float(spec.time_limit_s)
+    if not args.ompl_time_limit > 0:
         raise BenchmarkError(f"--ompl-time-limit must be > 0, got {args.ompl_time_limit}")
     if not args.samplers:
         raise BenchmarkError("--samplers is empty")
