@@ -180,3 +180,26 @@ def test_same_bounds_is_the_one_comparison_of_state_boxes():
     assert not same_bounds(box, (np.zeros(3), np.ones(3)))
     assert not same_bounds(box, (np.ones(2), np.zeros(2)))
     assert not same_bounds(box, (np.zeros(2), np.ones(3)))
+
+
+def test_register_scene_adds_a_scene_to_the_spec_and_leaves_the_env_ids():
+    """register_scene is the one way a task's module adds a scene family by name: the spec's scenes
+    (and, on request, its validation or OOD scenes) grow; the Gymnasium entries stay the same objects."""
+    from gnn_mp_envs.registration import register_scene
+    before = task_spec("maze2d")
+    entries = {env_id: gym.registry[env_id] for env_id in before.envs}
+    try:
+        assert register_scene("maze2d", "walls") is before                  # a known scene: unchanged
+        spec = register_scene("maze2d", "my-walls", ood=True)
+        assert task_spec("maze2d") is spec and spec.scenes == (*before.scenes, "my-walls")
+        assert spec.ood_scenes == (*before.ood_scenes, "my-walls") and spec.validation_scenes == before.validation_scenes
+        assert {env_id: gym.registry[env_id] for env_id in before.envs} == entries
+        assert all(gym.registry[env_id] is entry for env_id, entry in entries.items())
+        with pytest.raises(ValueError, match="unknown task"):
+            register_scene("no-such-task", "x")
+        with pytest.raises(ValueError, match="both"):
+            register_scene("maze2d", "x", validation=True, ood=True)
+        with pytest.raises(ValueError, match="non-empty name"):
+            register_scene("maze2d", "")
+    finally:
+        TASK_SPECS["maze2d"] = before

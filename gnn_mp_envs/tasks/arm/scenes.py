@@ -472,9 +472,7 @@ def register_scene_family(name: str, params: dict[str, Any], layout: str | Calla
     :func:`crevice_layout`), registered in :data:`LAYOUTS` under its ``__name__``; default:
     ``params["layout"]``. One scene is drawn (seed 0) to check the layout before the family is
     added; a bad family is a one-line ``ValueError``."""
-    from dataclasses import replace as replaced
-
-    from gnn_mp_envs.registration import TASK_SPECS, register_task
+    from gnn_mp_envs.registration import TASK_SPECS, register_scene
     if not isinstance(name, str) or not name or name == "train":
         raise ValueError(f"a scene family needs a name other than 'train' (either training family), got {name!r}")
     if name in SCENE_FAMILIES and not replace:
@@ -498,6 +496,5 @@ def register_scene_family(name: str, params: dict[str, Any], layout: str | Calla
         raise ValueError(f"scene family {name!r}: layout {layout!r} failed on a first draw "
                          f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
     SCENE_FAMILIES[name] = spec
-    arm = TASK_SPECS.get("arm")
-    if arm is not None and name not in arm.scenes:      # the environment and the CLI check scenes there
-        register_task(replaced(arm, scenes=(*arm.scenes, name)), replace=True)
+    if "arm" in TASK_SPECS:                             # the environment and the CLI check scenes there
+        register_scene("arm", name)
