@@ -268,32 +268,6 @@ def register_scene(task: str, name: str, *, validation: bool = False, ood: bool 
     return new
 
 
-def register_scene(task: str, name: str, *, validation: bool = False, ood: bool = False) -> TaskSpec:
-    """Add scene family ``name`` to the scenes of the registered task ``task`` (``validation`` /
-    ``ood``: also to its validation / out-of-distribution scenes) and return the task's new spec.
-
-    The task's own module keeps the family's data (the arm's
-    :func:`~gnn_mp_envs.tasks.arm.scenes.register_scene_family`) and calls this so that the
-    environment and the command line accept the name. Only the spec changes: the environment ids
-    name the task, and an environment reads the task's spec when it is made. A scene the task
-    already has is left as it is; an unknown task is a ``ValueError``.
-    """
-    from dataclasses import replace as replaced
-
-    spec = task_spec(task)
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"task {task!r}: a scene needs a non-empty name, got {name!r}")
-    if validation and ood:
-        raise ValueError(f"task {task!r}: a scene cannot be both a validation and an OOD scene")
-    if name in spec.scenes:
-        return spec
-    new = replaced(spec, scenes=(*spec.scenes, name),
-                  validation_scenes=spec.validation_scenes + ((name,) if validation else ()),
-                  ood_scenes=spec.ood_scenes + ((name,) if ood else ()))
-    TASK_SPECS[task] = new
-    return new
-
-
 def task_spec(name: str) -> TaskSpec:
     """The spec of a registered task; ``ValueError`` naming the known ones otherwise."""
     try:
