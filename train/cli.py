@@ -70,8 +70,10 @@ def fail(message: str, code: int = 2):
 
 # ---------------------------------------------------------------------------- parsers
 def terminate_as_interrupt() -> None:
-    """SIGTERM (a scheduler's stop, ``kill``) ends a benchmark like Ctrl-C: the finished runs are
-    written (``"partial": true``) and the workers stopped, instead of dying without a word."""
+    """SIGTERM (a scheduler's stop, ``kill``) ends a benchmark or a training run like Ctrl-C: the
+    finished runs are written (``"partial": true``), the worker processes (a benchmark's, an SB3
+    SubprocVecEnv's, a TorchRL ParallelEnv's) stopped, one line said, instead of dying without a word
+    and leaving each worker to print the traceback of its broken pipe."""
     import signal
 
     def interrupt(signum, frame):
@@ -243,6 +245,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 got = repr(argv[1]) if len(argv) > 1 else "nothing"
                 return fail(f"train: expected one of {', '.join(sorted(TRAIN_TARGETS))}, got {got}")
             module, prefix = TRAIN_TARGETS[argv[1]]
+            terminate_as_interrupt()     # a stopped training run: one line, its worker processes killed
             # `train critical` is `critical train`: name the command its usage lines show
             prog = f"{PROG} {argv[1]}" if prefix else f"{PROG} train {argv[1]}"
             return run_passthrough(module, prefix + argv[2:], prog)

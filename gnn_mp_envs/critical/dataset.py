@@ -154,6 +154,21 @@ def _collect(rows: list[tuple], map_index: list[int], split: list[int],
         split=np.array(split, dtype=np.int8), config=cfg)
 
 
+def map_split(i: int) -> int:
+    """The split code (:data:`SPLIT_CODES`) of labelled map ``i``: every tenth map from the ninth is
+    validation (8, 18, ...), from the tenth test (9, 19, ...), the rest training."""
+    return SPLIT_CODES["val"] if i % 10 == 8 else SPLIT_CODES["test"] if i % 10 == 9 else SPLIT_CODES["train"]
+
+
+def check_has_split(cfg: DatasetConfig, split: str, why: str) -> None:
+    """A one-line ``ValueError`` when the labelled set of ``cfg`` is too small to hold a map of
+    ``split`` (``"val"``, ``"test"``; checked before any data is generated)."""
+    first = next(i for i in range(10) if map_split(i) == SPLIT_CODES[split])
+    if cfg.num_maps <= first:
+        raise ValueError(f"--num-maps {cfg.num_maps}: {why}, and the labelled set's {split} maps are every tenth "
+                         f"from map {first}: use --num-maps {first + 1} or more")
+
+
 def generate_labelled(cfg: DatasetConfig, graph: HaltonGraph | None = None,
                       progress: bool = True) -> CriticalProblems:
     """The labelled train/val/test set: ``num_maps`` maps x ``pairs_per_map`` problems."""
@@ -162,7 +177,7 @@ def generate_labelled(cfg: DatasetConfig, graph: HaltonGraph | None = None,
     for i in tqdm(range(cfg.num_maps), desc="labelled maps", disable=not progress):
         rng = np.random.default_rng([cfg.seed, SPLIT_SEEDS["train"], i])
         got = _map_problems(rng, graph, cfg, 0, cfg.pairs_per_map)
-        code = SPLIT_CODES["val"] if i % 10 == 8 else SPLIT_CODES["test"] if i % 10 == 9 else 0
+        code = map_split(i)
         rows += got
         maps += [i] * len(got)
         splits += [code] * len(got)

@@ -169,9 +169,18 @@ class TreePlanningEnv(gym.Env):
         self._obs = GraphObservation(self.state_dim, self.max_nodes, obstacles)
         self.problem: Problem | None = None
         self.planner = None
+        self._closed = False
 
     # ------------------------------------------------------------------ gym API
+    def _check_open(self, call: str) -> None:
+        """After :meth:`close` the task's resources (the arm's and Panda's simulator) are gone: one clear
+        error instead of the simulator's own ("Not connected to physics server")."""
+        if getattr(self, "_closed", False):
+            name = self.spec.id if self.spec is not None else type(self).__name__
+            raise RuntimeError(f"{call}() on a closed environment ({name}): make a new one with gym.make")
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._check_open("reset")
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = sorted(set(options) - RESET_OPTIONS)
@@ -196,6 +205,7 @@ class TreePlanningEnv(gym.Env):
         return self._observation(), self._info()
 
     def step(self, action):
+        self._check_open("step")
         planner = self.planner
         if planner is None:
             raise RuntimeError("call reset() before step()")
@@ -228,6 +238,7 @@ class TreePlanningEnv(gym.Env):
 
     def close(self) -> None:
         self.task.close()
+        self._closed = True
         super().close()
 
     # ------------------------------------------------------------------ helpers

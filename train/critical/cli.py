@@ -57,7 +57,14 @@ def cmd_train(a: TrainArgs) -> None:
 
 
 def cmd_evaluate(a: EvaluateArgs) -> None:
+    from gnn_mp_envs.critical.dataset import check_has_split
     from train.critical.evaluate import evaluate, format_table
+    from train.critical.training import TrainError
+    if a.split == "val":
+        try:
+            check_has_split(a.dataset(), "val", "--split val scores the validation problems")
+        except ValueError as exc:
+            raise TrainError(str(exc)) from None
     rep = evaluate(a.models, a.checkpoints, a.data, a.problems, a.samples, seed=a.seed,
                    json_path=a.json, plot_path=a.plot, dataset=a.dataset(), progress=a.progress,
                    eval_seed=a.eval_seed, ks=a.ks, min_sep_r=a.min_sep, select=a.select,

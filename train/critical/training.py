@@ -39,7 +39,7 @@ from tqdm.auto import tqdm
 from agents.checkpoints import (CheckpointError, count_parameters, load_checkpoint, load_training_state, plain,
                                 save_checkpoint, save_training_state)
 from agents.critical.models import MODELS, build_model, kind_of
-from gnn_mp_envs.critical.dataset import DatasetConfig, load_or_generate
+from gnn_mp_envs.critical.dataset import DatasetConfig, check_has_split, load_or_generate
 from gnn_mp_envs.critical.halton import halton_graph
 from gnn_mp_envs.utils.io import atomic_write_text
 from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
@@ -120,6 +120,10 @@ def train(args: TrainArgs, dataset: DatasetConfig | None = None, progress: bool 
     except ValueError as exc:
         raise TrainError(str(exc)) from None
     cfg = dataset or args.dataset()
+    try:
+        check_has_split(cfg, "val", "train selects its weights on the validation problems")
+    except ValueError as exc:
+        raise TrainError(str(exc)) from None
     paths = run_paths(args, runs_dir)
     name, kind = args.model, kind_of(args.model)
     hp = _hparams(ctor, optim, args)

@@ -46,6 +46,19 @@ PICK_ONLY_FLAGS = ("candidates", "local_scale", "target_scale", "pi_arch", "pick
                    "candidate_embed", "tree_context", "prior", "prior_temperature")
 
 
+def picker_flags_given(args: RLArgs) -> list[str]:
+    """The picker's flags given on the command line with values other than their defaults (``--tree-context``
+    and ``--prior`` are refused by :func:`~train.rl.args.check_args`, with their own message)."""
+    given = []
+    for field in dataclasses.fields(RLArgs):
+        if field.name not in PICK_ONLY_FLAGS or field.name in ("tree_context", "prior"):
+            continue
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        if getattr(args, field.name) != default:
+            given.append("--" + field.name.replace("_", "-"))
+    return given
+
+
 def parse(argv: list[str]) -> RLArgs:
     """The flags: the dataclass's defaults, then the task's YAML section (``--hyperparams``, by
     default ``train/rl/hyperparams/<task>.yml``; a box run skips its picker keys), then the
@@ -61,6 +74,9 @@ def parse(argv: list[str]) -> RLArgs:
         action = first.action if explicit_action else values.get("action", first.action)
         if action == "box":
             values = {k: v for k, v in values.items() if k not in PICK_ONLY_FLAGS}
+            ignored = picker_flags_given(first)
+            if ignored:
+                raise ValueError(f"--action box ignores the picker's flags (--action pick): {', '.join(ignored)}")
         tokens = hyperparam_tokens(values)
     except ValueError as exc:
         parser.error(str(exc))
