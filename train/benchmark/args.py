@@ -76,8 +76,9 @@ class BenchmarkArgs:
     render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
-    ompl_time_limit: float | None = arg(None, "seconds per problem: OMPL's solve limit, and the time budget of "
-                                        "'solved within the budgets' (default: the task's, 10 s for most)",
+    ompl_time_limit: float | None = arg(None, "seconds per problem: OMPL's solve limit (an OMPL row's success) and "
+                                        "the axis of the success-vs-time figure (default: the task's, 10 s for "
+                                        "most)",
                                         parse=positive_float)
     checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable): a .pt, or the SB3 .zip of a "
                                        "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it)",

@@ -87,13 +87,13 @@ def plot_success_vs_time(report: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    from train.benchmark.stats import within_budget
+    from train.benchmark.stats import solved as is_solved
     limit, max_nodes = report.get("time_limit_s", 10.0), report["max_nodes"]
     times = [r["wall_time_s"] for runs in report["runs"].values() for r in runs if r.get("wall_time_s")]
     grid = np.geomspace(max(min(times, default=1e-3) / 2, 1e-4), limit, 200)
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for name, runs in report["runs"].items():
-        solved = np.array([r["wall_time_s"] for r in runs if within_budget(r, max_nodes, limit)])
+        solved = np.array([r["wall_time_s"] for r in runs if is_solved(r, max_nodes) and r.get("wall_time_s") is not None])
         ax.step(grid, [(solved <= t).sum() / max(len(runs), 1) for t in grid], where="post", label=name)
     ax.set_xscale("log")
     ax.set_ylim(0, 1.02)

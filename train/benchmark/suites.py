@@ -57,7 +57,7 @@ class SuiteEntry:
     ompl: tuple[str, ...] = ()
     split: str = "test"
     checker: str | None = None         # None: the task's default (TaskSpec.checkers[0], where it has several)
-    #: also report as the field does: <name>_field.txt (success within the budgets, median / p95 time,
+    #: also report as the field does: <name>_field.txt (solved as every table counts it, median / p95 time,
     #: iterations, checks, initial path length; per scene) and <name>_success_vs_time.png
     field: bool = False
 
