@@ -325,15 +325,15 @@ BUILTIN_TASKS = (
              ood_scenes=("trap", "goal-trap", "corridor", "spiral", "forest", "rotated"),
              symmetries=SQUARE_SYMMETRIES, rl_reward={"step_penalty": 1.0, "node_cost": 0.0}),
     # pendulum: one 0.2 s edge moves the state by ~0.4 (rad, rad/s); the metric weighs omega by
-    # tasks/pendulum.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
+    # tasks/pendulum/task.py VELOCITY_WEIGHT; the GNN head that beat uniform there is the scorer.
     TaskSpec("pendulum", "gnn_mp_envs.tasks.pendulum:PendulumTask",
              envs={"GNNMP/PendulumRRT-v0": {"planner": "rrt"}},
              max_nodes=20000, ompl_planners=("rrt", "kpiece"),
-             ompl_control_setup="gnn_mp_envs.baselines.ompl_runner:pendulum_setup",
+             ompl_control_setup="gnn_mp_envs.tasks.pendulum.ompl_setup:pendulum_setup",
              path_unit="seconds of motion", headline_metric="nodes_expanded", step_scale=0.4, periodic=(0,),
              metric_weights=(1.0, 0.4),
              gnn_head="scorer", rl_reward={"collision_check_cost": 0.01},
-             # Scenes (tasks/pendulum.py SCENE_FAMILIES): other goals, starts and torque limits.
+             # Scenes (tasks/pendulum/task.py SCENE_FAMILIES): other goals, starts and torque limits.
              scenes=("upright", "mixed", "far-goal", "lively", "side-goal", "fast-goal", "moving-start", "weak",
                      "strong", "hang"),
              validation_scenes=("far-goal", "lively"),

@@ -14,6 +14,9 @@ import networkx as nx
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("gnn_mp_envs", "agents", "train")
 TORCH_FAMILY = ("torch", "tensordict", "torchrl", "torch_geometric", "stable_baselines3")
+#: The modules that import OMPL, inside functions: the OMPL runner and a kinodynamic task's control-space
+#: setup, which only the runner's subprocess imports (through ``TaskSpec.ompl_control_setup``).
+OMPL_SIDE = ("gnn_mp_envs.baselines.ompl_runner", "gnn_mp_envs.tasks.pendulum.ompl_setup")
 #: The learned methods, one package each: none imports another (they meet on the shared floor).
 METHODS = ("agents.tree", "agents.rl", "agents.critical")
 #: The shared floor under the methods: what any method may import; it imports no method (a registry
@@ -123,3 +126,11 @@ def test_the_method_rules_see_a_break():
     assert _method("agents.tree") == "agents.tree" and _method("agents.treelike") is None
     graph, _ = import_graph()
     assert graph.has_edge("agents.tree.models", "agents.nn.causal")      # a method on the floor: allowed
+
+
+def test_only_the_ompl_runner_side_imports_ompl():
+    """The environments never import OMPL: only the runner's side does, and no module imports a task's
+    OMPL setup (the runner finds it by the name in the task's spec)."""
+    graph, external = import_graph()
+    assert sorted(m for m, names in external.items() if "ompl" in names) == sorted(OMPL_SIDE)
+    assert sorted(a for a, b in graph.edges if b in OMPL_SIDE[1:]) == []
