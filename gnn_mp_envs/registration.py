@@ -311,11 +311,11 @@ SQUARE_SYMMETRIES = tuple(
               [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[1, 0], [0, -1]], [[0, -1], [-1, 0]]))
 
 BUILTIN_TASKS = (
-    # maze2d: step_scale is the extension length (tasks/maze2d.py STEP_SIZE).
-    # Scenes (tasks/maze2d_scenes.py): "walls" is every split's family; "mixed" the training
+    # maze2d: step_scale is the extension length (tasks/maze2d/task.py STEP_SIZE).
+    # Scenes (tasks/maze2d/scenes.py): "walls" is every split's family; "mixed" the training
     # domain randomisation ("mixed-angled": plus walls at an angle); pockets, slits, slanted held-out
     # validation kinds; the rest the OOD test kinds.
-    TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d_scenes:Maze2DScenesTask",
+    TaskSpec("maze2d", "gnn_mp_envs.tasks.maze2d:Maze2DScenesTask",
              envs={"GNNMP/Maze2DRRT-v0": {"planner": "rrt"}, "GNNMP/Maze2DBiRRT-v0": {"planner": "birrt"}},
              max_nodes=5000, ompl_planners=("rrtconnect", "rrt"), path_unit="unit-square length",
              step_scale=0.05,

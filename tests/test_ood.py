@@ -10,7 +10,7 @@ import torch
 
 from gnn_mp_envs.registration import SQUARE_SYMMETRIES, task_spec
 from gnn_mp_envs.tasks.maze2d import Maze2DTask, MazeMap, box_corners, maze_rows
-from gnn_mp_envs.tasks.maze2d_scenes import (
+from gnn_mp_envs.tasks.maze2d.scenes import (
     SCENE_FAMILIES,
     Maze2DScenesTask,
     connected,

@@ -9,7 +9,7 @@ wall of the generator here spans the square and has one or two gaps (the narrow 
 Start and goal lie on opposite sides of all walls, so every path threads at least one gap.
 Collision checks are exact: a point test or a segment test each counts as one check. Other
 map kinds (traps, corridors, spirals, forests, rotated maps) are the scene families of
-:mod:`gnn_mp_envs.tasks.maze2d_scenes`.
+:mod:`gnn_mp_envs.tasks.maze2d.scenes`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Maze2D scene families: map kinds beyond the walls-with-gaps generator, as seeded generators.
 
 :class:`Maze2DScenesTask` is the registered ``maze2d`` task: ``scene="walls"`` (the default,
-every split) is :class:`~gnn_mp_envs.tasks.maze2d.Maze2DTask`'s generator, bit for bit; the
+every split) is :class:`~gnn_mp_envs.tasks.maze2d.task.Maze2DTask`'s generator, bit for bit; the
 other families are named in :data:`SCENE_FAMILIES` by their role:
 
 * ``mixed`` (training, domain randomisation): per problem one of the walls generator, walls
@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from gnn_mp_envs.core.problem import InvalidProblemError
-from gnn_mp_envs.tasks.maze2d import (
+from gnn_mp_envs.tasks.maze2d.task import (
     ENDPOINT_MARGIN,
     STEP_SIZE,
     Maze2DProblem,
