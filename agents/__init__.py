@@ -6,10 +6,9 @@ Shared floor:
   uniform / goal / model mixture, one seeded stream) and the classical samplers;
 - ``agents.registry``: ``load_sampler(name, task=...)``, bounds from the task's ``TaskSpec``;
 - ``agents.checkpoints``: the one checkpoint format (``weights_only=True``) and the shipped weights;
-- ``agents.nn``: the shared network pieces: graph conversion (``graph``; also ``agents.graph``),
-  the encoders and their registry by name (``encoders``; also ``agents.encoders``), the causal tree
-  GNN trunk (``causal``), numpy twins of torch layers (``twins``), candidate priors by model kind
-  (``priors``).
+- ``agents.nn``: the shared network pieces: graph conversion (``graph``), the encoders and their
+  registry by name (``encoders``), the causal tree GNN trunk (``causal``), numpy twins of torch
+  layers (``twins``), candidate priors by model kind (``priors``).
 
 One folder per method (no method imports another; the shared floor imports no method):
 

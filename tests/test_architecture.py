@@ -21,8 +21,7 @@ OMPL_SIDE = ("gnn_mp_envs.baselines.ompl_runner", "gnn_mp_envs.tasks.pendulum.om
 METHODS = ("agents.tree", "agents.rl", "agents.critical")
 #: The shared floor under the methods: what any method may import; it imports no method (a registry
 #: may name a method's class as a ``"module:attribute"`` string, resolved on first use).
-SHARED_FLOOR = ("agents", "agents.nn", "agents.samplers", "agents.checkpoints", "agents.registry",
-                "agents.graph", "agents.encoders")
+SHARED_FLOOR = ("agents", "agents.nn", "agents.samplers", "agents.checkpoints", "agents.registry")
 
 
 def modules() -> dict[str, Path]:

@@ -6,7 +6,7 @@ Run: ``.venv/bin/python -m tools.bench_sampler`` from the repository root.
    trees planned on validation problems with the goal test switched off, tiled to the batch)
    are converted to one PyG ``Batch``, ``--conversions`` times; reported for full trees and
    for mixed sizes (each tree cut to a random prefix of 50-100 % of its nodes), next to the
-   per-graph reference converter (``agents.graph.to_pyg_per_graph``, the old loop).
+   per-graph reference converter (``agents.nn.graph.to_pyg_per_graph``, the old loop).
 2. ``act()``: for every sampler in ``--samplers`` (default: all registered) and task in
    ``--tasks``, a tree is grown to ``--act-nodes`` nodes (validation problem 0, uniform
    samples) and ``sampler.act`` is called on its last ``--window`` prefixes, one node larger
@@ -108,7 +108,7 @@ def best_time(fn, repeats: int, rounds: int, clock=time.perf_counter) -> float:
 
 def measure_to_pyg(args: Args) -> dict[str, dict[str, float]]:
     """Seconds per batch conversion: ``{"full"|"mixed": {"vectorised": s, "per-graph": s}}``."""
-    from agents.graph import to_pyg, to_pyg_per_graph
+    from agents.nn.graph import to_pyg, to_pyg_per_graph
 
     trees = [grow("maze2d", args.nodes, i, args.seed, max_nodes=args.nodes) for i in range(args.trees)]
     clock = CLOCKS[args.clock]

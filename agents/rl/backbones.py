@@ -15,7 +15,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torch import nn
 
-from agents.nn.encoders import ENCODERS, encoder_class, encoder_from_space
+from agents.nn.encoders import ENCODERS, encoder_from_space
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
 
@@ -46,14 +46,6 @@ class EncoderModule(TensorDictModuleBase):
         _, embed, _ = self.encoder(tensordict)
         tensordict.set(self.out_keys[0], embed)
         return tensordict
-
-
-def __getattr__(name: str):
-    """``TreeGNNEncoder`` by its former path: the tree method's (:mod:`agents.tree.backbone`), handed
-    out by the shared floor's registry under its backbone name."""
-    if name == "TreeGNNEncoder":
-        return encoder_class("tree-gnn")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["ENCODERS", "EncoderModule", "encoder_from_space"]

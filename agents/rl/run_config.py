@@ -38,8 +38,10 @@ def env_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     if c.get("prior") is not None:
         from functools import partial
 
-        from agents.rl.prior import ScorerPrior
-        kw["candidate_prior"] = partial(ScorerPrior.from_checkpoint, str(c["prior"]), c["prior_temperature"])
+        from agents.nn.encoders import PRIOR_KIND
+        from agents.nn.priors import prior_class
+        kw["candidate_prior"] = partial(prior_class(PRIOR_KIND).from_checkpoint, str(c["prior"]),
+                                        c["prior_temperature"])
     return kw
 
 

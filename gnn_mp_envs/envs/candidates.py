@@ -41,7 +41,7 @@ last   with a ``prior``: its logit of ``c`` (one more column, ``F = 14 + 4 d``)
 =====  ==========================================================================
 
 **A prior** (``CandidateSet(..., prior=...)``, :class:`CandidatePrior`): any object that scores the
-step's candidates from the full observation, e.g. ``agents.rl.prior.ScorerPrior``, the supervised
+step's candidates from the full observation, e.g. ``agents.tree.prior.ScorerPrior``, the supervised
 GNN sample scorer read incrementally over the whole tree (a policy whose logits start as the
 prior's is a warm start that PPO refines; ``docs/rl.md``). This module only calls it, so the
 environments stay free of torch.

@@ -23,7 +23,7 @@ key                shape / dtype       meaning
 =================  ==================  =========================================================
 
 ``spaces.Dict`` rather than ``spaces.Graph``: SB3 and TorchRL accept padded boxes, and
-``agents.graph.to_pyg`` turns this layout into a PyG ``Data``/``Batch``.
+``agents.nn.graph.to_pyg`` turns this layout into a PyG ``Data``/``Batch``.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ the same keys and layout padded to ``K`` rows instead:
   x_goal - x_n, tree_id]``), ``start``, ``goal``, ``active_tree`` and ``obstacles`` are
   copied unchanged.
 
-So :class:`agents.encoders.TreeEncoder` reads a view exactly like a full observation, and a
+So :class:`agents.nn.encoders.TreeEncoder` reads a view exactly like a full observation, and a
 sampler trained on views reuses :func:`tree_view` on the full observation the benchmark
 gives it. Everything here is numpy; no torch.
 
