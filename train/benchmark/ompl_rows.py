@@ -16,6 +16,7 @@ from train.benchmark.args import (
     BenchmarkError,
     is_ompl,
 )
+from train.benchmark.stats import time_limit_s
 
 
 def _finite_or_none(x: Any) -> float | None:
@@ -60,7 +61,7 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
         with tqdm(total=len(indices), desc=f"{args.task} {planner_row}", unit="run", disable=not args.progress,
                   file=sys.stderr) as bar:
             results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
-                                           planner=planner, time_limit=args.ompl_time_limit, seed=args.seed,
+                                           planner=planner, time_limit=time_limit_s(args), seed=args.seed,
                                            on_problem=lambda _: bar.update(1), modules=args.modules)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
@@ -86,17 +87,17 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
     # the log's planner names: OMPL's control-based planners say so (ompl-rrt of maze2d is geometric RRT)
     log_name = {name: ("ompl-control-" + name[len(OMPL_PREFIX):] if control and is_ompl(name) else name)
                 for name in args.samplers}
-    results_by_planner = {log_name[name]: [_as_ompl_run(r, args.ompl_time_limit) for r in report["runs"][name]]
+    results_by_planner = {log_name[name]: [_as_ompl_run(r, time_limit_s(args)) for r in report["runs"][name]]
                           for name in args.samplers}
     total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
-    settings = {log_name[name]: ({"time_limit": args.ompl_time_limit, "seed": args.seed + 1} if is_ompl(name)
+    settings = {log_name[name]: ({"time_limit": time_limit_s(args), "seed": args.seed + 1} if is_ompl(name)
                                  else {"max_nodes": report["max_nodes"]})
                 for name in args.samplers}
     # one word: OMPL's ompl_benchmark_statistics.py names the experiment by the line's last word
     experiment = ":".join(["gnn-mp", report["env_id"], *(f"{k}={v}" for k, v in
                                                           (("scene", args.scene), ("checker", report.get("checker")))
                                                           if v)])
-    write_ompl_log(path, experiment, results_by_planner, time_limit=args.ompl_time_limit, seed=args.seed,
+    write_ompl_log(path, experiment, results_by_planner, time_limit=time_limit_s(args), seed=args.seed,
                    total_time=total_time, planner_settings=settings)
     return path
 

@@ -51,6 +51,14 @@ def sampler_summary(records: list[dict[str, Any]], max_nodes: int | None = None)
     return summary
 
 
+def time_limit_s(args: BenchmarkArgs) -> float:
+    """The run's time budget: ``--ompl-time-limit``, else the task's (``TaskSpec.time_limit_s``; a
+    validated ``args`` already holds it)."""
+    if args.ompl_time_limit is not None:
+        return float(args.ompl_time_limit)
+    return float(task_spec_for(args.task).time_limit_s)
+
+
 def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     """The ``--json`` document (schema in docs/results.md)."""
     spec = task_spec_for(args.task)
@@ -63,7 +71,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "env_id": spec.env_id,
         "split": args.split,
         "max_nodes": int(max_nodes),
-        "time_limit_s": float(args.ompl_time_limit),   # the time budget (OMPL rows: their solve limit)
+        "time_limit_s": time_limit_s(args),   # the time budget (OMPL rows: their solve limit)
         "scene": args.scene,
         "checker": args.checker,
         "samplers": list(args.samplers),
