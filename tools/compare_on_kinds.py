@@ -9,7 +9,7 @@ sampler's median headline figure (``TaskSpec.headline_metric``) over uniform's, 
 mean over problems of the per-problem ratio (the same problem and seed for both samplers: less
 noisy than a ratio of medians); the model share is the fraction of samples the adaptive mixture
 drew from the model. The last column is the paired geometric mean over the validation kinds.
-This is how the training ablations of docs/learned_samplers.md were compared.
+This is how the training ablations in docs/journal/2026-12-05-tree-sampler-training.md were compared.
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ class ModelDefaults:
 _GRAPH = {"in_channels": NODE_FEATURES_WITH_POSITION, "hidden_channels": 32, "num_layers": 3,
           "readout": "attention", "edges": "all"}
 #: Node-level training: the label-node term at weight 1
-#: next to the point regression. "any" and "all" targets were tied on validation (docs/critical.md).
+#: next to the point regression. "any" and "all" targets were tied on validation (docs/journal/2026-12-05-critical-node-level-tuning-and-seeds.md).
 _NODE = {"node_loss_weight": 1.0, "node_target": "any", "point_loss_weight": 1.0}
 #: TAGConv models: 6 layers of 3 taps (18 hops) scored better on validation than 3 (9 hops).
 _DEEP = {"num_layers": 6, "K": 3}
