@@ -47,6 +47,16 @@ def finite_loss(loss, where: str, lr: float) -> float:
     return value
 
 
+def non_finite_policy(exc: ValueError, lr: float) -> RunError | None:
+    """A one-line :class:`RunError` for torch's refusal of a distribution over NaN parameters (a
+    learning rate that drove an RL policy's weights to NaN), else None (another ValueError)."""
+    text = str(exc)
+    if not (text.startswith("Expected parameter") and "invalid values" in text):
+        return None
+    return RunError(f"the policy's outputs became NaN during training (learning rate {lr:g}): lower --lr; the "
+                    "last evaluated policy stays in policy.pt")
+
+
 @dataclass
 class RunFlags:
     """The flags of the run shell, shared by ``gnn-mp train sampler`` and ``gnn-mp train rl``."""

@@ -41,11 +41,12 @@ def _named(exc: OSError, path: Path) -> OSError:
 def atomic_path(path: str | os.PathLike, *, mkdir: bool = True) -> Iterator[Path]:
     """Yield a fresh temporary path in ``path``'s directory; on success rename it to ``path``.
 
-    The temporary name ends with ``path``'s suffix, so writers that infer the format from
-    the extension (matplotlib) behave as for ``path``. On an exception the temporary file
+    The temporary name ends with ``path``'s suffix (a symlink's own, not its target's), so writers
+    that infer the format from the extension (matplotlib) behave as for ``path``. On an exception the temporary file
     is removed and the target is left untouched. ``mkdir`` creates missing parent directories.
     """
     path = Path(path)
+    suffix = path.suffix             # the name given says the format, also when it is a link's
     if path.is_symlink():            # write through a link: the file it names is replaced, the link stays
         path = path.resolve()
     if path.exists() and not path.is_file():
@@ -54,7 +55,7 @@ def atomic_path(path: str | os.PathLike, *, mkdir: bool = True) -> Iterator[Path
     try:
         if mkdir:
             path.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{path.suffix}")
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{suffix}")
     except OSError as exc:
         raise _named(exc, path) from None
     os.close(fd)

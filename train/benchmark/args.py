@@ -222,9 +222,11 @@ def check_ray_address(address: str, timeout: float = 5.0) -> None:
                                      "start --head`, or give its address)") from None
     host, _, port = address.removeprefix("ray://").rpartition(":")
     try:
+        if not 0 < int(port) < 65536:
+            raise ValueError(port)
         with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):
             return
-    except ValueError:
+    except (ValueError, OverflowError):
         raise BenchmarkError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT or auto") from None
     except OSError as exc:
         raise BenchmarkError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from gnn_mp_envs.envs.wrappers import ACTIONS, RL_MAX_EPISODE_STEPS, make_rl_env
-from train.args import (arg, non_negative_float, non_negative_int, positive_float, positive_int, seed_int, size_int,
-                        temperature_float, worker_count)
+from train.args import (arg, bounded, non_negative_float, non_negative_int, positive_float, positive_int, seed_int,
+                        size_int, temperature_float, worker_count)
 from train.run import RunFlags
 
 #: The defaults of ``make_rl_env``: the flags of the MDP take them, so a run trains the MDP of the
@@ -151,7 +151,8 @@ class RLArgs(RunFlags):
     clip_range: float = arg(0.2, "PPO: clip range", parse=positive_float)
     ent_coef: float = arg(0.0, "PPO: entropy bonus", parse=non_negative_float)
     log_std_init: float = arg(-2.0, "PPO: initial log std of the Gaussian (actions in [-1, 1]; -2: std 0.135, a "
-                              "narrow bias toward the target in the target frame)")
+                              "narrow bias toward the target in the target frame; in [-20, 2], SAC's clamp)",
+                              parse=bounded(float, -20.0, False, "a number in [-20, 2]", 2.0))
     buffer_size: int = arg(100_000, "SAC: replay buffer transitions", parse=positive_int)
     learning_starts: int = arg(1000, "SAC: steps before the first update", parse=non_negative_int)
     # --- evaluation, outputs

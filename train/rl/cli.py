@@ -46,6 +46,13 @@ PICK_ONLY_FLAGS = ("candidates", "local_scale", "target_scale", "pi_arch", "pick
                    "candidate_embed", "tree_context", "prior", "prior_temperature")
 
 
+def build_parser() -> OneLineParser:
+    """The flags of ``gnn-mp train rl`` (the fields of :class:`~train.rl.args.RLArgs`)."""
+    parser = OneLineParser(prog="gnn-mp train rl", description=__doc__.splitlines()[0])
+    add_dataclass_arguments(parser, RLArgs)
+    return parser
+
+
 def picker_flags_given(args: RLArgs) -> list[str]:
     """The picker's flags given on the command line with values other than their defaults (``--tree-context``
     and ``--prior`` are refused by :func:`~train.rl.args.check_args`, with their own message)."""
@@ -63,8 +70,7 @@ def parse(argv: list[str]) -> RLArgs:
     """The flags: the dataclass's defaults, then the task's YAML section (``--hyperparams``, by
     default ``train/rl/hyperparams/<task>.yml``; a box run skips its picker keys), then the
     command line."""
-    parser = OneLineParser(prog="gnn-mp train rl", description=__doc__.splitlines()[0])
-    add_dataclass_arguments(parser, RLArgs)
+    parser = build_parser()
     first = from_namespace(RLArgs, parser.parse_args(argv))
     try:
         import_modules(first.modules)

@@ -33,7 +33,7 @@ from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
-from train.run import RunError, TrainingRun
+from train.run import RunError, TrainingRun, non_finite_policy
 
 
 class EvalCallback(BaseCallback):
@@ -177,8 +177,14 @@ def train(args: RLArgs) -> RunResult:
     callbacks = [EvalCallback(evaluator, run)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
     started = time.perf_counter()
     remaining = max(args.total_steps - model.num_timesteps, 0)
-    model.learn(total_timesteps=remaining, callback=callbacks, tb_log_name=f"{args.algo}_{args.task}",
-                reset_num_timesteps=not args.resume)
+    try:
+        model.learn(total_timesteps=remaining, callback=callbacks, tb_log_name=f"{args.algo}_{args.task}",
+                    reset_num_timesteps=not args.resume)
+    except ValueError as exc:            # torch refuses a distribution over NaN parameters
+        error = non_finite_policy(exc, args.lr)
+        if error is None:
+            raise
+        raise error from None
     train_time = time.perf_counter() - started
 
     # 5. final evaluation, learning curve, --tune-mix, --ship

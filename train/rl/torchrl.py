@@ -35,7 +35,7 @@ from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make
 from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
-from train.run import RunError, TrainingRun
+from train.run import RunError, TrainingRun, non_finite_policy
 
 
 def keep_threads(threads: int) -> None:
@@ -233,35 +233,41 @@ def train(args: RLArgs) -> RunResult:
         row = evaluator(steps)
         bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
                   f"({row['eval_wall_s']:.0f} s)")
-    for batch in collected(collector, args, state_path):
-        if steps >= args.total_steps:
-            break
-        keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
-        steps += batch.numel()
-        batch_bytes = max(batch_bytes, batch.bytes())   # the rollout storage of one batch
-        for _ in range(args.n_epochs):
-            with torch.no_grad():
-                advantage(batch)
-            flat = batch.reshape(-1)
-            for idx in torch.randperm(flat.numel()).split(args.batch_size):
-                losses = loss_module(flat[idx])
-                loss = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                optimiser.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(loss_module.parameters(), 0.5)
-                optimiser.step()
-        collector.update_policy_weights_()
-        done = batch["next", "done"]
-        logger.log_scalar("train/reward_per_step", batch["next", "reward"].mean().item(), step=steps)
-        logger.log_scalar("train/episodes_ended", done.sum().item(), step=steps)
-        logger.log_scalar("train/loss_objective", losses["loss_objective"].item(), step=steps)
-        logger.log_scalar("train/loss_critic", losses["loss_critic"].item(), step=steps)
-        bar.update(batch.numel())
-        if evaluator.due(steps):
-            row = evaluator(steps)
-            save_state(steps)
-            bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes {row['median_nodes']:.0f} "
-                      f"({row['eval_wall_s']:.0f} s)")
+    try:
+        for batch in collected(collector, args, state_path):
+            if steps >= args.total_steps:
+                break
+            keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
+            steps += batch.numel()
+            batch_bytes = max(batch_bytes, batch.bytes())   # the rollout storage of one batch
+            for _ in range(args.n_epochs):
+                with torch.no_grad():
+                    advantage(batch)
+                flat = batch.reshape(-1)
+                for idx in torch.randperm(flat.numel()).split(args.batch_size):
+                    losses = loss_module(flat[idx])
+                    loss = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                    optimiser.zero_grad()
+                    loss.backward()
+                    torch.nn.utils.clip_grad_norm_(loss_module.parameters(), 0.5)
+                    optimiser.step()
+            collector.update_policy_weights_()
+            done = batch["next", "done"]
+            logger.log_scalar("train/reward_per_step", batch["next", "reward"].mean().item(), step=steps)
+            logger.log_scalar("train/episodes_ended", done.sum().item(), step=steps)
+            logger.log_scalar("train/loss_objective", losses["loss_objective"].item(), step=steps)
+            logger.log_scalar("train/loss_critic", losses["loss_critic"].item(), step=steps)
+            bar.update(batch.numel())
+            if evaluator.due(steps):
+                row = evaluator(steps)
+                save_state(steps)
+                bar.write(f"  step {steps:>7}: val success {row['success_rate']:.2f}, median nodes "
+                          f"{row['median_nodes']:.0f} ({row['eval_wall_s']:.0f} s)")
+    except ValueError as exc:            # torch refuses a distribution over NaN parameters
+        error = non_finite_policy(exc, args.lr)
+        if error is None:
+            raise
+        raise error from None
     bar.close()
     collector.shutdown()
     keep_threads(args.threads)

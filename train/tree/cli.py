@@ -10,14 +10,21 @@ from typing import Sequence
 from train.args import OneLineParser, add_dataclass_arguments, from_namespace
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    if importlib.util.find_spec("torch") is None:     # an environments-only install: one line naming the extra
-        raise ModuleNotFoundError("No module named 'torch'", name="torch")
+def build_parser() -> OneLineParser:
+    """The flags of ``gnn-mp train sampler`` (the fields of :class:`~train.tree.args.TrainArgs`)."""
     from train.tree.args import TrainArgs
     parser = OneLineParser(prog="gnn-mp train sampler",
                            description="Train a learned tree sampler (the paper's Algorithm 1, with DAgger) and "
                            "evaluate it against uniform on validation problems.")
     add_dataclass_arguments(parser, TrainArgs)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    if importlib.util.find_spec("torch") is None:     # an environments-only install: one line naming the extra
+        raise ModuleNotFoundError("No module named 'torch'", name="torch")
+    from train.tree.args import TrainArgs
+    parser = build_parser()
     args = from_namespace(TrainArgs, parser.parse_args(argv))
     from train.benchmark.args import BenchmarkError, check_ray_address
     if args.ray not in (None, "local", "auto"):

@@ -1,0 +1,67 @@
+"""tools/fuzz_cli.py: a small sample of its attempts (the full run is `python -m tools.fuzz_cli`), and
+its oracles themselves (a FIFO replaced, a traceback, a hang are each seen)."""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+
+import pytest
+
+from tools import fuzz_cli
+
+
+def test_every_subcommand_has_flags_of_each_kind_read_from_its_parser():
+    kinds = {name: {f.kind for f in fuzz_cli.flags_of(cmd)} for name, cmd in fuzz_cli.COMMANDS.items()}
+    assert set(kinds) == {"benchmark", "train sampler", "train rl", "critical generate-data", "critical train",
+                          "critical evaluate"}
+    assert all("number" in k and "path" in k for k in kinds.values()), kinds
+    options = {f.option for f in fuzz_cli.flags_of(fuzz_cli.COMMANDS["benchmark"])}
+    assert {"--json", "--plot", "--problems", "--workers", "--checkpoint", "--task"} <= options
+    chosen = fuzz_cli.choose(fuzz_cli.all_attempts(list(fuzz_cli.COMMANDS)), 200, 0)
+    assert len(chosen) == 200 and len(set(chosen)) == 200
+
+
+def test_a_sample_of_bad_values_is_one_line_each(tmp_path):
+    """Output paths that are a FIFO, a device node or a symlink, huge and NaN counts, an unknown task:
+    no traceback, no hang, no node replaced."""
+    attempts = [fuzz_cli.Attempt("benchmark", "--json", "fifo", "{fifo}"),
+                fuzz_cli.Attempt("benchmark", "--plot", "char device", "{chardev}"),
+                fuzz_cli.Attempt("benchmark", "--json", "symlink", "{symlink}"),
+                fuzz_cli.Attempt("benchmark", "--problems", "huge", fuzz_cli.HUGE),
+                fuzz_cli.Attempt("train rl", "--hyperparams", "fifo", "{fifo}"),
+                fuzz_cli.Attempt("train rl", "--candidates", "nan", "nan"),
+                fuzz_cli.Attempt("train sampler", "--workers", "huge", fuzz_cli.HUGE),
+                fuzz_cli.Attempt("benchmark", "--task", "unknown", "no-such-value"),
+                # what the full run found (each fixed): a figure through a symlink to a .txt, a port past
+                # the C long, a learning rate that makes the policy NaN
+                fuzz_cli.Attempt("benchmark", "--plot", "symlink", "{symlink}"),
+                fuzz_cli.Attempt("train sampler", "--ray", "huge", fuzz_cli.HUGE),
+                fuzz_cli.Attempt("train rl", "--lr", "huge", fuzz_cli.HUGE),
+                fuzz_cli.Attempt("train rl", "--log-std-init", "inf", "inf")]
+    outcomes = fuzz_cli.fuzz(attempts, jobs=2, timeout=120, workdir=tmp_path, progress=False)
+    summary = fuzz_cli.counts(outcomes)
+    assert summary["attempts"] == len(attempts)
+    assert (summary["tracebacks"], summary["hangs"], summary["non_regular_files_replaced"]) == (0, 0, 0), \
+        [(o.attempt, o.last_line) for o in fuzz_cli.findings(outcomes)]
+    assert all(o.returncode == (0 if o.attempt.label == "symlink" else 2) for o in outcomes), \
+        [(o.attempt, o.returncode, o.last_line) for o in outcomes]
+
+
+def test_the_oracles_see_a_replaced_fifo_a_traceback_and_a_hang(tmp_path, monkeypatch):
+    """A stand-in subcommand that replaces its output FIFO, one that raises, one that sleeps."""
+    scripts = {"replace": "import os, sys; p = sys.argv[-1]; os.remove(p); open(p, 'w').write('x')",
+               "raise": "raise KeyError('boom')",
+               "sleep": "import time; time.sleep(60)"}
+    for name, code in scripts.items():
+        monkeypatch.setitem(fuzz_cli.COMMANDS, name, fuzz_cli.Command(name, (name,), lambda: None, ()))
+    monkeypatch.setattr(fuzz_cli, "ENTRY", "import sys; exec({'replace': %r, 'raise': %r, 'sleep': %r}[sys.argv[1]])"
+                        % (scripts["replace"], scripts["raise"], scripts["sleep"]))
+    attempts = [fuzz_cli.Attempt("replace", "--out", "fifo", "{fifo}"), fuzz_cli.Attempt("raise", "--x", "nan", "nan"),
+                fuzz_cli.Attempt("sleep", "--x", "nan", "nan")]
+    outcomes = fuzz_cli.fuzz(attempts, jobs=2, timeout=5, workdir=tmp_path, progress=False)
+    assert [o.replaced for o in outcomes] == [["fifo"], [], []]
+    assert [o.traceback for o in outcomes] == [False, True, False]
+    assert [o.hang for o in outcomes] == [False, False, True]
+    assert fuzz_cli.counts(outcomes)["hangs"] == 1 and len(fuzz_cli.findings(outcomes)) == 3
