@@ -8,12 +8,12 @@ STAMP  := $(VENV)/.installed
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
-	@echo "make: creating $(VENV) and installing gnn-mp-envs with its extras (agents, test, ompl, ray, docs);"
+$(STAMP): pyproject.toml Makefile
+	@echo "make: creating $(VENV) and installing gnn-mp-envs with its extras (agents, test, ompl, ray, docs, zoo);"
 	@echo "      pip runs quietly (a few minutes on a fresh machine, once)"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e ".[agents,test,ompl,ray,docs]"
+	$(BIN)/pip install --quiet -e ".[agents,test,ompl,ray,docs,zoo]"
 	touch $(STAMP)
 	@echo "make: installed into $(VENV)"
 
