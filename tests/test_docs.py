@@ -3,7 +3,8 @@
 * Every fence names its language: ``python``, ``bash`` (commands) or ``text`` (output, layouts),
   so no command can hide in an unlabelled block.
 * The python blocks of a page run in order, in one fresh interpreter started in an empty
-  directory (nothing depends on the repository being the working directory). docs/samplers.md
+  directory (nothing depends on the repository being the working directory) that holds only
+  the page's own files (the ``# file: PATH`` blocks below, written there, not run). docs/samplers.md
   and docs/rl.md have tests of their own that also check what their blocks print
   (tests/test_samplers.py, tests/test_rl.py).
 * The bash blocks of a page run in order, each with ``bash -e -o pipefail``, in a fresh copy of
@@ -12,6 +13,8 @@
   user's own (``my_pkg/disks.py``); it is written there first. The commands run with the budget
   flags of tests/docs_shim.py appended (docs/index.md, "How the docs are tested"), in processes
   forked from one preloaded interpreter (tests/docs_server.py).
+* A benchmark table a page prints right after the ``gnn-mp benchmark`` command that makes it is
+  what that command prints now, run as written without the budget, up to wall times.
 """
 
 from __future__ import annotations
@@ -97,8 +100,14 @@ def test_the_budget_is_appended_to_the_commands_it_names():
 
 @pytest.mark.parametrize("page", WITH_BLOCKS, ids=lambda p: p.name)
 def test_page_blocks_run(page, tmp_path):
+    """The page's python blocks in order, in one interpreter; the user's own files (``# file:
+    PATH`` blocks) are written to the directory it starts in, not run, so a block that uses one
+    imports it as the reader would (``import my_pkg.disks``)."""
+    for name, code in file_blocks(page).items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(code)
     script = tmp_path / f"{page.stem}.py"
-    script.write_text("\n\n".join(python_blocks(page)))
+    script.write_text("\n\n".join(code for code in python_blocks(page) if not FILE_LINE.match(code)))
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
                             timeout=900)
@@ -257,3 +266,57 @@ def test_every_relative_link_of_the_docs_names_a_file_that_exists():
             if path and not (page.parent / path).exists():
                 missing.append(f"{page.relative_to(ROOT)}: {target}")
     assert not missing, missing
+
+
+# ---------------------------------------------------------------------------- printed tables
+def printed_benchmark_tables() -> list[tuple[Path, str, str]]:
+    """``(page, command, printed)``: every bash block of one ``gnn-mp benchmark`` command (no
+    ``--suite``) whose next block is the table it prints (a ``text`` block starting with the
+    table's title, ``<task> (GNNMP/...``)."""
+    found = []
+    for page in PAGES:
+        fences = list(FENCE.finditer(page.read_text()))
+        for command, output in zip(fences, fences[1:]):
+            code = textwrap.dedent(command.group(3)).replace("\\\n", " ")
+            if (command.group(2).strip() == "bash" and output.group(2).strip() == "text"
+                    and re.match(r"\S+ \(GNNMP/", textwrap.dedent(output.group(3)))
+                    and len(code.strip().splitlines()) == 1 and "gnn-mp benchmark" in code and "--suite" not in code):
+                found.append((page, code.strip(), textwrap.dedent(output.group(3))))
+    return found
+
+
+def counters(table: str) -> list[str]:
+    """A printed benchmark table without what varies with the machine: the title, each row's
+    sampler, success, nodes, edges, collision checks and path length (not its wall times), and
+    the re-check line."""
+    lines = table.strip().splitlines()
+    rows = [re.split(r"\s{2,}", line.strip())[:6] for line in lines[3:] if re.match(r"\S+\s+\d+%", line)]
+    return [lines[0], *map(" | ".join, rows), *[line for line in lines if line.startswith("returned paths")]]
+
+
+def test_the_pages_print_their_benchmark_tables():
+    assert {page.name for page, _, _ in printed_benchmark_tables()} >= {"adding_a_task.md", "ompl.md"}
+
+
+@pytest.mark.parametrize("page, command, printed", printed_benchmark_tables(),
+                         ids=lambda value: value.name if isinstance(value, Path) else "")
+def test_a_printed_benchmark_table_is_what_its_command_prints(page, command, printed, tmp_path):
+    """The table a page prints after a ``gnn-mp benchmark`` command is what the command prints
+    now, run as written (no budget; the page's own files written first), up to wall times. The
+    learned rows' counters can differ on another CPU model (docs/results.md): re-run the command
+    there and compare."""
+    if "ompl-" in command:
+        pytest.importorskip("ompl")
+    for name, code in file_blocks(page).items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(code)
+    words = command.split()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    while "=" in words[0]:
+        words.pop(0)
+    assert words[:2] == ["gnn-mp", "benchmark"], command
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    result = subprocess.run([sys.executable, "-c", code, *words[1:]], cwd=tmp_path, env=env, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert counters(printed) == counters(result.stdout), f"{page.name}: re-run `{command}` and paste its table"
