@@ -216,6 +216,27 @@ def test_docs_python_blocks_run(tmp_path):
     assert "takes goal_bias; unknown: goal_bais" in result.stdout and "GoalMLPSampler 0.25" in result.stdout
 
 
+def test_docs_samplers_listing_is_what_gnn_mp_samplers_prints():
+    """docs/samplers.md prints `gnn-mp samplers` after the command: the listing is the registry's
+    (the ompl-* lines only where OMPL is installed, as here when `make install` ran)."""
+    import importlib.util
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "samplers.md").read_text()
+    match = re.search(r"^```bash\ngnn-mp samplers\n```\n\n```text\n(.*?)^```", text, re.M | re.S)
+    assert match, "docs/samplers.md: no `gnn-mp samplers` block followed by its output"
+    code = "import sys; from train.cli import main; sys.exit(main())"
+    result = subprocess.run([sys.executable, "-c", code, "samplers"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    page, printed = match.group(1).splitlines(), result.stdout.splitlines()
+    if importlib.util.find_spec("ompl") is None:
+        page = [line for line in page if not line.startswith("ompl-")]
+        printed = [line for line in printed if not line.startswith("ompl-")]
+    assert page == printed
+
+
 # ---------------------------------------------------------------------------- the registry refuses mistakes
 def test_load_sampler_takes_bounds_from_the_task_spec():
     env = gym.make("GNNMP/ArmBiRRT-v0", disable_env_checker=True)
