@@ -2,7 +2,9 @@
 no import circle among the package's modules; ``gnn_mp_envs`` imports neither ``agents`` nor
 ``train`` nor torch; ``agents`` imports no ``train``; nothing in the packages imports ``tools``.
 Inside ``agents``: every module is a method's or the shared floor's, no method imports another
-method, and the shared floor imports no method (``docs/architecture.md``)."""
+method, and the shared floor imports no method. Inside ``train`` the same by job: no job (an entry
+point's package: benchmark, tree samplers, RL, critical samples) imports another job, and ``train``'s
+shared floor imports no job (``docs/architecture.md``)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,11 @@ METHODS = ("agents.tree", "agents.rl", "agents.critical")
 #: The shared floor under the methods: what any method may import; it imports no method (a registry
 #: may name a method's class as a ``"module:attribute"`` string, resolved on first use).
 SHARED_FLOOR = ("agents", "agents.nn", "agents.samplers", "agents.checkpoints", "agents.registry")
+#: ``train``'s jobs, one package per entry point: none imports another (they meet on ``train``'s floor).
+JOBS = ("train.benchmark", "train.tree", "train.rl", "train.critical")
+#: ``train``'s shared floor: flags and ``UsageError`` (``args``), the run shell (``run``), worker processes and
+#: Ray actors (``workers``); it imports no job. ``train.cli``, the command, sits above the jobs it dispatches to.
+TRAIN_FLOOR = ("train", "train.args", "train.run", "train.workers")
 
 
 def modules() -> dict[str, Path]:
@@ -125,6 +132,38 @@ def test_the_method_rules_see_a_break():
     assert _method("agents.tree") == "agents.tree" and _method("agents.treelike") is None
     graph, _ = import_graph()
     assert graph.has_edge("agents.tree.models", "agents.nn.causal")      # a method on the floor: allowed
+
+
+def _job(name: str) -> str | None:
+    return _part(name, JOBS)
+
+
+def test_every_train_module_is_a_job_or_the_floor():
+    unplaced = sorted(m for m in modules() if m.startswith("train") and _job(m) is None
+                      and m not in TRAIN_FLOOR and m != "train.cli")
+    assert unplaced == []
+
+
+def test_no_job_imports_another_job():
+    graph, _ = import_graph()
+    breaks = sorted((a, b) for a, b in graph.edges if _job(a) and _job(b) and _job(a) != _job(b))
+    assert breaks == []
+
+
+def test_the_train_floor_imports_no_job():
+    graph, _ = import_graph()
+    breaks = sorted((a, b) for a, b in graph.edges if a in TRAIN_FLOOR and _job(b) is not None)
+    assert breaks == []
+
+
+def test_the_job_rules_see_a_break():
+    """An oracle for the two rules: the reader places modules by job, and finds the edges (module level
+    and inside a function) by which a job reaches the floor, the edges a break would be."""
+    assert _job("train.tree.data") == "train.tree" and _job("train.treelike") is None and _job("train.workers") is None
+    graph, _ = import_graph()
+    assert graph.has_edge("train.tree.data", "train.workers")         # inside a function
+    assert graph.has_edge("train.benchmark.runs", "train.workers")    # at module level
+    assert graph.has_edge("train.cli", "train.benchmark.args")        # the command above the jobs: allowed
 
 
 def test_only_the_ompl_runner_side_imports_ompl():

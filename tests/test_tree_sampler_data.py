@@ -172,9 +172,9 @@ def test_a_dataset_worker_that_dies_is_one_line_naming_the_progress(monkeypatch)
     """A worker process (or Ray actor) killed while planning the training problems ends the
     collection with one line saying how far it got (before: a 30-line BrokenProcessPool)."""
     from tests.helpers import solve_job_dying_on_problem_one
-    from train.benchmark.args import BenchmarkError
+    from train.args import UsageError
     from train.tree import data as data_module
     monkeypatch.setattr(data_module, "_solve_job", solve_job_dying_on_problem_one)
-    with pytest.raises(BenchmarkError, match=r"a worker died while planning the maze2d training problems \(\d of 4 "
+    with pytest.raises(UsageError, match=r"a worker died while planning the maze2d training problems \(\d of 4 "
                                              r"planned; no dataset was written\)"):
         generate(TreeDataConfig(task="maze2d", problems=4, max_nodes=300), progress=False, workers=2)

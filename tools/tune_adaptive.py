@@ -54,7 +54,7 @@ class Args:
 def measure(task: str, sampler: str, kinds: list[str | None], problems: int, seed: int, workers: int,
             candidates: list[Any], setting: str = "adaptive") -> dict:
     """``{kind: {"uniform": records, json(candidate): records}}`` (benchmark episodes, split ``val``)."""
-    from train.benchmark.runs import WorkerPool
+    from train.workers import WorkerPool
     jobs = []
     for kind in kinds:
         env_kwargs = {"split": "val", **({"scene": kind} if kind else {})}

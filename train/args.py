@@ -13,6 +13,9 @@ parsed flags, so the training and benchmark functions take the dataclass, not ``
     parser = OneLineParser(prog="gnn-mp thing")
     add_dataclass_arguments(parser, Args)
     args = from_namespace(Args, parser.parse_args(argv))
+
+It also holds what every entry point shares about bad input: :class:`UsageError` and the checks
+of flags more than one entry point takes (:func:`check_output_path`, :func:`check_ray_address`).
 """
 
 from __future__ import annotations
@@ -20,10 +23,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import types
 import typing
 from pathlib import Path
 from typing import Any, Callable
+
+
+class UsageError(Exception):
+    """A user-facing error (bad flags, unknown names, missing or unwritable files): one line on
+    stderr, exit status 2, no traceback."""
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -189,6 +198,47 @@ def import_modules(modules: typing.Iterable[str]) -> None:
             line = str(exc).splitlines()[0] if str(exc) else ""
             raise ValueError(f"--import {module}: the module raised {type(exc).__name__}"
                              + (f": {line}" if line else "")) from None
+
+
+# ---------------------------------------------------------------------------- checks of shared flags
+def check_output_path(flag: str, path: Path, is_dir: bool) -> None:
+    """Fail before any work when an output cannot be written (wrong kind, parent is a file, no access):
+    a one-line :class:`UsageError` naming ``flag``."""
+    if path.exists() and path.is_dir() != is_dir:
+        raise UsageError(f"{flag} {path}: expected a {'directory' if is_dir else 'file'}")
+    if path.exists() and not is_dir and not path.is_file():
+        raise UsageError(f"{flag} {path}: not a regular file (a device, FIFO or socket is never replaced)")
+    parent = path if (is_dir and path.exists()) else path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UsageError(f"{flag} {path}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK):
+        raise UsageError(f"{flag} {path}: {parent} is not writable")
+
+
+def check_ray_address(address: str, timeout: float = 5.0) -> None:
+    """Fail at once when nothing listens at a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``):
+    ``ray.init`` would retry for many minutes before giving up. A one-line :class:`UsageError`."""
+    import socket
+    if address == "auto":            # what ray.init("auto") joins: RAY_ADDRESS, else this machine's running head
+        address = os.environ.get("RAY_ADDRESS", "")
+        if not address:
+            try:
+                address = Path("/tmp/ray/ray_current_cluster").read_text().strip()
+            except OSError:
+                raise UsageError("--ray auto: no running Ray instance on this machine (start one with `ray "
+                                 "start --head`, or give its address)") from None
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        if not 0 < int(port) < 65536:
+            raise ValueError(port)
+        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):
+            return
+    except (ValueError, OverflowError):
+        raise UsageError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT or auto") from None
+    except OSError as exc:
+        raise UsageError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None
 
 
 # ---------------------------------------------------------------------------- dataclass -> flags

@@ -23,7 +23,7 @@ import sys
 from typing import Callable, Sequence
 
 from agents.registry import LEARNED_MODULES, missing_extra_message
-from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+from train.args import OneLineParser, UsageError, add_dataclass_arguments, from_namespace
 
 PROG = "gnn-mp"
 
@@ -183,7 +183,7 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         if exc.interrupted:
             exit_now(code)
         return code
-    except bm.BenchmarkError as exc:
+    except UsageError as exc:        # a BenchmarkError, or a shared check's (--json's path)
         return fail(f"benchmark: {exc}")
     return 0
 

@@ -9,8 +9,8 @@ from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
 from train.args import import_modules as import_plugins
-from train.args import (arg, figure_path, name_list, non_negative_int, positive_float, positive_int, seed_int,
-                        worker_count)
+from train.args import (UsageError, arg, check_output_path, check_ray_address, figure_path, name_list, non_negative_int,
+                        positive_float, positive_int, seed_int, worker_count)
 
 #: Prefix of OMPL planner rows; the rest of the name is the OMPL planner.
 OMPL_PREFIX = "ompl-"
@@ -18,8 +18,9 @@ OMPL_INSTALL_HINT = ("OMPL is not installed; install the optional extra with `pi
                      "(in a checkout: `pip install -e '.[ompl]'`)")
 
 
-class BenchmarkError(Exception):
-    """A user-facing error (bad flags, unknown names, missing files): printed as one line."""
+class BenchmarkError(UsageError):
+    """A user-facing error of the benchmark (bad flags, unknown names, missing files, a failing
+    sampler): printed as one line."""
 
 
 def checkpoint_pair(text: str) -> tuple[str, Path]:
@@ -207,49 +208,9 @@ def validate_args(args: BenchmarkArgs) -> None:
         check_ray_address(args.ray)
 
 
-def check_ray_address(address: str, timeout: float = 5.0) -> None:
-    """Fail at once when nothing listens at a Ray address (``HOST:PORT`` or ``ray://HOST:PORT``):
-    ``ray.init`` would retry for many minutes before giving up."""
-    import socket
-    if address == "auto":            # what ray.init("auto") joins: RAY_ADDRESS, else this machine's running head
-        import os
-        address = os.environ.get("RAY_ADDRESS", "")
-        if not address:
-            try:
-                address = Path("/tmp/ray/ray_current_cluster").read_text().strip()
-            except OSError:
-                raise BenchmarkError("--ray auto: no running Ray instance on this machine (start one with `ray "
-                                     "start --head`, or give its address)") from None
-    host, _, port = address.removeprefix("ray://").rpartition(":")
-    try:
-        if not 0 < int(port) < 65536:
-            raise ValueError(port)
-        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout):
-            return
-    except (ValueError, OverflowError):
-        raise BenchmarkError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT or auto") from None
-    except OSError as exc:
-        raise BenchmarkError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None
-
-
 def _specs():
     from gnn_mp_envs.registration import TASK_SPECS
     return TASK_SPECS
-
-
-def check_output_path(flag: str, path: Path, is_dir: bool) -> None:
-    """Fail before planning when an output cannot be written (wrong kind, parent is a file, no access)."""
-    if path.exists() and path.is_dir() != is_dir:
-        raise BenchmarkError(f"{flag} {path}: expected a {'directory' if is_dir else 'file'}")
-    if path.exists() and not is_dir and not path.is_file():
-        raise BenchmarkError(f"{flag} {path}: not a regular file (a device, FIFO or socket is never replaced)")
-    parent = path if (is_dir and path.exists()) else path.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise BenchmarkError(f"{flag} {path}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK):
-        raise BenchmarkError(f"{flag} {path}: {parent} is not writable")
 
 
 def check_ompl() -> None:

@@ -11,8 +11,9 @@ from gnn_mp_envs.utils.io import atomic_write_text
 from train.benchmark.args import BenchmarkArgs
 from train.benchmark.ompl_rows import write_ompl_logs
 from train.benchmark.plots import plot_report, render_growth
-from train.benchmark.runs import BenchmarkIncomplete, WorkerPool, run_benchmark
+from train.benchmark.runs import BenchmarkIncomplete, run_benchmark
 from train.benchmark.tables import families_of, format_family_table, format_table
+from train.workers import WorkerPool
 
 
 def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path]:

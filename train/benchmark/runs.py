@@ -1,14 +1,11 @@
-"""Planning runs: one sampler on one problem, and every sampler on every problem (serially or
-in worker processes). Each run goes through :func:`gnn_mp_envs.rollout.rollout`."""
+"""Planning runs: one sampler on one problem, and every sampler on every problem (serially, in
+the worker processes or on the Ray actors of :mod:`train.workers`). Each run goes through
+:func:`gnn_mp_envs.evaluation.plan_problem`."""
 
 from __future__ import annotations
 
 import json
-import multiprocessing
-import os
-import signal
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Iterable
 
@@ -19,10 +16,11 @@ from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
     env_kwargs_for,
-    import_modules,
     is_ompl,
     validate_args,
 )
+from train.args import UsageError
+from train.workers import WorkerPool, run_on_ray
 
 #: Per-process caches of the worker state: one env per (id, kwargs), one sampler per (name, task,
 #: checkpoint); building the arm's simulator or a learned sampler is not free.
@@ -112,68 +110,6 @@ def _run_episode_job(job: tuple) -> dict[str, Any]:
     return run_episode(*job)
 
 
-def _die_with_parent() -> None:
-    """Ask Linux to SIGKILL this worker when the benchmark process dies (SIGTERM, SIGKILL,
-    a crash), so no worker, and hence no resource tracker, outlives it; and leave Ctrl-C to
-    the parent, which stops the workers itself (one line instead of a traceback per worker)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        import ctypes
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):   # not Linux/glibc: workers still end with the pool
-        return
-    if os.getppid() == 1:   # the parent died before the request took effect
-        os._exit(1)
-
-
-def _init_worker(modules: list[str], die_with_parent: bool = True) -> None:
-    """Worker initializer: die with the parent and import the plugin modules. Envs and samplers
-    are built (and warmed up) by the first job that needs them, so one pool serves several tasks."""
-    if die_with_parent:
-        _die_with_parent()
-    import_modules(modules)
-
-
-class WorkerPool:
-    """``workers`` processes that plan benchmark jobs, reused across the tasks of a suite (each
-    pays its imports once). Forked while this process has not imported torch, else spawned
-    (:func:`worker_start_method`). On an error or Ctrl-C the workers are killed at once."""
-
-    def __init__(self, workers: int, modules: list[str] = ()) -> None:
-        context = multiprocessing.get_context(worker_start_method())
-        self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
-                                            initargs=(list(modules),))
-        self.killed = False
-
-    def run(self, jobs: list[tuple], finished, fn=None) -> None:
-        """``finished(fn(job))`` for every job, in completion order (``fn``: a module-level function;
-        default: one benchmark episode)."""
-        try:
-            futures = [self.executor.submit(fn or _run_episode_job, job) for job in jobs]
-            for future in as_completed(futures):
-                finished(future.result())
-        except BaseException:
-            self.kill()
-            raise
-
-    def kill(self) -> None:
-        self.killed = True
-        processes = list((self.executor._processes or {}).values())   # the pool has no public kill
-        self.executor.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.kill()
-        for process in processes:
-            process.join(timeout=5)
-
-    def __enter__(self) -> "WorkerPool":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if not self.killed:
-            self.executor.shutdown()
-
-
 def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
     path = args.checkpoints.get(name)
     return None if path is None else str(path)
@@ -241,18 +177,18 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         if args.ray is not None:
             _run_on_ray(args, jobs, finished)
         elif pool is not None:
-            pool.run(jobs, finished)
+            pool.run(jobs, finished, _run_episode_job)
         elif min(args.workers, len(jobs)) <= 1:
             for job in jobs:
                 finished(_run_episode_job(job))
         else:                                    # never more processes than jobs
             with WorkerPool(min(args.workers, len(jobs)), args.modules) as own:
-                own.run(jobs, finished)
+                own.run(jobs, finished, _run_episode_job)
     except KeyboardInterrupt:
         reason = "interrupted"
     except BrokenProcessPool:
         reason = "a worker process died (killed by a signal or out of memory)"
-    except BenchmarkError as exc:
+    except UsageError as exc:           # a failing sampler (a BenchmarkError), or Ray's
         reason = str(exc)
     finally:
         bar.close()
@@ -277,57 +213,6 @@ class BenchmarkIncomplete(BenchmarkError):
         self.interrupted = interrupted
 
 
-class _JobActor:
-    """A Ray actor: one worker process with its envs and samplers, as the local workers."""
-
-    def __init__(self, modules) -> None:
-        _init_worker(modules, die_with_parent=False)
-
-    def run(self, fn, job: tuple) -> Any:
-        return fn(job)
-
-
 def _run_on_ray(args: BenchmarkArgs, jobs: list[tuple], finished) -> None:
-    """Run the benchmark's ``jobs`` on ``args.workers`` Ray actors (:func:`run_on_ray`)."""
-    run_on_ray(args.ray, args.workers, args.modules, jobs, finished)
-
-
-def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished, fn=None) -> None:
-    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors: a local Ray
-    instance (``address="local"``, the flags' ``--ray``) or a cluster (``"auto"`` /
-    ``ray://HOST:10001``); ``fn`` a module-level function (default: one benchmark episode). Results
-    equal a local run's for the same seed."""
-    try:
-        import ray
-        from ray.util import ActorPool
-    except ImportError:
-        raise BenchmarkError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
-    local = address == "local"
-    started = not ray.is_initialized()
-    if started:
-        try:
-            ray.init(address=None if local else address, num_cpus=workers if local else None,
-                     include_dashboard=False, log_to_driver=False, configure_logging=False)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise BenchmarkError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
-    fn = fn or _run_episode_job
-    try:
-        actor = ray.remote(num_cpus=1)(_JobActor)
-        pool = ActorPool([actor.remote(modules) for _ in range(max(1, min(workers, len(jobs))))])
-        for record in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
-            finished(record)
-    except ray.exceptions.RayTaskError as exc:
-        cause = exc.cause if isinstance(getattr(exc, "cause", None), BenchmarkError) else None
-        raise cause or BenchmarkError(f"a Ray task failed: {str(exc).splitlines()[0]}") from None
-    except ray.exceptions.RayActorError:
-        raise BrokenProcessPool("a Ray actor died") from None
-    finally:
-        if started:
-            ray.shutdown()
-
-
-def worker_start_method() -> str:
-    """``"fork"`` while this process has not imported torch (classical samplers: the workers start
-    at once, with everything imported), ``"spawn"`` once it has (torch's thread pools do not survive
-    a fork: a forked worker can deadlock)."""
-    return "spawn" if "torch" in sys.modules else "fork"
+    """Run the benchmark's ``jobs`` on ``args.workers`` Ray actors (:func:`train.workers.run_on_ray`)."""
+    run_on_ray(args.ray, args.workers, args.modules, jobs, finished, _run_episode_job)

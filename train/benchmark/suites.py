@@ -25,9 +25,9 @@ from train.benchmark.args import (
     ompl_available,
 )
 from train.benchmark.outputs import benchmark
-from train.benchmark.runs import WorkerPool
 from train.benchmark.plots import plot_success_vs_time
 from train.benchmark.tables import format_family_table, format_field_table, format_table
+from train.workers import WorkerPool
 
 
 @dataclass

@@ -271,10 +271,10 @@ def check_args(args: RLArgs) -> None:
             raise ValueError(f"--ray-workers {args.ray_workers} > --n-envs {args.n_envs}: every actor steps at "
                              "least one env")
         if args.ray != "local":
-            from train.benchmark.args import BenchmarkError, check_ray_address
+            from train.args import UsageError, check_ray_address
             try:
                 check_ray_address(args.ray)
-            except BenchmarkError as exc:
+            except UsageError as exc:
                 raise ValueError(str(exc)) from None
     if args.clip_range >= 1.0:
         raise ValueError(f"--clip-range must be in (0, 1), got {args.clip_range}")

@@ -26,11 +26,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from train.tree.args import TrainArgs
     parser = build_parser()
     args = from_namespace(TrainArgs, parser.parse_args(argv))
-    from train.benchmark.args import BenchmarkError, check_ray_address
+    from train.args import UsageError, check_ray_address
     if args.ray not in (None, "local", "auto"):
         try:
             check_ray_address(args.ray)
-        except BenchmarkError as exc:
+        except UsageError as exc:
             parser.error(str(exc))
     from agents.checkpoints import CheckpointError       # torch: only once the flags are known to be good
     from gnn_mp_envs.utils.npz import DatasetCacheError
@@ -38,7 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from train.tree.training import TrainError, train
     try:
         summary = train(args)
-    except (TrainError, RunError, CheckpointError, DatasetCacheError, BenchmarkError) as exc:
+    except (TrainError, RunError, CheckpointError, DatasetCacheError, UsageError) as exc:
         print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: summary[k] for k in ("run_dir", "checkpoint", "items", "train_seconds", "validation",

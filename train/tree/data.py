@@ -210,8 +210,8 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
              workers: int = 1, ray: str | None = None) -> TreeDataset:
     """Solve the config's problems with its sampler (uniform, or a learned one from
     ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones.
-    ``workers`` > 1 plans them in the benchmark's worker processes, ``ray`` (an address, or
-    ``"local"``) on ``workers`` Ray actors as the benchmark's ``--ray``; the problems are assembled
+    ``workers`` > 1 plans them in worker processes, ``ray`` (an address, or ``"local"``) on
+    ``workers`` Ray actors (:mod:`train.workers`, as the benchmark's ``--workers`` and ``--ray``); the problems are assembled
     in index order, so the dataset (and its file) is the same whatever the worker count or backend."""
     indices = range(config.first_problem, config.first_problem + config.problems)
     bar = tqdm(total=config.problems, desc=f"{config.task} {config.sampler} solutions", unit="problem",
@@ -225,18 +225,18 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
 
     try:
         if ray is not None:
-            from train.benchmark.runs import run_on_ray
+            from train.workers import run_on_ray
             run_on_ray(ray, workers, [], [(config, i, checkpoint) for i in indices], finished, _solve_job)
         elif min(workers, len(indices)) > 1:
-            from train.benchmark.runs import WorkerPool
+            from train.workers import WorkerPool
             with WorkerPool(min(workers, len(indices))) as pool:
                 pool.run([(config, i, checkpoint) for i in indices], finished, _solve_job)
         else:
             for i in indices:
                 finished(solve_problem(config, i, checkpoint))
     except BrokenProcessPool:            # a worker process or Ray actor was killed (a signal, out of memory)
-        from train.benchmark.args import BenchmarkError
-        raise BenchmarkError(f"a worker died while planning the {config.task} training problems ({len(solved)} of "
+        from train.args import UsageError
+        raise UsageError(f"a worker died while planning the {config.task} training problems ({len(solved)} of "
                              f"{config.problems} planned; no dataset was written): rerun, with fewer --workers if "
                              "memory ran out") from None
     finally:

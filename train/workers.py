@@ -1,0 +1,138 @@
+"""Jobs in other processes: the worker pool and the Ray runner that the benchmark and the tree
+samplers' dataset collection both use.
+
+A job is a tuple; ``fn(job)`` (a module-level function, so it pickles) runs it in a worker and
+``finished(result)`` is called in this process for every job, in completion order:
+
+    with WorkerPool(workers, modules) as pool:
+        pool.run(jobs, finished, fn)
+    run_on_ray("local", workers, modules, jobs, finished, fn)
+
+Each worker imports the ``--import`` modules once and keeps what its jobs cache (envs, samplers);
+results do not depend on the worker count or the backend when every job seeds itself. A dead
+worker or Ray actor is a :class:`~concurrent.futures.process.BrokenProcessPool`.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any, Callable
+
+from train.args import UsageError, import_modules
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to SIGKILL this worker when the parent process dies (SIGTERM, SIGKILL, a crash),
+    so no worker, and hence no resource tracker, outlives it; and leave Ctrl-C to the parent, which
+    stops the workers itself (one line instead of a traceback per worker)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        import ctypes
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):   # not Linux/glibc: workers still end with the pool
+        return
+    if os.getppid() == 1:   # the parent died before the request took effect
+        os._exit(1)
+
+
+def _init_worker(modules: list[str], die_with_parent: bool = True) -> None:
+    """Worker initializer: die with the parent and import the plugin modules. What the jobs need
+    (envs, samplers) is built by the first job that needs it, so one pool serves several tasks."""
+    if die_with_parent:
+        _die_with_parent()
+    import_modules(modules)
+
+
+class WorkerPool:
+    """``workers`` processes that run jobs, reused across calls (a benchmark suite's tasks: each
+    worker pays its imports once). Forked while this process has not imported torch, else spawned
+    (:func:`worker_start_method`). On an error or Ctrl-C the workers are killed at once."""
+
+    def __init__(self, workers: int, modules: list[str] = ()) -> None:
+        context = multiprocessing.get_context(worker_start_method())
+        self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
+                                            initargs=(list(modules),))
+        self.killed = False
+
+    def run(self, jobs: list[tuple], finished: Callable[[Any], None], fn: Callable[[tuple], Any]) -> None:
+        """``finished(fn(job))`` for every job, in completion order (``fn``: a module-level function)."""
+        try:
+            futures = [self.executor.submit(fn, job) for job in jobs]
+            for future in as_completed(futures):
+                finished(future.result())
+        except BaseException:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        self.killed = True
+        processes = list((self.executor._processes or {}).values())   # the pool has no public kill
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.kill()
+        for process in processes:
+            process.join(timeout=5)
+
+    def __enter__(self) -> "WorkerPool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if not self.killed:
+            self.executor.shutdown()
+
+
+class _JobActor:
+    """A Ray actor: one worker process with what its jobs cache, as a pool's workers."""
+
+    def __init__(self, modules) -> None:
+        _init_worker(modules, die_with_parent=False)
+
+    def run(self, fn, job: tuple) -> Any:
+        return fn(job)
+
+
+def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],
+               fn: Callable[[tuple], Any]) -> None:
+    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors: a local Ray
+    instance (``address="local"``, the flags' ``--ray``) or a cluster (``"auto"`` /
+    ``ray://HOST:10001``); ``fn`` a module-level function. Results equal a local run's for the same
+    seed. A job's :class:`~train.args.UsageError` is raised here as it was raised there."""
+    try:
+        import ray
+        from ray.util import ActorPool
+    except ImportError:
+        raise UsageError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
+    local = address == "local"
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(address=None if local else address, num_cpus=workers if local else None,
+                     include_dashboard=False, log_to_driver=False, configure_logging=False)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise UsageError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
+    try:
+        actor = ray.remote(num_cpus=1)(_JobActor)
+        pool = ActorPool([actor.remote(modules) for _ in range(max(1, min(workers, len(jobs))))])
+        for result in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
+            finished(result)
+    except ray.exceptions.RayTaskError as exc:
+        cause = exc.cause if isinstance(getattr(exc, "cause", None), UsageError) else None
+        raise cause or UsageError(f"a Ray task failed: {str(exc).splitlines()[0]}") from None
+    except ray.exceptions.RayActorError:
+        raise BrokenProcessPool("a Ray actor died") from None
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def worker_start_method() -> str:
+    """``"fork"`` while this process has not imported torch (classical jobs: the workers start at
+    once, with everything imported), ``"spawn"`` once it has (torch's thread pools do not survive a
+    fork: a forked worker can deadlock)."""
+    return "spawn" if "torch" in sys.modules else "fork"
