@@ -65,3 +65,13 @@ def test_the_oracles_see_a_replaced_fifo_a_traceback_and_a_hang(tmp_path, monkey
     assert [o.traceback for o in outcomes] == [False, True, False]
     assert [o.hang for o in outcomes] == [False, False, True]
     assert fuzz_cli.counts(outcomes)["hangs"] == 1 and len(fuzz_cli.findings(outcomes)) == 3
+
+
+@pytest.mark.parametrize("flag,value", [("--ks", fuzz_cli.HUGE), ("--ks", "1,100000"), ("--samples", "100000")])
+def test_critical_evaluate_bounds_its_sample_counts(flag, value, capsys):
+    """Found by the fuzz run of seed 1: `--ks 10**30` was numpy's 'Maximum allowed dimension exceeded'."""
+    from train.critical.cli import main
+    with pytest.raises(SystemExit) as info:
+        main(["evaluate", "--models", "gnn", flag, value])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and len(err) == 1 and flag in err[0] and "4,096" in err[0], err

@@ -18,8 +18,8 @@ from typing import Any
 from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
 from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
-from train.args import (arg, figure_path, non_negative_float, non_negative_int, positive_float, positive_int, seed_int,
-                        worker_count)
+from train.args import (MAX_SIZE, arg, figure_path, non_negative_float, non_negative_int, positive_float, positive_int,
+                        seed_int, size_int, worker_count)
 
 #: Where cached datasets go (git-ignored).
 DEFAULT_DATA_DIR = Path("data/critical")
@@ -232,6 +232,8 @@ def k_list(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"expected comma-separated positive integers, got {text!r}") from None
     if not ks or min(ks) < 1:
         raise argparse.ArgumentTypeError(f"expected comma-separated positive integers, got {text!r}")
+    if max(ks) > MAX_SIZE:
+        raise argparse.ArgumentTypeError(f"at most {MAX_SIZE:,} samples per model, got {max(ks)}")
     return ks
 
 
@@ -252,7 +254,7 @@ class EvaluateArgs(DataArgs):
                                          ".png, .svg, .pdf)", "none"), parse=figure_path)
     problems: int | None = arg(None, _shown("first N of the 300 problems per set", "all"), parse=positive_int)
     samples: int = arg(EVAL_SAMPLES, "CVAE samples per problem for the point prediction (their mean) and "
-                       "the best-of accuracy", parse=positive_int)
+                       "the best-of accuracy", parse=size_int)
     ks: list[int] = arg(list(KS), "numbers of planning samples per model", parse=k_list)
     min_sep: float = arg(MIN_SEP_R, "k samples: no two within this many graph radii r", parse=non_negative_float)
     select: str = arg("top", "k samples from a node distribution: the top-k nodes or draws from it "
