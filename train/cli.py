@@ -11,7 +11,8 @@
 Speed probes live outside the package: ``python -m tools.bench_env``, ``tools.bench_sampler``,
 ``tools.bench_arm``, ``tools.tune_proposals``.
 
-Bad input exits with status 2 and one line on stderr (no traceback).
+Bad input exits with status 2 and one line on stderr (no traceback): every entry point's errors of
+that kind are a :class:`train.args.UsageError`.
 """
 
 from __future__ import annotations
@@ -42,8 +43,9 @@ TRAIN_HELP = {"critical": "critical-sample models on the fixed Halton graph (GNN
               "rl": "RL samplers: SB3 PPO/SAC, TorchRL PPO over the tree view (docs/rl.md)"}
 
 
-class CLIError(Exception):
-    """A user-facing error: printed as one line, exit status 2."""
+class CLIError(UsageError):
+    """A subcommand that cannot be loaded (not in this checkout, an extra not installed): one line, exit
+    status 2."""
 
 
 def exit_now(code: int) -> None:
@@ -152,13 +154,13 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
     try:
         args = from_namespace(bm.BenchmarkArgs, ns)
     except ValueError as exc:        # e.g. --checkpoint repeated for one sampler
-        return fail(f"benchmark: {exc}")
+        raise UsageError(str(exc)) from None
     terminate_as_interrupt()
     suite = from_namespace(SuiteOptions, ns)
     if suite.suite is None and (suite.out is not None or not suite.ompl or not suite.render_images):
         # a one-task run writes only what --json / --plot / --render ask for: refuse rather than write nothing
-        return fail("benchmark: --out, --no-ompl and --no-render apply to --suite only; for one task give "
-                    "--json FILE, --plot FILE or --render DIR (OMPL rows: --samplers ompl-rrt,...)")
+        raise UsageError("--out, --no-ompl and --no-render apply to --suite only; for one task give "
+                         "--json FILE, --plot FILE or --render DIR (OMPL rows: --samplers ompl-rrt,...)")
     if suite.suite is not None:
         # a suite names its own tasks, samplers, problems and outputs: refuse one task's flags, not ignore them
         import dataclasses
@@ -168,8 +170,8 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
                    for f in dataclasses.fields(bm.BenchmarkArgs)
                    if f.name in SUITE_IGNORED and getattr(args, f.name) != getattr(defaults, f.name)]
         if ignored:
-            return fail(f"benchmark: --suite {suite.suite} plans its own tasks, samplers, problems and outputs; "
-                        f"{', '.join(ignored)} apply to one task (drop --suite or those flags)")
+            raise UsageError(f"--suite {suite.suite} plans its own tasks, samplers, problems and outputs; "
+                             f"{', '.join(ignored)} apply to one task (drop --suite or those flags)")
     try:
         if suite.suite is not None:
             out = suite.out or SuiteOptions.DEFAULT_OUT
@@ -178,13 +180,11 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
                          with_ompl=None if suite.ompl else False, render=renders)
             return 0
         bm.benchmark(args)
-    except bm.BenchmarkIncomplete as exc:
+    except bm.BenchmarkIncomplete as exc:      # not a usage error: exit 1 (130: interrupted)
         code = fail(f"benchmark: {exc}", 130 if exc.interrupted else 1)
         if exc.interrupted:
             exit_now(code)
         return code
-    except UsageError as exc:        # a BenchmarkError, or a shared check's (--json's path)
-        return fail(f"benchmark: {exc}")
     return 0
 
 
@@ -231,6 +231,7 @@ def run_passthrough(module: str, argv: list[str], prog: str) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    command = ""        # a subcommand's one-line errors name it: "gnn-mp: error: benchmark: ..."
     try:
         if argv and argv[0] in PASSTHROUGH:
             return run_passthrough(PASSTHROUGH[argv[0]][0], argv[1:], f"{PROG} {argv[0]}")
@@ -257,10 +258,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if ns.command == "samplers":
             return cmd_samplers()
         if ns.command == "benchmark":
+            command = "benchmark: "
             return cmd_benchmark(ns)
         return fail(f"unknown command {ns.command!r}")
-    except CLIError as exc:
-        return fail(str(exc))
+    except UsageError as exc:        # every usage error (CLIError, BenchmarkError, a shared check's): exit 2
+        return fail(f"{command}{exc}")
     except KeyboardInterrupt:
         exit_now(fail("interrupted", 130))
     except OSError as exc:   # unreadable / unwritable files from any subcommand

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from gnn_mp_envs.utils.io import atomic_path, atomic_write_bytes, atomic_write_text
-from train.args import arg, positive_int, worker_count
+from train.args import UsageError, arg, positive_int, worker_count
 
 #: Where run directories go by default: runs/<family>/<name>-seed<S>-<YYYYmmdd-HHMMSS>/.
 RUNS_ROOT = Path("runs")
@@ -33,8 +33,8 @@ RUNS_ROOT = Path("runs")
 RUN_MARKERS = ("config.json",)
 
 
-class RunError(Exception):
-    """A user-facing error about a run directory (one line)."""
+class RunError(UsageError):
+    """A user-facing error about a run (its directory, a loss or policy gone non-finite): one line."""
 
 
 def finite_loss(loss, where: str, lr: float) -> float:

@@ -16,7 +16,7 @@ import torch
 
 from agents.checkpoints import CheckpointError
 from gnn_mp_envs.critical.dataset import DatasetCacheError, generate_all
-from train.args import OneLineParser, add_dataclass_arguments, from_namespace
+from train.args import OneLineParser, UsageError, add_dataclass_arguments, from_namespace
 from train.critical.config import EvaluateArgs, GenerateArgs, TrainArgs
 
 PROG = "critical"
@@ -85,11 +85,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if isinstance(args, TrainArgs) and args.model is None:
         parser.error("train: the following argument is required: --model")
     torch.set_num_threads(args.threads)
-    from train.critical.training import TrainError
-    from train.run import RunError
     try:
         RUN[type(args)](args)
-    except (CheckpointError, DatasetCacheError, TrainError, RunError) as exc:
+    except (UsageError, CheckpointError, DatasetCacheError) as exc:     # TrainError, RunError
         return _fail(prog, str(exc))
     except OSError as exc:   # unreadable / unwritable files
         return _fail(prog, f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))

@@ -42,6 +42,7 @@ from agents.critical.models import MODELS, build_model, kind_of
 from gnn_mp_envs.critical.dataset import DatasetConfig, check_has_split, load_or_generate
 from gnn_mp_envs.critical.halton import halton_graph
 from gnn_mp_envs.utils.io import atomic_write_text
+from train.args import UsageError
 from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
 from train.critical.data import inputs_for
 from train.critical.evaluate import validation_scores
@@ -54,7 +55,7 @@ from train.run import finite_loss, inside
 SELECT_ON = "val_score"
 
 
-class TrainError(ValueError):
+class TrainError(UsageError, ValueError):
     """A training request that cannot be carried out (one line)."""
 
 

@@ -17,7 +17,7 @@ import sys
 import dataclasses
 from typing import Any
 
-from train.args import OneLineParser, add_dataclass_arguments, from_namespace, import_modules
+from train.args import OneLineParser, UsageError, add_dataclass_arguments, from_namespace, import_modules
 from train.rl.args import RLArgs, check_args, hyperparams_file, read_hyperparams
 
 
@@ -100,7 +100,6 @@ def parse(argv: list[str]) -> RLArgs:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from train.run import RunError
     args = parse(list(sys.argv[1:] if argv is None else argv))
     if args.lib == "sb3":
         from train.rl.sb3 import train
@@ -108,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         from train.rl.torchrl import train
     try:
         train(args)
-    except RunError as exc:
+    except UsageError as exc:        # a RunError
         print(f"gnn-mp train rl: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -34,11 +34,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(str(exc))
     from agents.checkpoints import CheckpointError       # torch: only once the flags are known to be good
     from gnn_mp_envs.utils.npz import DatasetCacheError
-    from train.run import RunError
-    from train.tree.training import TrainError, train
+    from train.tree.training import train
     try:
         summary = train(args)
-    except (TrainError, RunError, CheckpointError, DatasetCacheError, UsageError) as exc:
+    except (UsageError, CheckpointError, DatasetCacheError) as exc:     # TrainError, RunError, a worker's
         print(f"gnn-mp train sampler: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: summary[k] for k in ("run_dir", "checkpoint", "items", "train_seconds", "validation",

@@ -31,6 +31,7 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.checkpoints import load_training_state, save_checkpoint, save_training_state
+from train.args import UsageError
 from train.run import RunError, TrainingRun, finite_loss, plot_learning_curve
 from train.tree.adapters import adapter_for, task_scales
 from train.tree.args import TrainArgs
@@ -38,8 +39,8 @@ from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
 from train.tree.items import Symmetry, symmetries_of, transformed
 
 
-class TrainError(Exception):
-    """A user-facing error (one line)."""
+class TrainError(UsageError):
+    """A training request that cannot be carried out (one line)."""
 
 
 # ---------------------------------------------------------------------------- one phase
