@@ -18,12 +18,13 @@ this package) is one :func:`register_task` call::
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
+
+from gnn_mp_envs.utils.imports import import_entry
 
 ENTRY_POINT = "gnn_mp_envs.envs.tree_env:TreePlanningEnv"
 #: Entry point of the RL variants of every env id (``<Env>-RLPick-v0``, ``<Env>-RLBox-v0``).
@@ -152,8 +153,7 @@ class TaskSpec:
     def task_class(self) -> Callable[..., Any]:
         if not isinstance(self.entry_point, str):
             return self.entry_point
-        module, _, cls = self.entry_point.partition(":")
-        return getattr(importlib.import_module(module), cls)
+        return import_entry(self.entry_point)
 
     def sampler_defaults(self, name: str) -> dict[str, Any]:
         """The sampling settings stored with a newly trained ``name`` sampler for this task."""

@@ -203,3 +203,17 @@ def test_register_scene_adds_a_scene_to_the_spec_and_leaves_the_env_ids():
             register_scene("maze2d", "")
     finally:
         TASK_SPECS["maze2d"] = before
+
+
+def test_registry_entries_named_by_string_are_imported_once():
+    """``"module:attribute"`` entries (task classes, encoders, priors, foreign checkpoint readers) are
+    imported on first use and stored back; a malformed name is one ValueError."""
+    import json
+
+    from gnn_mp_envs.utils.imports import import_entry, resolved
+    assert import_entry("json:dumps") is json.dumps
+    registry = {"dumps": "json:dumps"}
+    assert resolved(registry, "dumps") is json.dumps and registry["dumps"] is json.dumps
+    for bad in ("json", "json:", ":dumps"):
+        with pytest.raises(ValueError, match="module:attribute"):
+            import_entry(bad)

@@ -44,6 +44,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from gnn_mp_envs.utils.imports import import_entry
 from gnn_mp_envs.utils.io import atomic_path
 
 #: Version of the record layout written by :func:`save_checkpoint`; readers refuse newer ones.
@@ -294,8 +295,7 @@ def _read(path: Path) -> Any:
         raise CheckpointError(f"{path}: empty file, not a checkpoint")
     foreign = foreign_format(path)
     if foreign is not None:
-        module, function = FOREIGN_READERS[foreign].split(":")
-        return getattr(importlib.import_module(module), function)(path)
+        return import_entry(FOREIGN_READERS[foreign])(path)
     try:
         return torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as exc:

@@ -18,7 +18,6 @@ policies): ``"tree"``, this one; ``"tree-gnn"``, the GNN sampler's causal backbo
 
 from __future__ import annotations
 
-import importlib
 from typing import Callable, Mapping
 
 import numpy as np
@@ -28,6 +27,7 @@ from torch import nn
 from torch_geometric.nn import GATv2Conv, GCNConv, GraphConv, SAGEConv, global_max_pool, global_mean_pool
 
 from agents.nn.graph import knn_edge_index, tree_graph
+from gnn_mp_envs.utils.imports import resolved
 
 #: Convolution name -> factory(in_channels, out_channels, heads) (``conv=`` of TreeEncoder).
 CONVS: dict[str, Callable[[int, int, int], nn.Module]] = {
@@ -317,11 +317,7 @@ def encoder_class(name: str) -> type[nn.Module]:
     """The encoder class registered as ``name`` (ValueError: an unknown name)."""
     if name not in ENCODERS:
         raise ValueError(f"unknown backbone {name!r}; known: {', '.join(ENCODERS)}")
-    entry = ENCODERS[name]
-    if isinstance(entry, str):
-        module, attribute = entry.split(":")
-        entry = ENCODERS[name] = getattr(importlib.import_module(module), attribute)
-    return entry
+    return resolved(ENCODERS, name)
 
 
 def encoder_from_space(observation_space: spaces.Dict, backbone: str = "tree", **kwargs) -> nn.Module:

@@ -16,8 +16,9 @@ first asked for (as the checkpoint kinds' modules are); :func:`register_candidat
 
 from __future__ import annotations
 
-import importlib
 from typing import Any, Mapping
+
+from gnn_mp_envs.utils.imports import resolved
 
 #: Checkpoint kind -> the prior class of a model of that kind (or its ``"module:attribute"``).
 CANDIDATE_PRIORS: dict[str, Any] = {"tree/gnn-scorer": "agents.tree.prior:ScorerPrior",
@@ -35,11 +36,7 @@ def prior_class(kind: str) -> Any:
     """The prior class of checkpoint kind ``kind`` (ValueError: no prior reads that kind)."""
     if kind not in CANDIDATE_PRIORS:
         raise ValueError(f"no candidate prior reads models of kind {kind!r}; known: {', '.join(CANDIDATE_PRIORS)}")
-    entry = CANDIDATE_PRIORS[kind]
-    if isinstance(entry, str):
-        module, attribute = entry.split(":")
-        entry = CANDIDATE_PRIORS[kind] = getattr(importlib.import_module(module), attribute)
-    return entry
+    return resolved(CANDIDATE_PRIORS, kind)
 
 
 def prior_model(kind: str, ctor_args: Mapping[str, Any]) -> Any:
