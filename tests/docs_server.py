@@ -26,7 +26,7 @@ import types
 
 PRELOAD = ("train.cli", "train.benchmark", "train.benchmark.runs", "train.tree.cli", "train.tree.training",
            "train.rl.cli", "train.rl.sb3", "train.rl.torchrl", "train.critical.cli", "train.critical.training",
-           "train.critical.evaluate", "agents.registry", "agents.tree.samplers", "agents.rl.sampler",
+           "train.critical.evaluation", "agents.registry", "agents.tree.samplers", "agents.rl.sampler",
            "agents.critical.models", "torch_geometric", "matplotlib.pyplot", "tools.bench_sampler",
            "tools.tune_proposals")
 

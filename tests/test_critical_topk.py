@@ -72,7 +72,7 @@ def _one_problem(graph, label_nodes):
 
 
 def test_hit_rate_and_distance_on_a_hand_made_case():
-    from train.critical.evaluate import distance_metrics, nearest_label_distance
+    from train.critical.evaluation import distance_metrics, nearest_label_distance
     g = halton_graph()
     r = g.radius
     probs = _one_problem(g, [100, 900])
@@ -176,7 +176,7 @@ def test_evaluate_rows_carry_model_and_k(tmp_path):
     """Point and k rows for every model, k uniform random points, oracle, sparse, dense; two
     checkpoint directories give mean ± std; --eval-seed reaches the data."""
     from train.critical import evaluate, format_table
-    from train.critical.config import CHECKPOINT_DIR
+    from train.critical.args import CHECKPOINT_DIR
     rep = evaluate(models=["gnn", "cvae"], checkpoint_dir=[CHECKPOINT_DIR, CHECKPOINT_DIR], data_dir=tmp_path,
                    num_problems=2, num_samples=4, dataset=TINY, progress=False, eval_seed=7, ks=(1, 3))
     assert rep["settings"]["eval_seed"] == 7 and (tmp_path / "eval_blob_seed7.npz").exists()

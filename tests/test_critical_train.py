@@ -152,7 +152,7 @@ def test_every_sub_command_takes_the_dataset_size_flags():
     """generate-data's --num-maps / --pairs-per-map / --eval-problems made a cache that train and
     evaluate did not use (they regenerated the full 4,800-problem set); the flags are now every
     sub-command's, and the same flags name the same dataset."""
-    from train.critical.config import EvaluateArgs, GenerateArgs
+    from train.critical.args import EvaluateArgs, GenerateArgs
     flags = {"data_seed": TINY.seed, "num_maps": TINY.num_maps, "pairs_per_map": TINY.pairs_per_map,
              "eval_problems": TINY.eval_problems}
     assert GenerateArgs(**flags).dataset() == TrainArgs(model="gnn", **flags).dataset() == \

@@ -10,27 +10,27 @@ Entry point ``main(argv)`` with three sub-commands (``--help`` on each lists eve
 
 One file per job:
 
-=================  ===============================================================
-``config.py``      per-model defaults (:data:`DEFAULTS`) and the flags of each sub-command
-``data.py``        problem indices -> model inputs (:class:`Inputs`)
-``losses.py``      training losses, dispatched on the model family
-``training.py``    the training loop, run directories, checkpoint and resume
-``evaluate.py``    predictions, accuracy, planning comparison, report table
-``plots.py``       the prediction figure
-``cli.py``         argparse from the dataclasses; ``main(argv)``
-=================  ===============================================================
+===================  ===============================================================
+``args.py``          per-model defaults (:data:`DEFAULTS`) and the flags of each sub-command
+``data.py``          problem indices -> model inputs (:class:`Inputs`)
+``losses.py``        training losses, dispatched on the model family
+``training.py``      the training loop, run directories, checkpoint and resume
+``evaluation.py``    predictions, accuracy, planning comparison, report table
+``plots.py``         the prediction figure
+``cli.py``           argparse from the dataclasses; ``main(argv)``
+===================  ===============================================================
 
 Checkpoints are read and written by :mod:`agents.checkpoints` (``weights_only=True``).
 """
 
 from agents.critical.models import MODELS
 from train.critical.cli import main
-from train.critical.config import (CHECKPOINT_DIR, DEFAULT_DATA_DIR, DEFAULTS, EVAL_SAMPLES, RUNS_DIR,
-                                   VAL_PROBLEMS, EvaluateArgs, GenerateArgs, ModelDefaults, Optim, TrainArgs)
+from train.critical.args import (CHECKPOINT_DIR, DEFAULT_DATA_DIR, DEFAULTS, EVAL_SAMPLES, RUNS_DIR,
+                                 VAL_PROBLEMS, EvaluateArgs, GenerateArgs, ModelDefaults, Optim, TrainArgs)
 from train.critical.data import Inputs, inputs_for, uses_position
-from train.critical.evaluate import (Predictions, accuracy, choose, evaluate, format_table, load_model,
-                                     nearest_label_distance, nearest_label_mse, predict, predict_all,
-                                     score_predictions, validation_scores)
+from train.critical.evaluation import (Predictions, accuracy, choose, evaluate, format_table, load_model,
+                                       nearest_label_distance, nearest_label_mse, predict, predict_all,
+                                       score_predictions, validation_scores)
 from train.critical.losses import (label_log_likelihood, label_mean_log_prob, loss, nearest_label_loss,
                                    one_label_each)
 from train.critical.plots import plot_predictions

@@ -1,6 +1,6 @@
 """``python -m train.critical`` / ``gnn-mp critical``: generate-data | train | evaluate.
 
-The flags of each sub-command are the fields of its dataclass in :mod:`train.critical.config`
+The flags of each sub-command are the fields of its dataclass in :mod:`train.critical.args`
 (``--help`` lists them with defaults). Bad input, unusable checkpoints and dataset or file
 errors end with one line on stderr and exit status 2.
 """
@@ -17,7 +17,7 @@ import torch
 from agents.checkpoints import CheckpointError
 from gnn_mp_envs.critical.dataset import DatasetCacheError, generate_all
 from train.args import OneLineParser, UsageError, add_dataclass_arguments, from_namespace
-from train.critical.config import EvaluateArgs, GenerateArgs, TrainArgs
+from train.critical.args import EvaluateArgs, GenerateArgs, TrainArgs
 
 PROG = "critical"
 #: sub-command -> (flags dataclass, help)
@@ -58,7 +58,7 @@ def cmd_train(a: TrainArgs) -> None:
 
 def cmd_evaluate(a: EvaluateArgs) -> None:
     from gnn_mp_envs.critical.dataset import check_has_split
-    from train.critical.evaluate import evaluate, format_table
+    from train.critical.evaluation import evaluate, format_table
     from train.critical.training import TrainError
     if a.split == "val":
         try:

@@ -20,7 +20,7 @@ import torch
 from torch import Tensor, nn
 
 from agents.critical.models import MODELS
-from train.critical.config import Optim
+from train.critical.args import Optim
 
 Batch = dict  # an Inputs(...) batch, see train.critical.data
 

@@ -43,9 +43,9 @@ from gnn_mp_envs.critical.dataset import DatasetConfig, check_has_split, load_or
 from gnn_mp_envs.critical.halton import halton_graph
 from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import UsageError
-from train.critical.config import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
+from train.critical.args import CHECKPOINT_DIR, RUNS_DIR, VAL_PROBLEMS, Optim, TrainArgs, checkpoint_name
 from train.critical.data import inputs_for
-from train.critical.evaluate import validation_scores
+from train.critical.evaluation import validation_scores
 from train.critical.losses import loss as loss_fn
 from train.run import finite_loss, inside
 

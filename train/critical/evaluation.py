@@ -41,7 +41,7 @@ from gnn_mp_envs.critical.halton import SPARSE_NODES, HaltonGraph, default_radiu
 from gnn_mp_envs.critical.planning import SPARSE_RADIUS_FACTOR, compare_planners, path_is_valid, plan_rdisc, summarize
 from gnn_mp_envs.critical.selection import first_k_diverse, sample_k_diverse, top_k_diverse
 from gnn_mp_envs.utils.io import atomic_write_text
-from train.critical.config import CHECKPOINT_DIR, DEFAULT_DATA_DIR, EVAL_SAMPLES, KS, MIN_SEP_R, checkpoint_name
+from train.critical.args import CHECKPOINT_DIR, DEFAULT_DATA_DIR, EVAL_SAMPLES, KS, MIN_SEP_R, checkpoint_name
 from train.critical.data import inputs_for
 
 #: CVAEs: latent samples decoded per problem, the candidates the k samples are chosen from.

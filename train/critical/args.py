@@ -139,7 +139,7 @@ class GenerateArgs(DataArgs):
 
 @dataclass
 class TrainArgs(DataArgs):
-    """Train one model; flags left unset take the model's defaults (train/critical/config.py)."""
+    """Train one model; flags left unset take the model's defaults (train/critical/args.py)."""
 
     model: str | None = arg(None, "model to train (required)%(default).0s", choices=sorted(MODELS))
     epochs: int | None = arg(None, _shown("passes over the training set", "the model's"), parse=positive_int)
