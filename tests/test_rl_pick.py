@@ -458,33 +458,19 @@ def test_gnn_pick_scores_the_pickers_candidates_by_its_prior_alone():
 def test_resume_never_unpickles_the_run_directorys_model(tmp_path):
     """A crafted model.zip (a cloudpickle payload in its policy keywords, as SB3's PPO.load would
     run) is resumed weights-only: the payload never runs, training continues to --total-steps."""
-    import base64
     import json as _json
-    import pickle
     import zipfile
 
+    from tests.helpers import armed
     from train.cli import main
     marker = tmp_path / "payload-ran"
-
-    class Payload:
-        def __reduce__(self):
-            return (open, (str(marker), "w"))
-
     base = ["train", "rl", "--task", "maze2d", "--n-envs", "2", "--n-steps", "64", "--batch-size", "32",
             "--eval-problems", "1", "--eval-max-steps", "200", "--out", str(tmp_path / "run"), "--no-progress"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(base + ["--total-steps", "64"]) == 0
     path = tmp_path / "run" / "model.zip"
-    with zipfile.ZipFile(path) as archive:
-        members = {name: archive.read(name) for name in archive.namelist()}
-    data = _json.loads(members["data"])
-    data["policy_kwargs"] = {":type:": "<class 'dict'>",
-                             ":serialized:": base64.b64encode(pickle.dumps(Payload())).decode()}
-    members["data"] = _json.dumps(data).encode()
-    with zipfile.ZipFile(path, "w") as archive:
-        for name, content in members.items():
-            archive.writestr(name, content)
+    armed(path, marker)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(base + ["--total-steps", "128", "--resume"]) == 0

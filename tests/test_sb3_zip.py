@@ -3,15 +3,15 @@ the model rebuilt from the run's ``config.json``, never from the zip's pickled e
 
 from __future__ import annotations
 
-import base64
 import json
-import pickle
 import shutil
 import warnings
 import zipfile
 
 import pytest
 import torch
+
+from tests.helpers import armed
 
 RUN = ["train", "rl", "--task", "maze2d", "--n-envs", "2", "--n-steps", "64", "--batch-size", "32",
        "--eval-problems", "1", "--eval-max-steps", "200", "--total-steps", "128", "--no-progress"]
@@ -25,24 +25,6 @@ def run_dir(tmp_path_factory):
         warnings.simplefilter("ignore")
         assert main(RUN + ["--out", str(out)]) == 0
     return out
-
-
-def armed(path, marker) -> None:
-    """Rewrite ``path``'s ``data`` member with a cloudpickle payload in its policy keywords (what
-    ``PPO.load`` unpickles): it creates ``marker`` when unpickled."""
-    class Payload:
-        def __reduce__(self):
-            return (open, (str(marker), "w"))
-
-    with zipfile.ZipFile(path) as archive:
-        members = {name: archive.read(name) for name in archive.namelist()}
-    data = json.loads(members["data"])
-    data["policy_kwargs"] = {":type:": "<class 'dict'>",
-                             ":serialized:": base64.b64encode(pickle.dumps(Payload())).decode()}
-    members["data"] = json.dumps(data).encode()
-    with zipfile.ZipFile(path, "w") as archive:
-        for name, content in members.items():
-            archive.writestr(name, content)
 
 
 def test_a_runs_zip_loads_as_the_policy_its_run_exported_without_unpickling(run_dir, tmp_path):
