@@ -96,3 +96,19 @@ def test_sigterm_on_a_parallel_rl_run_is_one_line_and_leaves_no_worker(tmp_path,
     time.sleep(1)
     assert not [c for c in children if Path(f"/proc/{c}").exists()
                 and open(f"/proc/{c}/stat").read().split()[2] != "Z"]
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["train", "sampler", "--task", "maze2d", "--minutes", "1e30"], "--minutes"),
+    (["train", "sampler", "--task", "maze2d", "--dagger-minutes", "1e30"], "--dagger-minutes"),
+    (["critical", "train", "--model", "gnn", "--time-budget", "1e30"], "--time-budget"),
+])
+def test_a_time_budget_past_thirty_days_is_refused_in_one_line(argv, flag, tmp_path, capsys):
+    """A minutes flag of 1e30 used to start training that never ends (tools/fuzz_cli.py counted it
+    as a hang): every time budget is at most 30 days, refused in one line with exit 2."""
+    from train.cli import main
+    with pytest.raises(SystemExit) as info:
+        main([*argv, "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and flag in err[-1] and "at most 43,200" in err[-1], err
+    assert not (tmp_path / "run").exists()

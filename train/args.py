@@ -94,6 +94,9 @@ MAX_WORKERS = 256
 positive_int = bounded(int, 1, False, "a positive integer", MAX_COUNT)
 non_negative_int = bounded(int, 0, False, "a non-negative integer", MAX_COUNT)
 positive_float = bounded(float, 0, True, "a positive number")
+#: The longest time budget a flag takes: a 30-day run (a larger one is a typo, not a budget).
+MAX_MINUTES = 60 * 24 * 30
+minutes_float = bounded(float, 0, True, "a positive number of minutes", MAX_MINUTES)
 non_negative_float = bounded(float, 0, False, "a non-negative number")
 size_int = bounded(int, 1, False, "a positive integer", MAX_SIZE)
 worker_count = bounded(int, 1, False, "a positive integer", MAX_WORKERS)

@@ -18,8 +18,8 @@ from typing import Any
 from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
 from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
-from train.args import (MAX_SIZE, arg, figure_path, non_negative_float, non_negative_int, positive_float, positive_int,
-                        seed_int, size_int, worker_count)
+from train.args import (MAX_SIZE, arg, figure_path, minutes_float, non_negative_float, non_negative_int, positive_float,
+                        positive_int, seed_int, size_int, worker_count)
 
 #: Where cached datasets go (git-ignored).
 DEFAULT_DATA_DIR = Path("data/critical")
@@ -149,7 +149,7 @@ class TrainArgs(DataArgs):
     ship: bool = arg(False, "when done, also copy the best checkpoint and its .json into "
                      "agents/checkpoints/ (replaces the shipped weights)")
     resume: bool = arg(False, "continue the run of --out, or without --out the latest run of this model and seed")
-    time_budget: float | None = arg(None, _shown("stop after this many minutes", "no limit"), parse=positive_float)
+    time_budget: float | None = arg(None, _shown("stop after this many minutes", "no limit"), parse=minutes_float)
     max_train_problems: int | None = arg(None, _shown("use only the first N training problems", "all"), parse=positive_int)
     lr: float | None = arg(None, _shown("learning rate", "the model's"), parse=positive_float)
     batch_size: int | None = arg(None, _shown("problems per step", "the model's"), parse=positive_int)

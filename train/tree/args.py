@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from train.args import arg, non_negative_int, positive_float, positive_int, seed_int, worker_count
+from train.args import arg, minutes_float, non_negative_int, positive_float, positive_int, seed_int, worker_count
 from train.run import RunFlags
 from train.tree.data import VIEWS
 
@@ -34,12 +34,12 @@ class TrainArgs(RunFlags):
                     "start + path prefix)", choices=VIEWS)
     minutes: float = arg(10.0, "gradient-step budget of the first training phase (minutes); planning the dataset, "
                                    "each DAgger round (--dagger-minutes plus its planning) and the final evaluation "
-                                   "come on top", parse=positive_float)
+                                   "come on top", parse=minutes_float)
     dagger_rounds: int = arg(1, "DAgger rounds: plan with the sampler, relabel its own trees, fine-tune",
                              parse=non_negative_int)
     dagger_problems: int = arg(400, "fresh training problems planned per DAgger round", parse=positive_int)
     dagger_minutes: float = arg(6.0, "gradient-step budget per DAgger round (minutes), on top of --minutes; the "
-                                         "round's planning comes on top", parse=positive_float)
+                                         "round's planning comes on top", parse=minutes_float)
     batch_size: int = arg(8, "runs (solved problems) per optimisation step", parse=positive_int)
     lr: float = arg(2e-3, "Adam learning rate (cosine-annealed)", parse=positive_float)
     max_snapshots: int = arg(96, "snapshots per run in an epoch (the scorer: negative samples per run)",
