@@ -23,7 +23,7 @@ test: install
 benchmark: install
 	$(BIN)/gnn-mp benchmark --suite default --out results --workers 2
 
-# The out-of-distribution suite (issue #18): every OOD scene family of every task, ratios in results/ood/ood.md.
+# The out-of-distribution suite: every OOD scene family of every task, ratios in results/ood/ood.md.
 benchmark-ood: install
 	$(BIN)/gnn-mp benchmark --suite ood --out results/ood --workers 2 --no-render
 

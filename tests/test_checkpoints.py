@@ -1,5 +1,5 @@
 """agents.checkpoints: one format for every model, loaded with weights_only=True only;
-gnn_mp_envs.utils.io: atomic writes (issue #8, issue #11 items 1 and 6)."""
+gnn_mp_envs.utils.io: atomic writes."""
 
 import json
 import os
@@ -324,7 +324,7 @@ def test_a_failed_write_is_an_os_error_naming_the_file_and_keeps_the_old_one(tmp
 
 
 def test_a_crafted_size_is_refused_before_the_model_is_allocated(tmp_path):
-    """A checkpoint whose constructor arguments were edited to a huge width (issue #21, item 22):
+    """A checkpoint whose constructor arguments were edited to a huge width:
     the weights are checked against a skeleton on the meta device, so the refusal comes before
     the real model (gigabytes at 4096) is ever built."""
     devices = []

@@ -183,7 +183,7 @@ def test_listing_the_samplers_imports_no_torch():
 
 @pytest.mark.parametrize("argv", [["train", "sampler", "--help"], ["train", "sampler", "--model", "nope"]])
 def test_train_sampler_help_and_bad_flags_import_no_torch(argv):
-    """`gnn-mp train sampler --help` took 10-14 s importing torch before argparse (issue #21, item 10):
+    """`gnn-mp train sampler --help` took 10-14 s importing torch before argparse:
     the flags live in train.tree.args, and torch is imported once they parsed."""
     code = ("import sys\nfrom train.cli import main\ntry:\n    main(%r)\nexcept SystemExit as exc:\n"
             "    print('rc', exc.code)\nprint('torch' in sys.modules)" % (argv,))
@@ -195,7 +195,7 @@ def test_train_sampler_help_and_bad_flags_import_no_torch(argv):
 
 def test_version_and_render_without_a_mode(capsys):
     """`gnn-mp --version` names the installed version; render() without a render mode warns as
-    Gymnasium's own envs do instead of returning None silently (issue #21, item 10)."""
+    Gymnasium's own envs do instead of returning None silently."""
     import warnings
 
     import gymnasium as gym
@@ -214,7 +214,7 @@ def test_version_and_render_without_a_mode(capsys):
 
 def test_an_import_module_that_raises_is_one_line(tmp_path, monkeypatch, capsys):
     """--import of a module whose own code fails (not an ImportError): one line naming the module
-    and the error, rc 2 (issue #21, item 22)."""
+    and the error, rc 2."""
     from train.cli import main
     (tmp_path / "raising_plugin.py").write_text("raise RuntimeError('boom at import')\n")
     monkeypatch.syspath_prepend(str(tmp_path))

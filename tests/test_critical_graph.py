@@ -141,7 +141,7 @@ def _break_crc(path):
 
 
 def _rewritten(path, **changes):
-    """A valid zip of the format whose contents do not fit (issue #21, item 22: an IndexError later)."""
+    """A valid zip of the format whose contents do not fit (an IndexError later)."""
     from dataclasses import replace
 
     from gnn_mp_envs.critical.dataset import save_problems

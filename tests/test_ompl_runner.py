@@ -72,7 +72,7 @@ def test_a_runner_past_its_timeout_is_killed_and_reported(tmp_path):
                                      '[1, 2]', '{"results": [', '"ok"'])
 def test_a_runner_answer_of_the_wrong_shape_is_one_line(tmp_path, payload):
     """Another runner (python=...) writing JSON of another shape, or none at all: a RuntimeError of one
-    line saying what came back, not a traceback deep in the benchmark (issue #21, item 22)."""
+    line saying what came back, not a traceback deep in the benchmark."""
     wrapper = tmp_path / "python_with_another_runner"
     wrapper.write_text("#!/bin/sh\nwhile [ $# -gt 0 ]; do if [ \"$1\" = --json ]; then out=$2; fi; shift; done\n"
                        f"printf '%s' '{payload}' > \"$out\"\n")

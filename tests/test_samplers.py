@@ -360,7 +360,7 @@ def test_classical_samplers_run_without_torch():
 ])
 def test_an_environments_only_install_plans_classically_and_refuses_learned_samplers_in_one_line(argv, code, fragment):
     """Without the agents extra (torch and friends cannot be imported), the CLI plans with the
-    classical samplers and refuses anything learned in one line naming the extra, rc 2 (issue #21, item 4)."""
+    classical samplers and refuses anything learned in one line naming the extra, rc 2."""
     import subprocess
     import sys
     blocker = (

@@ -109,7 +109,7 @@ def test_bad_problem_index_is_refused_by_name(index):
 
 def test_scene_is_a_keyword_of_tasks_with_scenes_only():
     with pytest.raises(ValueError, match="unknown scene 'test' for task 'maze2d'"):
-        gym.make("GNNMP/Maze2DRRT-v0", scene="test")      # maze2d's scenes are its map kinds (issue #18)
+        gym.make("GNNMP/Maze2DRRT-v0", scene="test")      # maze2d's scenes are its map kinds
     assert gym.make("GNNMP/Maze2DRRT-v0", scene="spiral", max_nodes=50).unwrapped.scene == "spiral"
     from tests import tiny_task  # noqa: F401  (a task without scenes)
     with pytest.raises(ValueError, match="has no scenes"):
