@@ -306,12 +306,11 @@ class PickSampler(ModelSampler):
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=config.get("periodic"), proposals=proposals)
         self.policy = policy.eval()
-        #: ``prior`` (a CandidatePrior): scores candidates in place of the policy's own prior (``gnn-pick``
-        #: on a picker trained without one: the task's supervised ``gnn``); only with ``prior_only``.
+        # ``prior`` (a CandidatePrior): scores candidates in place of the policy's own prior (``gnn-pick``
+        # on a picker trained without one: the task's supervised ``gnn``); only with ``prior_only``.
         if prior is not None and not prior_only:
             raise ValueError("an outside candidate prior is only read with prior_only=True (the policy was not trained on it)")
-        self._outside_prior = prior
-        self.candidate_set = CandidateSet(low, high, prior=self.new_prior(), **config)
+        self.candidate_set = CandidateSet(low, high, prior=self.new_prior() if prior is None else prior, **config)
         if self.candidate_set.count != policy.count:
             raise ValueError(f"the policy picks among {policy.count} candidates, the candidate set has "
                              f"{self.candidate_set.count}")
@@ -326,9 +325,7 @@ class PickSampler(ModelSampler):
 
     def new_prior(self):
         """A fresh copy of the candidate prior the policy was trained with (its own caches), rebuilt from
-        the scorer weights the policy carries (or the outside prior given); None for a policy without one."""
-        if self._outside_prior is not None:
-            return self._outside_prior
+        the scorer weights the policy carries; None for a policy without one."""
         encoder = self.policy.encoder
         if encoder.prior_model is None:
             return None

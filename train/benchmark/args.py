@@ -145,6 +145,14 @@ def import_modules(modules: list[str]) -> None:
         raise BenchmarkError(str(exc)) from None
 
 
+def time_limit_s(args: BenchmarkArgs) -> float:
+    """The run's time budget: ``--ompl-time-limit``, else the task's (``TaskSpec.time_limit_s``; a
+    validated ``args`` holds it)."""
+    if args.ompl_time_limit is not None:
+        return float(args.ompl_time_limit)
+    return float(task_spec_for(args.task).time_limit_s)
+
+
 def validate_args(args: BenchmarkArgs) -> None:
     """Reject bad flags before any planning starts (one-line messages); fills in the default scene."""
     import_modules(args.modules)
@@ -169,8 +177,7 @@ def validate_args(args: BenchmarkArgs) -> None:
         raise BenchmarkError(f"--workers must be >= 1, got {args.workers}")
     if args.max_nodes is not None and args.max_nodes < 2:
         raise BenchmarkError(f"--max-nodes must be >= 2, got {args.max_nodes}")
-    if args.ompl_time_limit is None:
-        args.ompl_time_limit = float(spec.time_limit_s)
+    args.ompl_time_limit = time_limit_s(args)
     if not args.ompl_time_limit > 0:
         raise BenchmarkError(f"--ompl-time-limit must be > 0, got {args.ompl_time_limit}")
     if not args.samplers:

@@ -15,8 +15,8 @@ from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
     is_ompl,
+    time_limit_s,
 )
-from train.benchmark.stats import time_limit_s
 
 
 def _finite_or_none(x: Any) -> float | None:

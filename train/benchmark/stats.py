@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from train.benchmark.args import BenchmarkArgs, task_spec_for
+from train.benchmark.args import BenchmarkArgs, task_spec_for, time_limit_s
 
 #: The counters every run reports, in table order.
 METRICS: tuple[str, ...] = ("nodes_expanded", "edges", "collision_checks", "iterations", "path_length",
@@ -49,14 +49,6 @@ def sampler_summary(records: list[dict[str, Any]], max_nodes: int | None = None)
         runs = [r for r, won in zip(records, wins) if won] if metric in SUCCESS_ONLY_METRICS else records
         summary[metric] = summarize([r.get(metric) for r in runs])
     return summary
-
-
-def time_limit_s(args: BenchmarkArgs) -> float:
-    """The run's time budget: ``--ompl-time-limit``, else the task's (``TaskSpec.time_limit_s``; a
-    validated ``args`` already holds it)."""
-    if args.ompl_time_limit is not None:
-        return float(args.ompl_time_limit)
-    return float(task_spec_for(args.task).time_limit_s)
 
 
 def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
