@@ -302,3 +302,107 @@ def test_exactly_the_listed_problems_are_invalid_under_the_sphere_model(robot):
         task.close()
     assert invalid - set(INVALID_PROBLEMS[robot]) == set(SPHERE_INVALID_PROBLEMS[robot])
     assert 700 - len(set(INVALID_PROBLEMS[robot]) | set(SPHERE_INVALID_PROBLEMS[robot])) >= 665   # 95%
+
+
+def _world_leaves(checker, q, self_collision=False):
+    """Every link's leaves (centres) in the world at ``q``: link name -> ``(k, 3)``."""
+    rot, trans = checker.link_frames(q)
+    return {link: checker.model.leaves(link, self_collision)[:, :3] @ rot[i].T + trans[i]
+            for i, link in enumerate(checker.links) if link in checker.model.roots}
+
+
+def test_the_motion_bounds_hold_along_edges(world):
+    """What lets the edge check skip states: over ``s`` states from state ``k`` of an edge, every leaf
+    of a link moves at most ``s delta`` and at most ``s rate + s^2 curve / 2`` (``rate`` measured at
+    state ``k``), and a link below another moves at most the pair's bounds in that link's frame. The
+    oracle: the leaves' positions from forward kinematics at both states."""
+    checker = world.sphere_checker(())
+    rng = np.random.default_rng(5)
+    tighter = []
+    for _ in range(40):
+        a = rng.uniform(world.low, world.high)
+        d = rng.normal(size=len(a))
+        b = a + d / np.linalg.norm(d) * rng.uniform(0.2, 1.5)
+        n = int(rng.integers(20, 150))
+        k = int(rng.integers(0, n))
+        bounds = checker.motion_rates(a, b, n, k)
+        here = {t: _world_leaves(checker, a + (k / n) * (b - a), t) for t in (False, True)}
+        frames_here = checker.link_frames(a + (k / n) * (b - a))
+        for s in (1, 3, 10, 40):
+            for sign in (1, -1):
+                j = k + sign * s
+                if not 0 <= j <= n:
+                    continue
+                there = {t: _world_leaves(checker, a + (j / n) * (b - a), t) for t in (False, True)}
+                for i, link in enumerate(checker.links):
+                    if link not in checker.model.roots:
+                        continue
+                    moved = max(float(np.linalg.norm(there[t][link] - here[t][link], axis=1).max()) for t in (False, True))
+                    curved = s * bounds["rate"][i] + 0.5 * s * s * bounds["curve"][i]
+                    assert moved <= s * bounds["delta"][i] + 1e-9, (link, s)
+                    assert moved <= curved + 1e-9, (link, s, moved, curved)
+                    if moved > 1e-6:
+                        tighter.append(min(curved, s * bounds["delta"][i]) / (s * bounds["delta"][i]))
+                frames_there = checker.link_frames(a + (j / n) * (b - a))
+                for p, ((la, lb), m) in enumerate(zip(checker._pairs, checker._pair_moving)):
+                    if m < 0:
+                        continue
+                    f = la + lb - m
+                    name = checker.links[m]
+
+                    def local(frames, leaves):     # the moving link's self leaves in the other link's frame
+                        rot, trans = frames
+                        return (leaves[name] - trans[f]) @ rot[f]
+                    moved = float(np.linalg.norm(local(frames_there, there[True]) - local(frames_here, here[True]),
+                                                 axis=1).max())
+                    assert moved <= s * bounds["pair_delta"][p] + 1e-9
+                    assert moved <= s * bounds["pair_rate"][p] + 0.5 * s * s * bounds["pair_curve"][p] + 1e-9
+    assert np.median(tighter) < 0.9        # the local bound is what saves the work: it must be tighter
+
+
+def _touching(small: np.ndarray, tree, big: np.ndarray) -> bool:
+    """Whether a sphere of ``small`` ``(k, 4)`` touches one of ``big`` (centres and radii, in the same
+    frame; ``tree``: a k-d tree of ``big``'s centres): brute force over the pairs it cannot rule out
+    (some links have tens of thousands of spheres)."""
+    for i, near in enumerate(tree.query_ball_point(small[:, :3], small[:, 3] + big[:, 3].max())):
+        if near and (np.linalg.norm(big[near, :3] - small[i, :3], axis=1) <= small[i, 3] + big[near, 3]).any():
+            return True
+    return False
+
+
+def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(world):
+    """A self pair's joint-space table lets the edge check skip the pair's walk: wherever it says a
+    cell is free, the pair's leaves (brute force, no tree) touch nowhere in the cell, at its border
+    with cells that are not free above all."""
+    checker = world.sphere_checker(())
+    at, joint, low, step, dim, table = checker._tables
+    tabled = np.flatnonzero(at >= 0)
+    assert len(tabled) >= 2
+    rng = np.random.default_rng(6)
+    border_seen = 0
+    for p in tabled:
+        moving = [j for j in joint[p] if j >= 0]
+        cells = table[at[p]: at[p] + np.prod(dim[p][: len(moving)])]
+        assert (cells >= 1).any()
+        border = np.flatnonzero(cells == 1)
+        picks = np.concatenate([rng.choice(border, min(len(border), 60), replace=False) if len(border) else [],
+                                rng.choice(np.flatnonzero(cells >= 1), 20)]).astype(np.int64)
+        border_seen += len(border) > 0
+        from scipy.spatial import cKDTree
+        names = sorted(checker.self_pairs[p], key=lambda name: len(checker.model.leaves(name, True)))
+        s_index, b_index = (checker.links.index(name) for name in names)
+        small, big = (checker.model.leaves(name, True) for name in names)
+        tree = cKDTree(big[:, :3])             # the larger link's spheres, in its own frame
+        for c in picks:
+            cell = np.unravel_index(c, dim[p][: len(moving)])
+            q = rng.uniform(world.low, world.high)
+            for k, j in enumerate(moving):
+                q[j] = low[p, k] + (cell[k] + rng.uniform(0, 1)) * step[p, k]
+            if np.any(q < world.low) or np.any(q > world.high):
+                continue
+            assert checker.table_room(q)[p] >= 1
+            rot, trans = checker.link_frames(q)
+            world_small = small[:, :3] @ rot[s_index].T + trans[s_index]
+            in_big = np.c_[(world_small - trans[b_index]) @ rot[b_index], small[:, 3]]
+            assert not _touching(in_big, tree, big), (names, q)
+    assert border_seen       # some table has cells next to ones that are not free

@@ -11,8 +11,10 @@ from the root, so a link far from everything costs one test per obstacle.
 
 :meth:`SphereChecker.check_edge` checks the states of a whole edge in one compiled call, in the
 order it is given (the far end first, then by bisection), and stops at the first invalid one; each
-state it looks at is one collision check, as with the pybullet checker. Everything is float64 and a
-pure function of the configuration and the scene.
+state it looks at is one collision check, as with the pybullet checker. States are skipped only where
+certified bounds vouch for them: how far and how fast each link can move along the edge, and, for
+self pairs that only the wrist's one or two joints move, a joint-space table of where they are free.
+Everything is float64 and a pure function of the configuration and the scene.
 """
 
 from __future__ import annotations
@@ -36,6 +38,12 @@ _KINDS = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
 #: Along an edge the tree walks refine distance bounds below this many states' motion (more work
 #: per tested state, fewer tested states; measured with tools/bench_checker.py).
 REFINE = 3.0
+#: Joint-space tables of the wrist's self pairs (:meth:`SphereChecker._joint_tables`): a cell is free
+#: when the pair's leaves are more than this apart at its centre (m); smaller: finer tables.
+TABLE_FLOOR = 0.003
+#: At most this many cells per pair's table (a coarser grid, with a higher floor, past it).
+TABLE_CELLS = 1 << 17
+_TABLES: dict[tuple, tuple] = {}
 #: Format tag of the sphere model files.
 MODEL_FORMAT = "gnn-mp-envs sphere model, version 1"
 
@@ -54,9 +62,10 @@ class CheckerArrays(structref.StructRefProxy):
     thirty (a compiled call costs about 75 ns per array argument)."""
 
 
-_FIELDS = ("q", "gaps", "known", "reach", "pair_reach", "delta", "pdelta", "queue", "parent", "origin_r", "origin_t",
+_FIELDS = ("q", "gaps", "known", "reach", "pair_reach", "delta", "pdelta", "curve", "pcurve", "omega", "vel", "queue", "parent", "origin_r", "origin_t",
            "kind", "axis", "q_index", "q_fixed", "link_root", "self_root", "nodes", "first_child", "child_count",
-           "pairs", "exempt", "ob_kind", "ob_centre", "ob_rot", "ob_size", "rot", "trans", "stack", "pair_stack")
+           "pairs", "exempt", "ob_kind", "ob_centre", "ob_rot", "ob_size", "rot", "trans", "stack", "pair_stack", "pair_moving",
+           "pcell", "table_at", "table_joint", "table_low", "table_step", "table_dim", "table")
 structref.define_proxy(CheckerArrays, CheckerArraysType, list(_FIELDS))
 
 
@@ -267,6 +276,168 @@ def _position(n, k, bisection, queue):
     return -1
 
 
+def _velocities(a, b, n, parent, kind, axis, q_index, rot, trans, omega, vel):
+    """Per link, at the configuration whose frames ``rot``, ``trans`` hold: the angular velocity
+    ``omega[l]`` and the velocity ``vel[l]`` of the frame's origin for one state's step ``(b - a) / n``
+    of the edge (world axes; per state, not per second)."""
+    for link in range(parent.shape[0]):
+        p = parent[link]
+        if p < 0:
+            for i in range(3):
+                omega[link, i] = 0.0
+                vel[link, i] = 0.0
+            continue
+        wx, wy, wz = omega[p, 0], omega[p, 1], omega[p, 2]
+        dx, dy, dz = trans[link, 0] - trans[p, 0], trans[link, 1] - trans[p, 1], trans[link, 2] - trans[p, 2]
+        vel[link, 0] = vel[p, 0] + wy * dz - wz * dy
+        vel[link, 1] = vel[p, 1] + wz * dx - wx * dz
+        vel[link, 2] = vel[p, 2] + wx * dy - wy * dx
+        omega[link, 0], omega[link, 1], omega[link, 2] = wx, wy, wz
+        j = q_index[link]
+        if j >= 0 and kind[link] != 0:
+            step = (b[j] - a[j]) / n
+            for i in range(3):
+                world = rot[link, i, 0] * axis[link, 0] + rot[link, i, 1] * axis[link, 1] + rot[link, i, 2] * axis[link, 2]
+                if kind[link] == 1:
+                    omega[link, i] += step * world
+                else:
+                    vel[link, i] += step * world
+
+
+def _motion_bounds(a, b, n, reach, delta, curve):
+    """Per row of ``reach`` (a link, or a self pair's relative motion), for one state's step
+    ``(b - a) / n``: ``delta``, how far any of its spheres moves at most anywhere (the joints' steps
+    times their levers), and ``curve``, how much the speed of any of its points changes at most per
+    state. A point's velocity is ``sum_j dq_j a_j x (p - o_j)``; along the edge each axis ``a_j``
+    turns at most by the steps of the joints above it and each ``p - o_j`` changes at most by
+    ``sum_j dq_j reach_j``, so the change is at most ``3 (sum_j dq_j) delta`` over the joints that move it."""
+    for r in range(reach.shape[0]):
+        acc = 0.0
+        turn = 0.0
+        for j in range(reach.shape[1]):
+            if reach[r, j] > 0.0:
+                acc += abs(b[j] - a[j]) / n * reach[r, j]
+                turn += abs(b[j] - a[j]) / n
+        delta[r] = acc
+        curve[r] = 3.0 * turn * acc
+
+
+def _rate(moving, frame, node, nodes, rot, trans, omega, vel):
+    """How fast (per state) the points of the sphere ``node`` of link ``moving`` move at most at this
+    configuration, relative to link ``frame`` (-1: the world): the speed of its centre plus the
+    relative turn rate times its radius (from :func:`_velocities`)."""
+    x, y, z = nodes[node, 0], nodes[node, 1], nodes[node, 2]
+    ux = rot[moving, 0, 0] * x + rot[moving, 0, 1] * y + rot[moving, 0, 2] * z   # centre from the origin
+    uy = rot[moving, 1, 0] * x + rot[moving, 1, 1] * y + rot[moving, 1, 2] * z
+    uz = rot[moving, 2, 0] * x + rot[moving, 2, 1] * y + rot[moving, 2, 2] * z
+    wx, wy, wz = omega[moving, 0], omega[moving, 1], omega[moving, 2]
+    vx = vel[moving, 0] + wy * uz - wz * uy
+    vy = vel[moving, 1] + wz * ux - wx * uz
+    vz = vel[moving, 2] + wx * uy - wy * ux
+    if frame >= 0:          # less the velocity of the point fixed to ``frame`` at the centre
+        fx, fy, fz = omega[frame, 0], omega[frame, 1], omega[frame, 2]
+        rx = trans[moving, 0] + ux - trans[frame, 0]
+        ry = trans[moving, 1] + uy - trans[frame, 1]
+        rz = trans[moving, 2] + uz - trans[frame, 2]
+        vx -= vel[frame, 0] + fy * rz - fz * ry
+        vy -= vel[frame, 1] + fz * rx - fx * rz
+        vz -= vel[frame, 2] + fx * ry - fy * rx
+        wx, wy, wz = wx - fx, wy - fy, wz - fz
+    return math.sqrt(vx * vx + vy * vy + vz * vz) + math.sqrt(wx * wx + wy * wy + wz * wz) * nodes[node, 3]
+
+
+def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_count, rot, trans, pair_stack):
+    """Whether a leaf under ``root_a`` (of link ``la``) and one under ``root_b`` (of ``lb``) are at most
+    ``floor`` apart (``(True, ...)``), else ``(False, least)``: the least gap of the node pairs the walk
+    pruned, a lower bound of every leaf pair's. Simultaneous descent from the roots, splitting the
+    larger of two nodes nearer than ``tau`` (at least ``floor``)."""
+    least = 1e300
+    top = 0
+    pair_stack[0, 0] = root_a
+    pair_stack[0, 1] = root_b
+    while top >= 0:
+        na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
+        top -= 1
+        x, y, z = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
+        u, v, w = nodes[nb_, 0], nodes[nb_, 1], nodes[nb_, 2]
+        dx = (trans[la, 0] + rot[la, 0, 0] * x + rot[la, 0, 1] * y + rot[la, 0, 2] * z
+              - trans[lb, 0] - rot[lb, 0, 0] * u - rot[lb, 0, 1] * v - rot[lb, 0, 2] * w)
+        dy = (trans[la, 1] + rot[la, 1, 0] * x + rot[la, 1, 1] * y + rot[la, 1, 2] * z
+              - trans[lb, 1] - rot[lb, 1, 0] * u - rot[lb, 1, 1] * v - rot[lb, 1, 2] * w)
+        dz = (trans[la, 2] + rot[la, 2, 0] * x + rot[la, 2, 1] * y + rot[la, 2, 2] * z
+              - trans[lb, 2] - rot[lb, 2, 0] * u - rot[lb, 2, 1] * v - rot[lb, 2, 2] * w)
+        g = math.sqrt(dx * dx + dy * dy + dz * dz) - nodes[na_, 3] - nodes[nb_, 3]
+        ca, cb = child_count[na_], child_count[nb_]
+        if g > tau or (g > floor and ca == 0 and cb == 0):
+            least = g if g < least else least
+            continue
+        if ca == 0 and cb == 0:
+            return True, least
+        if cb == 0 or (ca > 0 and nodes[na_, 3] >= nodes[nb_, 3]):
+            for c in range(first_child[na_], first_child[na_] + ca):
+                top += 1
+                pair_stack[top, 0] = c
+                pair_stack[top, 1] = nb_
+        else:
+            for c in range(first_child[nb_], first_child[nb_] + cb):
+                top += 1
+                pair_stack[top, 0] = na_
+                pair_stack[top, 1] = c
+    return False, least
+
+
+def _table_room(p, q, table_at, table_joint, table_low, table_step, table_dim, table):
+    """The entry of self pair ``p``'s joint-space table at ``q``: ``d >= 1`` when the cell of ``q`` and
+    every cell fewer than ``d`` cells away from it (in each of the pair's joints) are free of contact
+    between the pair, so every configuration less than ``d - 1`` cells from ``q`` is; 0 when the cell
+    is not, or ``q`` lies outside the table."""
+    index = 0
+    for k in range(2):
+        j = table_joint[p, k]
+        if j < 0:
+            break
+        cell = math.floor((q[j] - table_low[p, k]) / table_step[p, k])
+        if cell < 0 or cell >= table_dim[p, k]:
+            return 0
+        index = index * table_dim[p, k] + cell
+    return table[table_at[p] + index]
+
+
+def _free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, q, parent, origin_r, origin_t, kind, axis,
+                q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, out):
+    """``out[c]``: no leaf of link ``la``'s tree at ``root_a`` comes within ``floor`` of one of ``lb``'s
+    at the centre of cell ``c`` of the grid of ``dim[k]`` cells of ``step[k]`` from ``low[k]`` over
+    joints ``joints`` (row-major; ``joints[1] < 0``: one joint) with the other joints at ``q``."""
+    cells = dim[0] * dim[1]
+    for c in range(cells):
+        i0, i1 = c // dim[1], c % dim[1]
+        q[joints[0]] = low[0] + (i0 + 0.5) * step[0]
+        if joints[1] >= 0:
+            q[joints[1]] = low[1] + (i1 + 0.5) * step[1]
+        _forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
+        hit, _ = _pair_walk(la, lb, root_a, root_b, floor, floor, nodes, first_child, child_count, rot, trans,
+                            pair_stack)
+        out[c] = not hit
+
+
+def _states_clear(gap, rate, curve, delta):
+    """How many states away (either way along the edge, real-valued) spheres at least ``gap`` from
+    everything stay clear, that is, states nearer than it are free: the larger of ``gap / delta``
+    (spheres move at most ``delta`` per state anywhere) and the root of ``rate s + curve s^2 / 2 =
+    gap`` (they move at ``rate`` per state here, and that speed changes by at most ``curve`` per
+    state; ``rate = curve = 0``: no such bound). Slightly rounded down; ``1e300`` where nothing moves."""
+    if gap <= 0.0:
+        return gap
+    if delta <= 0.0:
+        return 1e300
+    out = gap / delta
+    den = rate + math.sqrt(rate * rate + 2.0 * curve * gap)
+    if den > 0.0:
+        quadratic = 2.0 * gap / den
+        out = quadratic if quadratic > out else out
+    return out * (1.0 - 1e-12)
+
+
 def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     """The checker's one kernel, in one body (a compiled call with array arguments costs more than
     the tests it would wrap).
@@ -286,16 +457,24 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
 
     A state collides when a leaf of a link's obstacle tree touches an obstacle or a leaf of a
     checked link pair's self-collision trees touches the other's (depth first from the roots).
-    Along an edge the answer and the count are those of testing every state, with less work: the
-    walks that find no touching leaves leave lower bounds of the distances (the least gap of the
-    nodes they pruned) in ``gaps[k, i]``, per link to every obstacle (``i = link``) and per self
-    pair (``i = links + pair``); between neighbouring states a link's spheres move at most
-    ``delta[link]`` (``reach`` times each joint's step) and a pair's relative to each other at most
-    ``pdelta[pair]`` (only the joints between them count). So a link or pair whose bound at a
-    checked neighbour state exceeds the motion since is free without a test; an interval whose two
+    Along an edge the answer and the count are those of testing every state, with less work.
+    ``gaps[k, i]`` holds, for a state ``k`` known to be free, how many states away on either side (real
+    valued) link ``i``'s spheres stay clear of every obstacle (``i = link``), or a self pair's of each
+    other (``i = links + pair``). A walk that finds no touching leaves leaves a lower bound of the
+    distances (the least gap of the nodes it pruned); it becomes states through the motion bounds
+    (:func:`_states_clear`): anywhere, a link's spheres move at most ``delta[link]`` per state
+    (``reach`` times each joint's step) and a pair's relative to each other at most
+    ``pdelta[pair]`` (only the joints between them count); near the tested state they move at the
+    speed :func:`_rate` measures there, which changes by at most ``curve`` (``pcurve``) per state. A
+    self pair with a joint-space table (:meth:`SphereChecker._joint_tables`) is looked up instead of
+    walked where its cell is free, and vouches for as many cells as the table says. So a link or
+    pair that a checked neighbour state vouches for is free without a test; an interval whose two
     checked ends vouch for every link and pair across it is free as a whole, with the intervals
     under it (sequential order: the states ahead are skipped the same way)."""
     q, gaps, known, reach, pair_reach = arrays.q, arrays.gaps, arrays.known, arrays.reach, arrays.pair_reach
+    curve, pcurve, omega, vel, pair_moving = arrays.curve, arrays.pcurve, arrays.omega, arrays.vel, arrays.pair_moving
+    pcell, table_at, table_joint, table_low = arrays.pcell, arrays.table_at, arrays.table_joint, arrays.table_low
+    table_step, table_dim, table = arrays.table_step, arrays.table_dim, arrays.table
     delta, pdelta, queue, parent, origin_r = arrays.delta, arrays.pdelta, arrays.queue, arrays.parent, arrays.origin_r
     origin_t, kind, axis, q_index, q_fixed = arrays.origin_t, arrays.kind, arrays.axis, arrays.q_index, arrays.q_fixed
     link_root, self_root, nodes, first_child = arrays.link_root, arrays.self_root, arrays.nodes, arrays.first_child
@@ -336,16 +515,16 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 if out_:
                     limit = k - 1
                     break
-        for link in range(links):
+        _motion_bounds(a, b, n, reach, delta, curve)
+        _motion_bounds(a, b, n, pair_reach, pdelta, pcurve)
+        for p in range(pairs.shape[0]):     # cells of the pair's table crossed per state, at most
             acc = 0.0
-            for j in range(dof):
-                acc += abs(b[j] - a[j]) / n * reach[link, j]
-            delta[link] = acc
-        for p in range(pairs.shape[0]):
-            acc = 0.0
-            for j in range(dof):
-                acc += abs(b[j] - a[j]) / n * pair_reach[p, j]
-            pdelta[p] = acc
+            for k in range(2):
+                j = table_joint[p, k]
+                if j >= 0:
+                    r = abs(b[j] - a[j]) / n / table_step[p, k]
+                    acc = r if r > acc else acc
+            pcell[p] = acc
         for k in range(n + 1):
             known[k] = False
         if bisection and limit < n:
@@ -375,9 +554,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 if known[L] and known[R]:
                     free = True
                     for i in range(n_pairs):
-                        step = delta[i] if i < links else pdelta[i - links]
                         gl, gr = gaps[L, i], gaps[R, i]
-                        if not (gl > 0.0 and gr > 0.0 and gl + gr > (R - L) * step):
+                        if not (gl > 0.0 and gr > 0.0 and gl + gr > R - L):
                             free = False
                             break
                     if free:
@@ -396,10 +574,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             if known[last]:
                 room = 1e300
                 for i in range(n_pairs):
-                    step = delta[i] if i < links else pdelta[i - links]
-                    if step > 0.0:
-                        r = gaps[last, i] / step
-                        room = r if r < room else room
+                    r = gaps[last, i]
+                    room = r if r < room else room
                 skip = int(room) if room < 1e18 else n
                 if room == skip:                # the bound must exceed the motion strictly
                     skip -= 1
@@ -410,8 +586,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                     if end > limit:
                         end = limit
                     for i in range(n_pairs):
-                        step = delta[i] if i < links else pdelta[i - links]
-                        gaps[end, i] = gaps[last, i] - (end - last) * step
+                        gaps[end, i] = gaps[last, i] - (end - last)
                     known[end] = True
                     k_next = end + 1
                     continue
@@ -422,6 +597,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 q[j] = a[j] + t * (b[j] - a[j])
         # ---- test it
         _forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
+        if track:
+            _velocities(a, b, n, parent, kind, axis, q_index, rot, trans, omega, vel)
         if track:                                    # pairs never tested (exempt, no spheres) bound nothing
             for pr in range(gaps.shape[1]):
                 gaps[kk, pr] = 1e300
@@ -438,9 +615,9 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             if track:                                # the link's clearance to every obstacle, carried over
                 bound = -1.0
                 if LL >= 0 and known[LL]:
-                    bound = gaps[LL, link] - (kk - LL) * delta[link]
+                    bound = gaps[LL, link] - (kk - LL)
                 if RR >= 0 and known[RR]:
-                    other = gaps[RR, link] - (RR - kk) * delta[link]
+                    other = gaps[RR, link] - (RR - kk)
                     bound = other if other > bound else bound
                 if bound > 0.0:
                     gaps[kk, link] = bound
@@ -448,7 +625,13 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             clearance = 1e300
             # along an edge, walks go on below nodes nearer than tau: the bound they leave then vouches
             # for about REFINE states on either side
-            tau = REFINE * delta[link] if track else 0.0
+            rate = 0.0
+            tau = 0.0
+            if track:
+                rate = _rate(link, -1, root, nodes, rot, trans, omega, vel)
+                tau = REFINE * rate + 0.5 * REFINE * REFINE * curve[link]
+                linear = REFINE * delta[link]
+                tau = linear if linear < tau else tau
             for o in range(n_ob):
                 if exempt[o, link]:
                     continue
@@ -481,7 +664,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             if hit:
                 break
             if track:
-                gaps[kk, link] = clearance
+                gaps[kk, link] = _states_clear(clearance, rate, curve[link], delta[link])
         # --- self-collision: simultaneous descent, splitting the larger of two touching inner nodes
         if not hit:
             for p in range(pairs.shape[0]):
@@ -489,53 +672,35 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 pr = links + p
                 if track:
                     bound = -1.0
-                    step = pdelta[p]
                     if LL >= 0 and known[LL]:
-                        bound = gaps[LL, pr] - (kk - LL) * step
+                        bound = gaps[LL, pr] - (kk - LL)
                     if RR >= 0 and known[RR]:
-                        other = gaps[RR, pr] - (RR - kk) * step
+                        other = gaps[RR, pr] - (RR - kk)
                         bound = other if other > bound else bound
                     if bound > 0.0:
                         gaps[kk, pr] = bound
                         continue
-                least = 1e300
-                tau = REFINE * pdelta[p] if track else 0.0
-                top = 0
-                pair_stack[0, 0] = self_root[la]
-                pair_stack[0, 1] = self_root[lb]
-                while top >= 0:
-                    na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
-                    top -= 1
-                    x, y, z = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
-                    u, v, w = nodes[nb_, 0], nodes[nb_, 1], nodes[nb_, 2]
-                    dx = (trans[la, 0] + rot[la, 0, 0] * x + rot[la, 0, 1] * y + rot[la, 0, 2] * z
-                          - trans[lb, 0] - rot[lb, 0, 0] * u - rot[lb, 0, 1] * v - rot[lb, 0, 2] * w)
-                    dy = (trans[la, 1] + rot[la, 1, 0] * x + rot[la, 1, 1] * y + rot[la, 1, 2] * z
-                          - trans[lb, 1] - rot[lb, 1, 0] * u - rot[lb, 1, 1] * v - rot[lb, 1, 2] * w)
-                    dz = (trans[la, 2] + rot[la, 2, 0] * x + rot[la, 2, 1] * y + rot[la, 2, 2] * z
-                          - trans[lb, 2] - rot[lb, 2, 0] * u - rot[lb, 2, 1] * v - rot[lb, 2, 2] * w)
-                    g = math.sqrt(dx * dx + dy * dy + dz * dz) - nodes[na_, 3] - nodes[nb_, 3]
-                    ca, cb = child_count[na_], child_count[nb_]
-                    if g > tau or (g > 0.0 and ca == 0 and cb == 0):
-                        least = g if g < least else least
+                if table_at[p] >= 0:                  # the pair's joint-space table
+                    room = _table_room(p, q, table_at, table_joint, table_low, table_step, table_dim, table)
+                    if room >= 1:                       # this state's cell and ``room - 1`` around it are free
+                        if track:
+                            gaps[kk, pr] = (room - 1) / pcell[p] * (1.0 - 1e-12) if pcell[p] > 0.0 else 1e300
                         continue
-                    if ca == 0 and cb == 0:
-                        hit = True
-                        break
-                    if cb == 0 or (ca > 0 and nodes[na_, 3] >= nodes[nb_, 3]):
-                        for c in range(first_child[na_], first_child[na_] + ca):
-                            top += 1
-                            pair_stack[top, 0] = c
-                            pair_stack[top, 1] = nb_
-                    else:
-                        for c in range(first_child[nb_], first_child[nb_] + cb):
-                            top += 1
-                            pair_stack[top, 0] = na_
-                            pair_stack[top, 1] = c
+                rate = 0.0
+                tau = 0.0
+                if track:
+                    tau = REFINE * pdelta[p]
+                    lm = pair_moving[p]
+                    if lm >= 0:                         # one link below the other: it moves in the other's frame
+                        rate = _rate(lm, la + lb - lm, self_root[lm], nodes, rot, trans, omega, vel)
+                        quadratic = REFINE * rate + 0.5 * REFINE * REFINE * pcurve[p]
+                        tau = quadratic if quadratic < tau else tau
+                hit, least = _pair_walk(la, lb, self_root[la], self_root[lb], tau, 0.0, nodes, first_child,
+                                        child_count, rot, trans, pair_stack)
                 if hit:
                     break
                 if track:
-                    gaps[kk, pr] = least
+                    gaps[kk, pr] = _states_clear(least, rate, pcurve[p] if rate > 0.0 else 0.0, pdelta[p])
 
         # ---- what follows from it
         if mode == 0:
@@ -573,6 +738,17 @@ def _kernels() -> dict[str, Any]:
         g["_gap"] = njit(cache=True, nogil=True, inline="always")(g["_gap"])
         g["_forward_kinematics"] = njit(cache=True, nogil=True)(g["_forward_kinematics"])
         g["_position"] = njit(cache=True, nogil=True)(g["_position"])
+        g["_velocities"] = njit(cache=True, nogil=True)(g["_velocities"])
+        g["_states_clear"] = njit(cache=True, nogil=True, inline="always")(g["_states_clear"])
+        g["_motion_bounds"] = njit(cache=True, nogil=True)(g["_motion_bounds"])
+        g["_rate"] = njit(cache=True, nogil=True, inline="always")(g["_rate"])
+        g["_pair_walk"] = njit(cache=True, nogil=True, inline="always")(g["_pair_walk"])
+        g["_table_room"] = njit(cache=True, nogil=True, inline="always")(g["_table_room"])
+        _KERNELS["free_cells"] = njit(cache=True, nogil=True)(_free_cells)
+        _KERNELS["velocities"] = g["_velocities"]
+        _KERNELS["motion_bounds"] = g["_motion_bounds"]
+        _KERNELS["rate"] = g["_rate"]
+        _KERNELS["table_room"] = g["_table_room"]
         _KERNELS["run"] = njit(cache=True, nogil=True)(_run)
         _KERNELS["forward_kinematics"] = g["_forward_kinematics"]
     return _KERNELS
@@ -661,8 +837,87 @@ class SphereChecker:
         self._pair_reach = np.where(rb == 0, ra, 0.0) + np.where(ra == 0, rb, 0.0)
         self._delta = np.zeros(n)
         self._pdelta = np.zeros(len(self._pairs))
+        self._curve = np.zeros(n)
+        self._pcurve = np.zeros(len(self._pairs))
+        self._pcell = np.zeros(len(self._pairs))
+        # per self pair, the link that moves in the other's frame when one is below the other (-1: neither)
+        self._pair_moving = np.array([self._below(b_, a_) if self._below(b_, a_) >= 0 else self._below(a_, b_)
+                                      for a_, b_ in self._pairs], dtype=np.int64)
+        self._omega = np.zeros((n, 3))
+        self._vel = np.zeros((n, 3))
         self._gaps = self._known = self._queue = np.zeros(0)
+        self._tables = self._joint_tables(robot, joints, held)
         self.set_obstacles(())
+
+    def _joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> tuple:
+        """Joint-space tables of the self pairs whose relative pose only one or two joints change
+        (the wrist's): over a grid of those joints, how many cells around each cell are free of
+        contact between the pair. A cell is free when the pair's leaves are more than
+        ``TABLE_FLOOR`` apart at its centre; within the cell they come at most that much nearer.
+        Built once per robot and pair set (a few hundred milliseconds)."""
+        key = (robot.name, id(self.model), tuple(joints), tuple(sorted(held.items())), self._pairs.tobytes())
+        if key not in _TABLES:
+            _TABLES[key] = self._build_joint_tables(robot, joints, held)
+        return _TABLES[key]
+
+    def _build_joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> tuple:
+        from scipy.ndimage import distance_transform_cdt
+        limits = {j.name: (j.lower, j.upper) for j in robot.joints.values()}
+        n_pairs = len(self._pairs)
+        table_at = np.full(n_pairs, -1, dtype=np.int64)
+        table_joint = np.full((n_pairs, 2), -1, dtype=np.int64)
+        table_low = np.zeros((n_pairs, 2))
+        table_step = np.ones((n_pairs, 2))
+        table_dim = np.ones((n_pairs, 2), dtype=np.int64)
+        chunks: list[np.ndarray] = []
+        size = 0
+        free_cells = _kernels()["free_cells"]
+        q = np.array([float(held.get(name, 0.0)) for name in joints])
+        for p in range(n_pairs):
+            moving = np.flatnonzero(self._pair_reach[p] > 0)
+            if not 1 <= len(moving) <= 2:
+                continue
+            low, high = (np.array([limits[joints[j]][k] for j in moving]) for k in (0, 1))
+            if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(high > low)):
+                continue
+            # each joint's share of the floor: cells of ``2 * share / lever`` radians
+            floor = TABLE_FLOOR
+            while True:
+                step = 2 * (floor / len(moving)) / self._pair_reach[p, moving]
+                dim = np.ceil((high - low) / step).astype(np.int64)
+                if np.prod(dim) <= TABLE_CELLS:
+                    break
+                floor *= 1.25
+            free = np.zeros(int(np.prod(dim)), dtype=np.bool_)
+            la, lb = self._pairs[p]
+            grid_joints = np.array([*moving, -1][:2], dtype=np.int64)
+            free_cells(la, lb, self._self_root[la], self._self_root[lb], grid_joints, low, step,
+                       np.array([*dim, 1][:2], dtype=np.int64), floor, q.copy(), self._parent, self._origin_r,
+                       self._origin_t, self._kind, self._axis, self._q_index, self._q_fixed, self.model.nodes,
+                       self.model.first_child, self.model.child_count, self._rot, self._trans, self._pair_stack, free)
+            if not free.any():                  # always near contact at this floor: the walk decides
+                continue
+            # cells to the nearest cell that is not free (in any joint); all free: as good as unbounded
+            room = (distance_transform_cdt(free.reshape(dim), metric="chessboard").ravel() if not free.all()
+                    else np.full(free.size, 1 << 30))
+            table_at[p] = size
+            table_joint[p, : len(moving)] = moving
+            table_low[p, : len(moving)] = low
+            table_step[p, : len(moving)] = step
+            table_dim[p, : len(moving)] = dim
+            chunks.append(room.astype(np.int32))
+            size += room.size
+        table = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.int32)
+        return table_at, table_joint, table_low, table_step, table_dim, table
+
+    def _below(self, link: int, other: int) -> int:
+        """``link`` if ``other`` is one of its ancestors, else -1."""
+        up = self._parent[link]
+        while up >= 0:
+            if up == other:
+                return link
+            up = self._parent[up]
+        return -1
 
     def _joint_reach(self, robot: URDFRobot, index: dict[str, int], held: dict[str, float]) -> np.ndarray:
         """``(links, dof)``: how far any point of each link's spheres can lie from each planned joint's
@@ -716,11 +971,12 @@ class SphereChecker:
     def _pack(self) -> None:
         """(Re)build the :class:`CheckerArrays` the kernel reads (after the scene or the scratch changed)."""
         self._packed = CheckerArrays(
-            self._q, self._gaps, self._known, self._reach, self._pair_reach, self._delta, self._pdelta, self._queue,
+            self._q, self._gaps, self._known, self._reach, self._pair_reach, self._delta, self._pdelta, self._curve,
+            self._pcurve, self._omega, self._vel, self._queue,
             self._parent, self._origin_r, self._origin_t, self._kind, self._axis, self._q_index, self._q_fixed,
             self._root, self._self_root, self.model.nodes, self.model.first_child, self.model.child_count, self._pairs,
             self._exempt, self._ob_kind, self._ob_centre, self._ob_rot, self._ob_size, self._rot, self._trans,
-            self._stack, self._pair_stack)
+            self._stack, self._pair_stack, self._pair_moving, self._pcell, *self._tables)
 
     def valid(self, states: np.ndarray) -> np.ndarray:
         """Whether each row of ``states`` is collision-free (joint limits are the caller's)."""
@@ -750,6 +1006,38 @@ class SphereChecker:
         self._known = np.zeros(states, dtype=np.bool_)
         self._queue = np.zeros((2 * states + 2, 2), dtype=np.int64)   # two intervals per state
         self._pack()
+
+    def motion_rates(self, a: np.ndarray, b: np.ndarray, n: int, k: int) -> dict[str, np.ndarray]:
+        """The bounds the edge check skips states with, at state ``k`` of the edge ``a -> b`` of ``n``
+        steps: per link, ``delta`` (how far its spheres move per state anywhere), ``rate`` (how fast
+        here) and ``curve`` (how much that speed changes per state), so that over ``s`` states they
+        move at most ``min(s delta, s rate + s^2 curve / 2)``; per self pair, the same for the
+        relative motion (``pair_rate`` 0 where neither link is below the other: ``pair_delta`` only)."""
+        kernels = _kernels()
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        rot, trans = self.link_frames(a + (k / n) * (b - a))
+        omega, vel = np.zeros((len(self.links), 3)), np.zeros((len(self.links), 3))
+        kernels["velocities"](a, b, n, self._parent, self._kind, self._axis, self._q_index, rot, trans, omega, vel)
+        out = {name: np.zeros(size) for name, size in (("delta", len(self.links)), ("curve", len(self.links)),
+                                                       ("pair_delta", len(self._pairs)),
+                                                       ("pair_curve", len(self._pairs)))}
+        kernels["motion_bounds"](a, b, n, self._reach, out["delta"], out["curve"])
+        kernels["motion_bounds"](a, b, n, self._pair_reach, out["pair_delta"], out["pair_curve"])
+        rate = kernels["rate"]
+        nodes = self.model.nodes
+        out["rate"] = np.array([rate(i, -1, r, nodes, rot, trans, omega, vel) if r >= 0 else 0.0
+                                for i, r in enumerate(self._root)])
+        out["pair_rate"] = np.array([rate(m, la + lb - m, self._self_root[m], nodes, rot, trans, omega, vel)
+                                     if m >= 0 else 0.0 for (la, lb), m in zip(self._pairs, self._pair_moving)])
+        return out
+
+    def table_room(self, q: np.ndarray) -> np.ndarray:
+        """Per self pair, its joint-space table's entry at ``q`` (:meth:`_joint_tables`; -1: no table):
+        ``d >= 1`` when ``q``'s cell, and every configuration less than ``d - 1`` cells from ``q`` in each
+        of the pair's joints, is free of contact between the pair's spheres."""
+        room = _kernels()["table_room"]
+        q = np.asarray(q, dtype=np.float64)
+        return np.array([room(p, q, *self._tables) if self._tables[0][p] >= 0 else -1 for p in range(len(self._pairs))])
 
     def link_frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World rotation ``(links, 3, 3)`` and translation ``(links, 3)`` of every link at ``q``."""
