@@ -68,6 +68,8 @@ class ArmProblem(Problem):
         self._high = self.high + 1e-12
         self._low_tol = self._low.tolist()
         self._high_tol = self._high.tolist()
+        # distance's metric (unweighted, no periodic joint), for the planner's compiled nearest scan
+        self.nearest_metric = (np.ones(self.state_dim), np.zeros(self.state_dim, dtype=np.bool_))
 
     @property
     def family(self) -> str | None:
