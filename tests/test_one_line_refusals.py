@@ -83,9 +83,13 @@ def test_sigterm_on_a_parallel_rl_run_is_one_line_and_leaves_no_worker(tmp_path,
         for line in proc.stdout:                 # training has started: the untrained policy's evaluation
             if "step       0:" in line:
                 break
-        time.sleep(3)
-        children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        children: list[str] = []
+        deadline = time.monotonic() + 60              # the workers start within seconds, later on a loaded machine
+        while not children and time.monotonic() < deadline:
+            time.sleep(1)
+            children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
         assert children, "no worker processes"
+        time.sleep(2)                                # let them start their rollouts
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
     finally:

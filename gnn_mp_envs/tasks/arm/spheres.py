@@ -599,8 +599,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
         _forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
         if track:
             _velocities(a, b, n, parent, kind, axis, q_index, rot, trans, omega, vel)
-        if track:                                    # pairs never tested (exempt, no spheres) bound nothing
-            for pr in range(gaps.shape[1]):
+            for pr in range(gaps.shape[1]):          # pairs never tested (exempt, no spheres) bound nothing
                 gaps[kk, pr] = 1e300
         hit = False
         # --- obstacles
@@ -687,20 +686,22 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                             gaps[kk, pr] = (room - 1) / pcell[p] * (1.0 - 1e-12) if pcell[p] > 0.0 else 1e300
                         continue
                 rate = 0.0
+                bend = 0.0                              # no speed measured: the global bound only
                 tau = 0.0
                 if track:
                     tau = REFINE * pdelta[p]
                     lm = pair_moving[p]
                     if lm >= 0:                         # one link below the other: it moves in the other's frame
                         rate = _rate(lm, la + lb - lm, self_root[lm], nodes, rot, trans, omega, vel)
-                        quadratic = REFINE * rate + 0.5 * REFINE * REFINE * pcurve[p]
+                        bend = pcurve[p]
+                        quadratic = REFINE * rate + 0.5 * REFINE * REFINE * bend
                         tau = quadratic if quadratic < tau else tau
                 hit, least = _pair_walk(la, lb, self_root[la], self_root[lb], tau, 0.0, nodes, first_child,
                                         child_count, rot, trans, pair_stack)
                 if hit:
                     break
                 if track:
-                    gaps[kk, pr] = _states_clear(least, rate, pcurve[p] if rate > 0.0 else 0.0, pdelta[p])
+                    gaps[kk, pr] = _states_clear(least, rate, bend, pdelta[p])
 
         # ---- what follows from it
         if mode == 0:
