@@ -1,4 +1,4 @@
-"""The adaptive mixture (issue #18): a learned sampler whose model's share follows how useful its
+"""The adaptive mixture: a learned sampler whose model's share follows how useful its
 samples are, so that it cannot end much worse than uniform sampling."""
 
 import numpy as np

@@ -245,7 +245,7 @@ def test_scene_families_differ():
     assert "cylinder" in kinds["test"]
     layouts = {f: SCENE_FAMILIES[f]["layout"] for f in SCENE_FAMILIES}
     assert [layouts[f] for f in ("train-a", "train-b", "test")] == ["crevice", "shelf", "cubby"]
-    # the validation and out-of-distribution kinds (issue #18) have layouts of their own
+    # the validation and out-of-distribution kinds have layouts of their own
     for kind in ("pillars", "tall-clutter", "shelves", "bins"):
         assert layouts[kind] == kind
     assert "cylinder" in kinds["pillars"]
@@ -320,7 +320,7 @@ def test_render_draws_arm_scene_and_path():
 
 
 def test_the_render_legend_covers_only_its_corner():
-    """The legend of the arm render's colours (issue #21, item 8) is drawn into the top-left corner
+    """The legend of the arm render's colours is drawn into the top-left corner
     and leaves every other pixel of the TinyRenderer image as it was (same size, no resampling)."""
     from gnn_mp_envs.tasks.arm.render import with_legend
     img = np.random.default_rng(0).integers(0, 256, (360, 480, 3), dtype=np.uint8)
@@ -334,7 +334,7 @@ def test_the_render_legend_covers_only_its_corner():
 
 # ---------------------------------------------------------------------- statistics
 def test_uniform_birrt_solves_heldout_arm_problems():
-    """Issue 3: uniform BiRRT solves >= 90% of held-out test-scene problems within 20,000
+    """Uniform BiRRT solves >= 90% of held-out test-scene problems within 20,000
     nodes (10 problems here; python -m tools.bench_arm measures 50)."""
     t = ArmTask("test")
     try:
@@ -362,7 +362,7 @@ def _rss_mb() -> float:
 @pytest.mark.slow
 def test_memory_stays_flat_over_many_resets():
     """Random obstacle sizes make new pybullet shapes, which pybullet never frees; the world
-    rebuilds its client instead (issue 11: 1,000 resets within 10 MB; 26 MB before the fix)."""
+    rebuilds its client instead (1,000 resets within 10 MB; 26 MB before the fix)."""
     env = make_env(max_nodes=50, scene="train")
     world = env.unwrapped.task.world
     for i in range(50):
@@ -413,8 +413,7 @@ def test_a_typo_in_an_arm_problem_dict_is_refused():
 
 def test_importing_pybullet_prints_nothing_on_stdout_or_stderr():
     """pybullet's C module prints its build time on a file descriptor at import (this build: 2); the
-    arm world silences it, so a table or JSON piped from the CLI and its one-line errors stay clean
-    (issue #21, item 10)."""
+    arm world silences it, so a table or JSON piped from the CLI and its one-line errors stay clean."""
     import subprocess
     import sys
     code = ("import sys; sys.modules.pop('pybullet', None)\n"
@@ -428,8 +427,8 @@ def test_importing_pybullet_prints_nothing_on_stdout_or_stderr():
 def test_a_collision_answer_does_not_depend_on_the_queries_before_it():
     """Configurations on the collision boundary (bisected to ~1e-7 rad) get the same answer
     checked alone (after a far configuration) and at the end of a sweep arriving from the other
-    side, and a grazing edge with valid ends gets the same answer in both directions (issue #21,
-    item 12: pybullet's persistent contacts must not leak between queries)."""
+    side, and a grazing edge with valid ends gets the same answer in both directions (pybullet's
+    persistent contacts must not leak between queries)."""
     from gnn_mp_envs.registration import make_task
     task = make_task("arm", scene="test")
     rng = np.random.default_rng(3)
@@ -472,7 +471,7 @@ def test_grazing_edges_get_one_answer_in_both_directions_and_state_by_state():
     """The history probe's procedure (../shared/probes/arm_checker_history.py --grazing): edges from a
     valid configuration to the last valid state before a contact (bisected to 1e-6 rad) get the
     same verdict checked forwards and backwards, and every state of the sweep the same answer as a
-    fresh check of it after an unrelated configuration (issue #39, item 2: pybullet's contact
+    fresh check of it after an unrelated configuration (pybullet's contact
     cache must not leak between queries)."""
     from gnn_mp_envs.registration import make_task
     task = make_task("arm", scene="test")
@@ -532,8 +531,7 @@ def restored_scene_families():
 
 def test_scene_families_are_added_by_name(restored_scene_families):
     """A family registered from outside the package (tests/arm_family.py: a shipped layout with other
-    ranges, and a layout of its own) is planned by name everywhere: the task, gym.make, the benchmark
-    (issue #21, item 21)."""
+    ranges, and a layout of its own) is planned by name everywhere: the task, gym.make, the benchmark."""
     import importlib
 
     import gymnasium as gym
@@ -567,7 +565,7 @@ def test_scene_families_are_added_by_name(restored_scene_families):
 def test_a_parked_tower_does_not_reach_the_next_problem():
     """An obstacle taller than 100 m, parked below the table between problems, reached the robot
     in the next problem (its start was 'in collision'); parked bodies now wait their own size below
-    the table, so the next problem sees what a fresh world sees (issue #21, item 22)."""
+    the table, so the next problem sees what a fresh world sees."""
     import gymnasium as gym
     start, goal = [0.0, 0.3, -0.6, 0.0, 0.3, 0.0], [1.0, 0.3, -0.6, 0.0, 0.3, 0.0]
     tower = {"kind": "box", "size": [0.05, 0.05, 120.0], "position": [2.0, 2.0, 0.0]}
@@ -584,7 +582,7 @@ def test_a_parked_tower_does_not_reach_the_next_problem():
 def test_tool_quaternion_is_scipys_rotation():
     """The arm's hand-written quaternion product stays (scipy's Rotation differs in the last bit for
     72% of orientations, and IK turns that into other goals: 0 of 90 arm problems kept their start
-    and goal, so every arm counter would move; issue #21, item 11); scipy is its oracle here."""
+    and goal, so every arm counter would move); scipy is its oracle here."""
     from scipy.spatial.transform import Rotation
 
     from gnn_mp_envs.tasks.arm.world import tool_quaternion

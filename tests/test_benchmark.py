@@ -207,7 +207,7 @@ def test_suite_only_flags_without_a_suite_are_refused_in_one_line(flag, capsys):
 
 def test_every_returned_path_is_rechecked_and_failures_are_named():
     """The benchmark re-checks each solved run's path edge by edge (problem.path_valid) and the
-    table says how many passed; a failing row is named (issue #21, item 12)."""
+    table says how many passed; a failing row is named."""
     from train.benchmark.tables import path_check_note
     report = bm.run_benchmark(tiny_args(problems=2, samplers=["uniform", "goal-bias"], max_nodes=3000))
     records = [r for runs in report["runs"].values() for r in runs]

@@ -178,7 +178,7 @@ def test_a_killed_worker_is_one_line_and_the_finished_runs_are_written(tmp_path)
 @pytest.mark.parametrize("wait_for_runs", [True, False])
 def test_sigterm_keeps_the_finished_runs_and_an_older_file_when_none_finished(tmp_path, wait_for_runs):
     """SIGTERM ends a benchmark like Ctrl-C (finished runs written, marked partial); stopped before
-    any run finished, an older complete --json is left whole (issue #21, item 22)."""
+    any run finished, an older complete --json is left whole."""
     out = tmp_path / "runs.json"
     out.write_text('{"complete": true}\n')
     args = [a for a in LONG_RUN if a != "--no-progress"]

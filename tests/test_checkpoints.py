@@ -222,7 +222,7 @@ def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path):
 
 
 def test_no_unsafe_torch_load_in_the_sources():
-    """Issue #11 item 1: weights_only=False nowhere in the packages."""
+    """``weights_only=False`` nowhere in the packages."""
     offenders = []
     for package in ("agents", "train", "gnn_mp_envs"):
         for path in (REPO / package).rglob("*.py"):

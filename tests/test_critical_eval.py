@@ -62,7 +62,7 @@ def test_evaluate_end_to_end_on_a_few_problems(tmp_path):
             "uniform random k=10", "oracle (labels)"} <= set(rep["planning"]["blob"])
 
 
-# ----------------------------------------------------------------------------- issue #11 item 6
+# -----------------------------------------------------------------------------
 
 
 def _bad_files():

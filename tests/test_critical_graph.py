@@ -168,7 +168,7 @@ def _another_graphs_edges(path):
                          ids=["truncated", "empty", "crc", "label-outside-graph", "offsets-past-labels",
                               "another-graphs-edges"])
 def test_damaged_cache_is_regenerated_with_a_one_line_warning(tmp_path, corrupt, caplog):
-    """Issue #11 item 8: no BadZipFile / EOFError / TypeError traceback; byte-identical regeneration."""
+    """No BadZipFile / EOFError / TypeError traceback; byte-identical regeneration."""
     from gnn_mp_envs.critical.dataset import DatasetCacheError, load_or_generate
     fresh = generate_all(TINY, tmp_path / "fresh", progress=False)
     cache = generate_all(TINY, tmp_path / "cache", progress=False)

@@ -1,4 +1,4 @@
-"""Issue 12: node-level predictions, k diverse samples, hit rate / distance metrics, fresh
+"""Node-level predictions, k diverse samples, hit rate / distance metrics, fresh
 evaluation seeds, and report rows that carry their model and k."""
 
 import numpy as np

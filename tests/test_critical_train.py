@@ -1,5 +1,5 @@
 """Critical training: run directories, checkpoints in the agents.checkpoints format, safe resume,
---ship (issue #11 items 1 and 7)."""
+--ship."""
 
 import json
 import os
@@ -43,7 +43,7 @@ def test_default_output_is_a_run_directory_not_the_package(data_dir, tmp_path):
     assert run.parent == tmp_path / "runs" and run.name.startswith("gnn-seed0-")
     assert sorted(p.name for p in run.iterdir()) == ["critical_gnn.json", "critical_gnn.pt",
                                                      "critical_gnn.resume.pt", "tb"]
-    # TensorBoard events (issue #21, item 9): the loss per step, the validation scores per epoch
+    # TensorBoard events: the loss per step, the validation scores per epoch
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
     events = EventAccumulator(str(run / "tb" / "critical_gnn")).Reload()
     steps = json.loads((run / "critical_gnn.json").read_text())["history"][0]["steps"]
@@ -81,7 +81,7 @@ def test_resume_continues_exactly_and_uses_the_latest_run(data_dir, tmp_path):
 
 
 def test_resume_state_is_loaded_weights_only(data_dir, tmp_path):
-    """Issue #11 item 1: a resume file that would run code on load is refused."""
+    """A resume file that would run code on load is refused."""
     marker = Path(f"/tmp/pwned_{uuid.uuid4().hex}")
 
     class Evil:
@@ -134,7 +134,7 @@ def test_cli_train_errors_are_one_line(data_dir, tmp_path, monkeypatch, capsys):
 
 
 def test_node_level_training_max_steps_and_selection(data_dir, tmp_path):
-    """Issue 12: the heat-map CNN trains on the label-node term; --max-steps bounds the work;
+    """The heat-map CNN trains on the label-node term; --max-steps bounds the work;
     the best epoch is chosen on the validation hit rate and CPU time is recorded."""
     res = train(_args(data_dir, model="cnn", hidden=4, batch_size=2, epochs=3, max_steps=3,
                       out=tmp_path / "cnn" / "critical_cnn.pt"), dataset=TINY, progress=False)

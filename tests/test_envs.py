@@ -51,7 +51,7 @@ def checker_warnings(check, env) -> set[str]:
                                                       ("pendulum", "GNNMP/PendulumRRT-v0", False),
                                                       ("arm", "GNNMP/ArmBiRRT-v0", False)])
 def test_the_checkers_warn_about_exactly_what_the_docs_explain(task, env_id, normalized):
-    """Issue #21, item 10: the warnings of Gymnasium's and SB3's checkers are the three documented,
+    """The warnings of Gymnasium's and SB3's checkers are the three documented,
     by-design ones; the only unbounded key is ``obstacles``; make_rl_env's envs have the [-1, 1]
     action box RL libraries want."""
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -215,12 +215,12 @@ def _solve_rate(env_id, n, seed0=0):
 
 
 def test_uniform_rrt_solves_heldout_maze2d():
-    """Issue 2: at least 95% of held-out Maze2D problems within 5,000 nodes."""
+    """At least 95% of held-out Maze2D problems within 5,000 nodes."""
     assert _solve_rate("GNNMP/Maze2DRRT-v0", 100) >= 0.95
 
 
 def test_uniform_rrt_solves_heldout_pendulum():
-    """Issue 2: at least 90% of held-out pendulum problems within 20,000 nodes."""
+    """At least 90% of held-out pendulum problems within 20,000 nodes."""
     assert _solve_rate("GNNMP/PendulumRRT-v0", 30) >= 0.90
 
 

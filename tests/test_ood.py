@@ -1,4 +1,4 @@
-"""Out-of-distribution scene families (issue #18): the oriented boxes of maze2d maps against a
+"""Out-of-distribution scene families: the oriented boxes of maze2d maps against a
 brute-force oracle, each family's generator, the pendulum's torque limit, the arm's new layouts,
 the suites and the training flags that keep OOD scenes out of training."""
 

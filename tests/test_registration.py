@@ -135,7 +135,7 @@ def test_an_outside_task_trains_and_its_sampler_benchmarks(tmp_path):
 
 
 def test_a_task_in_a_shipped_state_space_borrows_its_weights_with_weights_from():
-    """Your own maps in maze2d's state space (issue #21, item 21): with weights_from="maze2d" the
+    """Your own maps in maze2d's state space: with weights_from="maze2d" the
     shipped learned samplers load and plan there; without it they are refused in one line naming
     the remedy; a task with other state bounds cannot borrow them."""
     from pathlib import Path

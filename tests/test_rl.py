@@ -1,4 +1,4 @@
-"""RL samplers (issue #10): the tree view, buffer memory, short training runs of SB3 PPO/SAC and
+"""RL samplers: the tree view, buffer memory, short training runs of SB3 PPO/SAC and
 TorchRL PPO, policy checkpoints as reproducible samplers, the warm start, the CLI."""
 
 from __future__ import annotations
@@ -536,7 +536,7 @@ def test_warm_start_from_the_supervised_gnn_sampler(tmp_path, lib):
     (["--action", "box", "--init-from", "gnm"], "shipped: cvae, gnn, gnn-cvae, rl-ppo"),
 ])
 def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment, tmp_path, capsys):
-    """Values that cannot train (issue #21, item 14) end in one line and rc 2 before any env is built."""
+    """Values that cannot train end in one line and rc 2 before any env is built."""
     from train.cli import main
     shipped = Path(__file__).resolve().parents[1] / "agents" / "checkpoints" / "rl-ppo_maze2d.pt"
     (tmp_path / "truncated.pt").write_bytes(shipped.read_bytes()[:1000])
@@ -554,7 +554,7 @@ def test_train_rl_refuses_bad_values_before_the_run_in_one_line(extra, fragment,
 
 def test_train_rl_init_from_takes_a_shipped_sampler_name(tmp_path, monkeypatch):
     """`--init-from gnn` is the task's shipped gnn weights from any directory (docs/rl.md used a path
-    into the checkout, which failed elsewhere; issue #21, item 6)."""
+    into the checkout, which failed elsewhere)."""
     from agents.checkpoints import shipped_checkpoint
     from train.rl.cli import parse
     monkeypatch.chdir(tmp_path)
@@ -580,7 +580,7 @@ def test_train_rl_init_from_weights_of_another_size_is_one_line(tmp_path, capsys
     ({"reward_scale": float("nan")}, "reward_scale"), ({"reward_scale": 0.0}, "reward_scale"),
 ])
 def test_make_rl_env_refuses_values_it_would_silently_bend(kwargs, fragment):
-    """2.5 rows, a NaN mixing rate or reward scale: refused, not rounded or switched off (issue #21, item 22)."""
+    """2.5 rows, a NaN mixing rate or reward scale: refused, not rounded or switched off."""
     from gnn_mp_envs.envs.wrappers import make_rl_env
     with pytest.raises(ValueError, match=fragment):
         make_rl_env("maze2d", **kwargs)
@@ -618,7 +618,7 @@ def test_reward_scale_is_gymnasiums_transform_reward_with_the_same_rewards():
 
 
 def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_during_their_start():
-    """Ctrl-C on `train rl --lib torchrl --parallel` (issue #21, item 16): the env's worker processes
+    """Ctrl-C on `train rl --lib torchrl --parallel`: the env's worker processes
     start with SIGINT ignored (no traceback per worker), while this process gets the KeyboardInterrupt
     (exit 130, one line) even while the workers are still starting; its handler is restored after."""
     import multiprocessing
@@ -669,7 +669,7 @@ def test_parallel_env_workers_are_deaf_to_ctrl_c_while_the_trainer_hears_it_duri
 
 @pytest.mark.parametrize("lib", ["sb3", "torchrl"])
 def test_rerunning_train_rl_into_a_finished_run_is_refused_and_keeps_it(lib, tmp_path, capsys):
-    """The same `train rl --out DIR` twice (issue #21, item 15): the second is one line and rc 2,
+    """The same `train rl --out DIR` twice: the second is one line and rc 2,
     and the finished run's files stay as they were (default run folders carry a timestamp)."""
     from train.cli import main
     out = tmp_path / "run"

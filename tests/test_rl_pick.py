@@ -1,4 +1,4 @@
-"""Candidate selection (issue #20): the candidate features against brute force, the registered RL
+"""Candidate selection: the candidate features against brute force, the registered RL
 ids (the MDP of `gnn-mp train rl`, with the time limit in the spec), the picker's numpy twin
 against its torch model, SB3's .zip and --resume, and a user's own SB3 PPO from docs/rl.md."""
 

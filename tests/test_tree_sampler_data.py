@@ -126,7 +126,7 @@ def test_train_sampler_refuses_an_unreachable_ray_address_in_one_line(capsys):
 
 
 def _crafted(data: TreeDataset, case: str) -> TreeDataset:
-    """A readable file whose contents do not fit together (issue #21, item 22)."""
+    """A readable file whose contents do not fit together."""
     from dataclasses import replace
     if case == "offsets past the arrays":
         return replace(data, node_ptr=data.node_ptr + np.arange(len(data.node_ptr)) * 50)

@@ -134,7 +134,7 @@ def test_training_resumes_from_its_state(tmp_path):
 
 
 def test_resume_refuses_the_state_of_another_run_in_one_line(tmp_path, capsys):
-    """`train sampler --resume` (issue #21, item 22): another model's state was a traceback, another
+    """`train sampler --resume`: another model's state was a traceback, another
     --lr / --batch-size / --seed resumed silently; each is refused in one line naming the flag (rc 2),
     and the same flags resume."""
     from train.tree.cli import main
@@ -176,10 +176,10 @@ def test_train_sampler_hidden_sets_the_width_and_is_recorded(tmp_path):
                                                    ("maze2d", "gnn-cvae", 1), ("maze2d", "gnn-cvae", 4),
                                                    ("pendulum", "gnn", None), ("pendulum", "gnn-cvae", 4)])
 def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(task, name, proposals):
-    """Two envs plan the same problem with different actions, one sampler serves both in turn
-    (issue #21, item 17): every forward reads the tree of the observation it was given, as a
-    sampler that only ever saw that env would (the caches recognise another tree of the same size).
-    The pendulum's gnn is the candidate scorer (no proposals)."""
+    """Two envs plan the same problem with different actions, one sampler serves both in turn: every
+    forward reads the tree of the observation it was given, as a sampler that only ever saw that env
+    would (the caches recognise another tree of the same size). The pendulum's gnn is the candidate
+    scorer (no proposals)."""
     import gymnasium as gym
     from agents.registry import load_sampler
     from gnn_mp_envs.registration import task_spec
@@ -205,7 +205,7 @@ def test_one_sampler_fed_two_trees_of_the_same_problem_reads_each(task, name, pr
 
 def test_a_non_finite_loss_stops_training_in_one_line():
     """--lr 1e6: the loss turns NaN/inf; training stops with a one-line RunError before any
-    non-finite weights are kept (issue #21, item 22)."""
+    non-finite weights are kept."""
     from train.run import RunError
     data = generate(TreeDataConfig(task="maze2d", problems=6, max_nodes=1500), progress=False)
     adapter = adapter_for("gnn", "maze2d")
@@ -218,7 +218,7 @@ def test_a_non_finite_loss_stops_training_in_one_line():
 
 
 def test_the_cvae_refuses_an_observation_with_other_obstacle_rows_in_one_line():
-    """A map with more obstacle rows than the CVAE was trained on (issue #21, item 21): one line
+    """A map with more obstacle rows than the CVAE was trained on: one line
     naming the mismatch, not a torch shape error."""
     import gymnasium as gym
     from agents.registry import load_sampler
