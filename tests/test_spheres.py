@@ -238,6 +238,65 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
     assert min(outcomes.values()) >= 60, outcomes
 
 
+def _oracle_edge(checker, a, b, resolution, low, high):
+    """``(valid, checks)`` of the edge ``a -> b`` in bisection order, state by state (``valid``, the box)."""
+    n = max(1, math.ceil(math.sqrt(sum(v * v for v in (b - a).tolist())) / resolution))
+    states = np.array([a + (k / n) * (b - a) for k in bisection_order(n)])
+    ok = checker.valid(states) & np.all((states >= low) & (states <= high), axis=1)
+    return (True, n) if ok.all() else (False, int(np.argmin(ok)) + 1)
+
+
+def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_saw_before(world):
+    """Grown as a tree grows, edges start where earlier ones ended; the checker remembers what it
+    found at those states and the fused steer-and-check call steers itself. Every answer and count
+    must still be the state-by-state oracle's, and the steered state the planner's formula, also
+    after the scene changes under the same tree: a small ball put 2 mm from the first node's
+    spheres, which edges from it hit within a few states (what was remembered there is void)."""
+    first = (Obstacle("box", (0.05, 0.05, 0.05), _around(world, (0.25, 0.0, 0.05))),
+             Obstacle("box", (0.2, 0.4, 0.01), _around(world, (0.35, 0.0, -0.38))),
+             Obstacle("cylinder", (0.03, 0.4), _around(world, (0.15, 0.3, 0.0))),
+             Obstacle("sphere", (0.06,), _around(world, (0.1, -0.35, 0.1))))
+    rng = np.random.default_rng(6)
+    low, high, step, resolution = world.low, world.high, 0.5, 0.01
+    checker = world.sphere_checker(first)
+    nodes = [q for q in rng.uniform(low, high, (200, len(low))) if checker.valid(q[None])[0]][:2]
+    outcomes = {True: 0, False: 0}
+
+    def grow(checker, starts, edges):
+        for _ in range(edges):
+            a = starts[int(rng.integers(len(starts)))]
+            target = rng.uniform(low, high)
+            d = target - a
+            dist = math.sqrt(float(d @ d))
+            x_new, valid, checks = checker.steer(a, target, dist, step, resolution, low, high)
+            np.testing.assert_array_equal(x_new, target if dist <= step else a + (step / dist) * d)
+            assert (valid, checks) == _oracle_edge(checker, a, x_new, resolution, low, high)
+            assert checker.check_motion(a, x_new, resolution, low, high) == (valid, checks)
+            outcomes[valid] += 1
+            if valid:
+                nodes.append(x_new)
+
+    grow(checker, nodes, 250)
+    root = nodes[0]
+    grow(checker, [root], 5)            # the root's clearances are fresh in the checker's memory
+    rot, trans = checker.link_frames(root)
+    links = [i for i, link in enumerate(checker.links) if link in checker.model.roots]
+    for _ in range(200):                # a ball 2 mm from a leaf at the root, touching nothing there
+        i = links[int(rng.integers(len(links)))]
+        leaves = checker.model.leaves(checker.links[i])
+        leaf = leaves[int(rng.integers(len(leaves)))]
+        centre, r = leaf[:3] @ rot[i].T + trans[i], leaf[3]
+        u = rng.normal(size=3)
+        at = centre + (r + 0.002 + 0.03) * u / np.linalg.norm(u)
+        checker = world.sphere_checker(first + (Obstacle("sphere", (0.03,), tuple(float(v) for v in at)),))
+        if checker.valid(root[None])[0]:
+            break
+    before = dict(outcomes)
+    grow(checker, [root], 60)
+    assert outcomes[False] - before[False] >= 10, outcomes          # edges from the root meet the ball
+    assert outcomes[True] >= 100 and outcomes[False] >= 25, outcomes
+
+
 # ---------------------------------------------------------------------- the checker as users choose it
 def test_the_environment_takes_a_checker_and_refuses_unknown_ones():
     import gymnasium as gym

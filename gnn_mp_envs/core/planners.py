@@ -136,8 +136,10 @@ class BiRRT(TreePlanner):
         counts as reached: steering toward it would be a zero-length, refused motion.
         """
         near = self._nearest(target, tree)
+        states, nearest_row = self.tree.states, self.problem.nearest_row
         while True:
-            if float(self.problem.distance(target[None], self.tree.states[near])[0]) < 1e-9:
+            # the distance to ``near`` as the nearest scan measures it (compiled where the problem names its metric)
+            if nearest_row(states[near:near + 1], target)[1] < 1e-9:
                 return near
             near = self._extend(tree, target, added, near)
             if near is None:

@@ -15,6 +15,7 @@ from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, obstacle_shape, observation_space
 from gnn_mp_envs.registration import make_task, task_spec
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS
+from gnn_mp_envs.utils.compiled import lazy_njit
 
 _add_reduce, _maximum, _minimum, _isfinite = np.add.reduce, np.maximum, np.minimum, math.isfinite
 
@@ -23,6 +24,23 @@ RESET_OPTIONS = frozenset({"problem", "index"})
 #: Largest node budget accepted: the padded observation and tree arrays of 2 million 6-D
 #: nodes already take ~0.5 GB; larger budgets are almost certainly a typo.
 MAX_NODES_LIMIT = 2_000_000
+
+
+def _clip_finite(action: np.ndarray, low: np.ndarray, high: np.ndarray, out: np.ndarray) -> bool:
+    """``out`` = ``action`` (as float64) clipped to ``[low, high]``, as ``np.minimum(np.maximum(action,
+    low), high)``; False when an entry is NaN or infinite. One compiled pass instead of four numpy calls
+    on every step."""
+    for i in range(action.shape[0]):
+        v = float(action[i])
+        if not math.isfinite(v):
+            return False
+        v = np.maximum(v, low[i])
+        out[i] = np.minimum(v, high[i])
+    return True
+
+
+#: :func:`_clip_finite` compiled (numba), or None without numba.
+compiled_clip_finite = lazy_njit(_clip_finite)
 
 
 def integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
@@ -164,6 +182,7 @@ class TreePlanningEnv(gym.Env):
         self._high = np.asarray(high, dtype=np.float32)
         self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
         self._action_shape = (self.state_dim,)
+        self._clip = compiled_clip_finite()
         obstacles = obstacle_shape(self.task.max_obstacles, self.task.obstacle_width)
         self.observation_space = observation_space(self._low, self._high, self.max_nodes, obstacles)
         self._obs = GraphObservation(self.state_dim, self.max_nodes, obstacles)
@@ -243,7 +262,12 @@ class TreePlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
-        if type(action) is np.ndarray and action.dtype.kind == "f":     # a sampler's float array: the common case
+        if (type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == self._action_shape
+                and self._clip is not None):              # a sampler's float array: the common case, compiled
+            out = np.empty(self._action_shape)
+            if self._clip(action, self.problem.low, self.problem.high, out):
+                return out
+        if type(action) is np.ndarray and action.dtype.kind == "f":
             a = action.astype(np.float64, copy=False)
         else:
             if np.iscomplexobj(action):

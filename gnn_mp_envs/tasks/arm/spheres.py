@@ -37,12 +37,16 @@ BOX, CYLINDER, SPHERE = 0, 1, 2
 _KINDS = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
 #: Along an edge the tree walks refine distance bounds below this many states' motion (more work
 #: per tested state, fewer tested states; measured with tools/bench_checker.py).
-REFINE = 3.0
+REFINE = 2.0
 #: Joint-space tables of the wrist's self pairs (:meth:`SphereChecker._joint_tables`): a cell is free
 #: when the pair's leaves are more than this apart at its centre (m); smaller: finer tables.
 TABLE_FLOOR = 0.003
 #: At most this many cells per pair's table (a coarser grid, with a higher floor, past it).
 TABLE_CELLS = 1 << 17
+#: How many tested edge ends (free far ends and starts) the checker remembers, with the clearances their
+#: walks found, so that an edge starting at one (the tree's nodes are the far ends of the edges that
+#: made them) need not walk again.
+MEMO_STATES = 128
 _TABLES: dict[tuple, tuple] = {}
 #: Format tag of the sphere model files.
 MODEL_FORMAT = "gnn-mp-envs sphere model, version 1"
@@ -65,7 +69,8 @@ class CheckerArrays(structref.StructRefProxy):
 _FIELDS = ("q", "gaps", "known", "reach", "pair_reach", "delta", "pdelta", "curve", "pcurve", "omega", "vel", "queue", "parent", "origin_r", "origin_t",
            "kind", "axis", "q_index", "q_fixed", "link_root", "self_root", "nodes", "first_child", "child_count",
            "pairs", "exempt", "ob_kind", "ob_centre", "ob_rot", "ob_size", "rot", "trans", "stack", "pair_stack", "pair_moving",
-           "pcell", "table_at", "table_joint", "table_low", "table_step", "table_dim", "table")
+           "pcell", "table_at", "table_joint", "table_low", "table_step", "table_dim", "table", "memo_q", "memo_clear",
+           "memo_meta")
 structref.define_proxy(CheckerArrays, CheckerArraysType, list(_FIELDS))
 
 
@@ -192,18 +197,34 @@ def _forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fi
                 trans[link, i] = 0.0
             continue
         v = q[q_index[link]] if q_index[link] >= 0 else q_fixed[link]
-        # parent * origin
+        # parent * origin (an identity origin rotation: the parent's, the same floats without the products)
+        plain = (origin_r[link, 0, 0] == 1.0 and origin_r[link, 1, 1] == 1.0 and origin_r[link, 2, 2] == 1.0
+                 and origin_r[link, 0, 1] == 0.0 and origin_r[link, 0, 2] == 0.0 and origin_r[link, 1, 0] == 0.0
+                 and origin_r[link, 1, 2] == 0.0 and origin_r[link, 2, 0] == 0.0 and origin_r[link, 2, 1] == 0.0)
         for i in range(3):
             acc = trans[p, i]
             for k in range(3):
                 acc += rot[p, i, k] * origin_t[link, k]
             trans[link, i] = acc
+            if plain:
+                for j in range(3):
+                    rot[link, i, j] = rot[p, i, j]
+                continue
             for j in range(3):
                 acc = 0.0
                 for k in range(3):
                     acc += rot[p, i, k] * origin_r[link, k, j]
                 rot[link, i, j] = acc
-        if kind[link] == 1:        # revolute: times Rodrigues(axis, v)
+        if kind[link] == 1 and axis[link, 0] == 0.0 and axis[link, 1] == 0.0 and axis[link, 2] == 1.0:
+            # revolute about z: Rodrigues' matrix below with its zero terms dropped (the same floats)
+            c, s = math.cos(v), math.sin(v)
+            m22 = (1.0 - c) + c
+            for i in range(3):
+                a0, a1, a2 = rot[link, i, 0], rot[link, i, 1], rot[link, i, 2]
+                rot[link, i, 0] = a0 * c + a1 * s
+                rot[link, i, 1] = a0 * -s + a1 * c
+                rot[link, i, 2] = a2 * m22
+        elif kind[link] == 1:        # revolute: times Rodrigues(axis, v)
             x, y, z = axis[link, 0], axis[link, 1], axis[link, 2]
             c, s = math.cos(v), math.sin(v)
             t = 1.0 - c
@@ -475,6 +496,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     curve, pcurve, omega, vel, pair_moving = arrays.curve, arrays.pcurve, arrays.omega, arrays.vel, arrays.pair_moving
     pcell, table_at, table_joint, table_low = arrays.pcell, arrays.table_at, arrays.table_joint, arrays.table_low
     table_step, table_dim, table = arrays.table_step, arrays.table_dim, arrays.table
+    memo_q, memo_clear, memo_meta = arrays.memo_q, arrays.memo_clear, arrays.memo_meta
     delta, pdelta, queue, parent, origin_r = arrays.delta, arrays.pdelta, arrays.queue, arrays.parent, arrays.origin_r
     origin_t, kind, axis, q_index, q_fixed = arrays.origin_t, arrays.kind, arrays.axis, arrays.q_index, arrays.q_fixed
     link_root, self_root, nodes, first_child = arrays.link_root, arrays.self_root, arrays.nodes, arrays.first_child
@@ -492,6 +514,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     k_next = 1
     head, tail = 0, 0
     lo, hi = 0, 0
+    memo = -1                   # the memo row of the edge's start (-1: not remembered)
     if mode == 1:
         acc = 0.0
         for j in range(dof):
@@ -541,6 +564,19 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
         elif phase == 0:                        # the start: its bounds only (not a check)
             for j in range(dof):
                 q[j] = a[j]
+            filled = memo_meta[0]
+            for m in range(filled):             # newest first
+                row_ = memo_meta[1] - 1 - m
+                if row_ < 0:
+                    row_ += memo_q.shape[0]
+                same = True
+                for j in range(dof):
+                    if memo_q[row_, j] != a[j]:
+                        same = False
+                        break
+                if same:
+                    memo = row_
+                    break
         elif phase == 1:                        # bisection: the far end first
             kk, LL = n, 0
         elif phase == 2:                        # bisection: the next interval that needs a test
@@ -601,6 +637,16 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             _velocities(a, b, n, parent, kind, axis, q_index, rot, trans, omega, vel)
             for pr in range(gaps.shape[1]):          # pairs never tested (exempt, no spheres) bound nothing
                 gaps[kk, pr] = 1e300
+        # a start found in the memo reuses its clearances; a start not found and a far end are remembered
+        use = memo if phase == 0 else -1
+        slot = -1
+        if track and (phase == 1 or (phase == 0 and memo < 0)):
+            slot = memo_meta[1]
+            for j in range(dof):
+                memo_q[slot, j] = math.nan      # not a valid row until the test ends free
+            for pr in range(memo_clear.shape[1]):
+                memo_clear[slot, pr] = -1.0     # -1: not walked (carried over, a table, no spheres)
+        rec = slot if slot >= 0 else use        # the memo row this test's walks fill in
         hit = False
         # --- obstacles
         for link in range(links):
@@ -631,6 +677,10 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 tau = REFINE * rate + 0.5 * REFINE * REFINE * curve[link]
                 linear = REFINE * delta[link]
                 tau = linear if linear < tau else tau
+            if use >= 0 and memo_clear[use, link] >= 0.0:
+                clearance = memo_clear[use, link]
+                gaps[kk, link] = _states_clear(clearance, rate, curve[link], delta[link])
+                continue
             for o in range(n_ob):
                 if exempt[o, link]:
                     continue
@@ -662,6 +712,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 clearance = least if least < clearance else clearance
             if hit:
                 break
+            if rec >= 0:
+                memo_clear[rec, link] = clearance
             if track:
                 gaps[kk, link] = _states_clear(clearance, rate, curve[link], delta[link])
         # --- self-collision: simultaneous descent, splitting the larger of two touching inner nodes
@@ -696,14 +748,24 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                         bend = pcurve[p]
                         quadratic = REFINE * rate + 0.5 * REFINE * REFINE * bend
                         tau = quadratic if quadratic < tau else tau
-                hit, least = _pair_walk(la, lb, self_root[la], self_root[lb], tau, 0.0, nodes, first_child,
-                                        child_count, rot, trans, pair_stack)
-                if hit:
-                    break
+                if use >= 0 and memo_clear[use, pr] >= 0.0:
+                    least = memo_clear[use, pr]
+                else:
+                    hit, least = _pair_walk(la, lb, self_root[la], self_root[lb], tau, 0.0, nodes, first_child,
+                                            child_count, rot, trans, pair_stack)
+                    if hit:
+                        break
+                    if rec >= 0:
+                        memo_clear[rec, pr] = least
                 if track:
                     gaps[kk, pr] = _states_clear(least, rate, bend, pdelta[p])
 
         # ---- what follows from it
+        if slot >= 0 and not hit:
+            for j in range(dof):
+                memo_q[slot, j] = q[j]
+            memo_meta[1] = (slot + 1) % memo_q.shape[0]
+            memo_meta[0] = min(memo_meta[0] + 1, memo_q.shape[0])
         if mode == 0:
             out[row] = not hit
             row += 1
@@ -723,6 +785,22 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 tail += 2
             else:
                 k_next = kk + 1
+
+
+def _steer_run(a, target, d, step, resolution, low, high, bisection, arrays, x_new):
+    """Steer from ``a`` toward ``target``, ``d`` away (joint-space L2), by at most ``step`` and check that
+    edge, in one call: ``x_new`` = ``target`` when ``d <= step``, else ``a + (step / d)(target - a)``.
+    Returns :func:`_run`'s answer for the edge ``a -> x_new``. The same floats as
+    :meth:`ArmProblem.steer <gnn_mp_envs.tasks.arm.problem.ArmProblem.steer>`."""
+    dof = a.shape[0]
+    if d <= step:
+        for j in range(dof):
+            x_new[j] = target[j]
+    else:
+        r = step / d
+        for j in range(dof):
+            x_new[j] = a[j] + r * (target[j] - a[j])
+    return _run(1, arrays.gaps[:0], arrays.known[:0], a, x_new, resolution, low, high, bisection, arrays)
 
 
 _KERNELS: dict[str, Any] = {}
@@ -750,7 +828,8 @@ def _kernels() -> dict[str, Any]:
         _KERNELS["motion_bounds"] = g["_motion_bounds"]
         _KERNELS["rate"] = g["_rate"]
         _KERNELS["table_room"] = g["_table_room"]
-        _KERNELS["run"] = njit(cache=True, nogil=True)(_run)
+        g["_run"] = _KERNELS["run"] = njit(cache=True, nogil=True)(_run)
+        _KERNELS["steer_run"] = njit(cache=True, nogil=True)(_steer_run)
         _KERNELS["forward_kinematics"] = g["_forward_kinematics"]
     return _KERNELS
 
@@ -848,6 +927,9 @@ class SphereChecker:
         self._vel = np.zeros((n, 3))
         self._gaps = self._known = self._queue = np.zeros(0)
         self._tables = self._joint_tables(robot, joints, held)
+        self._memo_q = np.full((MEMO_STATES, self.dof), np.nan)
+        self._memo_clear = np.zeros((MEMO_STATES, n + len(self._pairs)))
+        self._memo_meta = np.zeros(2, dtype=np.int64)      # rows filled, next row to write
         self.set_obstacles(())
 
     def _joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> tuple:
@@ -967,6 +1049,8 @@ class SphereChecker:
         for o, links in (exempt or {}).items():
             for name in links:
                 self._exempt[o, index[name]] = True
+        self._memo_meta[:] = 0           # clearances of the last scene's states
+        self._memo_q[:] = np.nan
         self._grow(max(self._known.shape[0], 130))
 
     def _pack(self) -> None:
@@ -977,7 +1061,8 @@ class SphereChecker:
             self._parent, self._origin_r, self._origin_t, self._kind, self._axis, self._q_index, self._q_fixed,
             self._root, self._self_root, self.model.nodes, self.model.first_child, self.model.child_count, self._pairs,
             self._exempt, self._ob_kind, self._ob_centre, self._ob_rot, self._ob_size, self._rot, self._trans,
-            self._stack, self._pair_stack, self._pair_moving, self._pcell, *self._tables)
+            self._stack, self._pair_stack, self._pair_moving, self._pcell, *self._tables, self._memo_q, self._memo_clear,
+            self._memo_meta)
 
     def valid(self, states: np.ndarray) -> np.ndarray:
         """Whether each row of ``states`` is collision-free (joint limits are the caller's)."""
@@ -999,6 +1084,19 @@ class SphereChecker:
             if r != 0:
                 return r > 0, abs(int(r))
             self._grow(max(2 * self._known.shape[0], int(math.ceil(float(np.linalg.norm(b - a)) / resolution)) + 2))
+
+    def steer(self, a: np.ndarray, target: np.ndarray, distance: float, step: float, resolution: float,
+              low: np.ndarray, high: np.ndarray, bisection: bool = True) -> tuple[np.ndarray, bool, int]:
+        """Steer from ``a`` toward ``target``, ``distance`` away (joint-space L2), by at most ``step`` and
+        check the edge as :meth:`check_motion` does, in one compiled call: ``(x_new, valid, states looked
+        at)``."""
+        run = _kernels()["steer_run"]
+        x_new = np.empty(self.dof)
+        while True:
+            r = run(a, target, distance, step, resolution, low, high, bisection, self._packed, x_new)
+            if r != 0:
+                return x_new, r > 0, abs(int(r))
+            self._grow(max(2 * self._known.shape[0], int(math.ceil(min(step, distance) / resolution)) + 2))
 
     def _grow(self, states: int) -> None:
         """Room for the distance bounds of ``states`` states of an edge."""
