@@ -88,20 +88,19 @@ class TreeStore:
         """Global index of the node of ``tree`` closest to ``x`` under ``metric.distance``."""
         k = self._tree_size[tree]
         states = self._tree_states[tree]
-        start = 0
-        if k >= KD_MIN_NODES:
-            indexed = self._kd_count[tree]
-            if k - indexed > max(KD_MIN_BUFFER, indexed // 8):
-                self._kd[tree] = cKDTree(metric.nn_embed(states[:k]), boxsize=metric.nn_boxsize)
-                self._kd_count[tree] = indexed = k
-            kd_dist, kd_idx = self._kd[tree].query(metric.nn_embed(x[None])[0])
-            start = indexed
-        if start == k:
+        if k < KD_MIN_NODES:            # a small tree: one scan
+            return int(self._tree_index[tree][metric.nearest_row(states[:k], x)[0]])
+        indexed = self._kd_count[tree]
+        if k - indexed > max(KD_MIN_BUFFER, indexed // 8):
+            self._kd[tree] = cKDTree(metric.nn_embed(states[:k]), boxsize=metric.nn_boxsize)
+            self._kd_count[tree] = indexed = k
+        kd_dist, kd_idx = self._kd[tree].query(metric.nn_embed(x[None])[0])
+        if indexed == k:
             return int(self._tree_index[tree][kd_idx])
-        j, d_j = metric.nearest_row(states[start:k], x)
-        if start and kd_dist <= d_j:
+        j, d_j = metric.nearest_row(states[indexed:k], x)     # the nodes added since the last rebuild
+        if kd_dist <= d_j:
             return int(self._tree_index[tree][kd_idx])
-        return int(self._tree_index[tree][start + j])
+        return int(self._tree_index[tree][indexed + j])
 
     def path_to_root(self, i: int) -> list[int]:
         """Node indices from the root of ``i``'s tree down to ``i``."""
