@@ -137,6 +137,34 @@ def test_bad_actions_raise_value_error(bad):
         env.step(bad)
 
 
+def test_the_compiled_action_clip_is_numpys_clip_bit_for_bit():
+    """``step`` clips a sampler's float array in one compiled pass (``compiled_clip_finite``; the same
+    loop in Python without numba): the values of ``np.minimum(np.maximum(action, low), high)`` in
+    float64, for float32 and float64 actions inside, on and beyond the bounds, and False for any NaN
+    or infinite entry (the step then refuses the action)."""
+    from gnn_mp_envs.envs.tree_env import compiled_clip_finite
+    clip = compiled_clip_finite()
+    assert clip is not None
+    rng = np.random.default_rng(5)
+    for trial in range(2000):
+        d = int(rng.integers(1, 8))
+        low = rng.uniform(-3, 0, d)
+        high = low + rng.uniform(0, 3, d)
+        action = rng.uniform(low - 1, high + 1)
+        if trial % 3 == 0:
+            action[rng.integers(d)] = rng.choice([low[0], high[0], -0.0, 0.0])
+        action = action.astype(np.float32 if trial % 2 else np.float64)
+        bad = trial % 5 == 0
+        if bad:
+            action[rng.integers(d)] = rng.choice([np.nan, np.inf, -np.inf])
+        for loop in (clip, compiled_clip_finite.__wrapped__):
+            out = np.full(d, 7.0)
+            ok = loop(action, low, high, out)
+            assert ok is not bad, trial
+            if not bad:
+                np.testing.assert_array_equal(out, np.minimum(np.maximum(action.astype(np.float64), low), high))
+
+
 def test_out_of_bounds_actions_are_clipped():
     env = gym.make("GNNMP/Maze2DRRT-v0").unwrapped
     env.reset(seed=0)

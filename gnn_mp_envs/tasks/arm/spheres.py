@@ -332,13 +332,16 @@ def _motion_bounds(a, b, n, reach, delta, curve):
     state. A point's velocity is ``sum_j dq_j a_j x (p - o_j)``; along the edge each axis ``a_j``
     turns at most by the steps of the joints above it and each ``p - o_j`` changes at most by
     ``sum_j dq_j reach_j``, so the change is at most ``3 (sum_j dq_j) delta`` over the joints that move it."""
+    steps = np.empty(reach.shape[1])
+    for j in range(reach.shape[1]):
+        steps[j] = abs(b[j] - a[j]) / n
     for r in range(reach.shape[0]):
         acc = 0.0
         turn = 0.0
         for j in range(reach.shape[1]):
             if reach[r, j] > 0.0:
-                acc += abs(b[j] - a[j]) / n * reach[r, j]
-                turn += abs(b[j] - a[j]) / n
+                acc += steps[j] * reach[r, j]
+                turn += steps[j]
         delta[r] = acc
         curve[r] = 3.0 * turn * acc
 
@@ -491,7 +494,14 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     walked where its cell is free, and vouches for as many cells as the table says. So a link or
     pair that a checked neighbour state vouches for is free without a test; an interval whose two
     checked ends vouch for every link and pair across it is free as a whole, with the intervals
-    under it (sequential order: the states ahead are skipped the same way)."""
+    under it (sequential order: the states ahead are skipped the same way).
+
+    Edges start where earlier ones ended (a tree's nodes are the far ends of the edges that made
+    them), so the clearances the walks find at a free start or far end are remembered
+    (``memo_q``, ``memo_clear``: the last :data:`MEMO_STATES` such states, forgotten when the scene
+    changes), and an edge whose start is one of them takes them instead of walking again. They are
+    lower bounds of distances, so only the work depends on what the checker saw before, never an
+    answer or a count."""
     q, gaps, known, reach, pair_reach = arrays.q, arrays.gaps, arrays.known, arrays.reach, arrays.pair_reach
     curve, pcurve, omega, vel, pair_moving = arrays.curve, arrays.pcurve, arrays.omega, arrays.vel, arrays.pair_moving
     pcell, table_at, table_joint, table_low = arrays.pcell, arrays.table_at, arrays.table_joint, arrays.table_low
@@ -511,6 +521,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     n, limit = 1, 1
     row = 0
     phase = 0                   # edges: 0 the start, 1 the far end, 2 intervals, 3 sequential states
+    #                             (bisection: the far end, then the start, then intervals)
     k_next = 1
     head, tail = 0, 0
     lo, hi = 0, 0
@@ -550,6 +561,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             pcell[p] = acc
         for k in range(n + 1):
             known[k] = False
+        if bisection:                           # the far end first, then the start (only if that end is free)
+            phase = 1
         if bisection and limit < n:
             return -1                           # the far end, looked at first, is out of bounds
     while True:
@@ -577,8 +590,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 if same:
                     memo = row_
                     break
-        elif phase == 1:                        # bisection: the far end first
-            kk, LL = n, 0
+        elif phase == 1:                        # bisection: the far end first (the start is not known yet)
+            kk = n
         elif phase == 2:                        # bisection: the next interval that needs a test
             found = False
             while head < tail:
@@ -771,14 +784,14 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             row += 1
         elif phase == 0:
             known[0] = not hit                  # a start in collision vouches for nothing
-            phase = 1 if bisection else 3
+            phase = 2 if bisection else 3
         elif hit:
             return -(_position(n, kk, bisection, queue) + 1)
         else:
             known[kk] = True
-            if phase == 1:
+            if phase == 1:                      # then the start, for the bounds of the states between
                 queue[0, 0], queue[0, 1] = 1, n - 1
-                head, tail, phase = 0, 1, 2
+                head, tail, phase = 0, 1, 0
             elif phase == 2:
                 queue[tail, 0], queue[tail, 1] = lo, kk - 1
                 queue[tail + 1, 0], queue[tail + 1, 1] = kk + 1, hi
@@ -927,6 +940,7 @@ class SphereChecker:
         self._vel = np.zeros((n, 3))
         self._gaps = self._known = self._queue = np.zeros(0)
         self._tables = self._joint_tables(robot, joints, held)
+        self._steer_run = _kernels()["steer_run"]
         self._memo_q = np.full((MEMO_STATES, self.dof), np.nan)
         self._memo_clear = np.zeros((MEMO_STATES, n + len(self._pairs)))
         self._memo_meta = np.zeros(2, dtype=np.int64)      # rows filled, next row to write
@@ -1090,7 +1104,7 @@ class SphereChecker:
         """Steer from ``a`` toward ``target``, ``distance`` away (joint-space L2), by at most ``step`` and
         check the edge as :meth:`check_motion` does, in one compiled call: ``(x_new, valid, states looked
         at)``."""
-        run = _kernels()["steer_run"]
+        run = self._steer_run
         x_new = np.empty(self.dof)
         while True:
             r = run(a, target, distance, step, resolution, low, high, bisection, self._packed, x_new)
