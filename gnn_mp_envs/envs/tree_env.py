@@ -262,12 +262,11 @@ class TreePlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
-        if (type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == self._action_shape
-                and self._clip is not None):              # a sampler's float array: the common case, compiled
-            out = np.empty(self._action_shape)
-            if self._clip(action, self.problem.low, self.problem.high, out):
-                return out
-        if type(action) is np.ndarray and action.dtype.kind == "f":
+        if type(action) is np.ndarray and action.dtype.kind == "f":     # a sampler's float array: the common case
+            if self._clip is not None and action.shape == self._action_shape:    # compiled: check and clip in one pass
+                out = np.empty(self._action_shape)
+                if self._clip(action, self.problem.low, self.problem.high, out):
+                    return out
             a = action.astype(np.float64, copy=False)
         else:
             if np.iscomplexobj(action):

@@ -1097,7 +1097,7 @@ class SphereChecker:
             r = run(1, _NO_STATES, _NO_OUT, a, b, resolution, low, high, bisection, self._packed)
             if r != 0:
                 return r > 0, abs(int(r))
-            self._grow(max(2 * self._known.shape[0], int(math.ceil(float(np.linalg.norm(b - a)) / resolution)) + 2))
+            self._grow_for(float(np.linalg.norm(b - a)), resolution)
 
     def steer(self, a: np.ndarray, target: np.ndarray, distance: float, step: float, resolution: float,
               low: np.ndarray, high: np.ndarray, bisection: bool = True) -> tuple[np.ndarray, bool, int]:
@@ -1110,7 +1110,11 @@ class SphereChecker:
             r = run(a, target, distance, step, resolution, low, high, bisection, self._packed, x_new)
             if r != 0:
                 return x_new, r > 0, abs(int(r))
-            self._grow(max(2 * self._known.shape[0], int(math.ceil(min(step, distance) / resolution)) + 2))
+            self._grow_for(min(step, distance), resolution)
+
+    def _grow_for(self, length: float, resolution: float) -> None:
+        """Room for an edge of ``length`` checked every ``resolution`` (the kernel answered 0: too few)."""
+        self._grow(max(2 * self._known.shape[0], int(math.ceil(length / resolution)) + 2))
 
     def _grow(self, states: int) -> None:
         """Room for the distance bounds of ``states`` states of an edge."""
