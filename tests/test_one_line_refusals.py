@@ -88,7 +88,8 @@ def test_sigterm_on_a_parallel_rl_run_is_one_line_and_leaves_no_worker(tmp_path,
         while not children and time.monotonic() < deadline:
             time.sleep(1)
             children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
-        assert children, "no worker processes"
+        assert children, (f"no worker processes; the run {'is still running' if proc.poll() is None else 'ended'}"
+                          + ("" if proc.poll() is None else f" (exit {proc.returncode}): {proc.stderr.read()[-3000:]}"))
         time.sleep(2)                                # let them start their rollouts
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
