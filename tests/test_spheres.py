@@ -268,7 +268,8 @@ def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_sa
             target = rng.uniform(low, high)
             d = target - a
             dist = math.sqrt(float(d @ d))
-            x_new, valid, checks = checker.steer(a, target, dist, step, resolution, low, high)
+            x_new, distance, valid, checks = checker.steer(a, target, step, resolution, low, high)
+            assert distance == dist         # numpy's d @ d, to the last bit
             np.testing.assert_array_equal(x_new, target if dist <= step else a + (step / dist) * d)
             assert (valid, checks) == _oracle_edge(checker, a, x_new, resolution, low, high)
             assert checker.check_motion(a, x_new, resolution, low, high) == (valid, checks)

@@ -152,17 +152,19 @@ class ArmProblem(Problem):
 
     def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
         """:meth:`Problem.steer` without the generic vectorised helpers (same result); with the sphere
-        checker, steering and the edge's check are one compiled call."""
+        checker, measuring, steering and the edge's check are one compiled call."""
+        if self.checker == "spheres":
+            x_new, dist, valid, checks = self.world.sphere_checker(self.scene).steer(
+                x_from, x_to, self.step_size, self.resolution, self._low, self._high, self.bisection)
+            if dist < 1e-12:
+                return None
+            self.edges_checked += 1
+            self.collision_checks += checks
+            return Edge(x_new, min(dist, self.step_size)) if valid else None
         d = x_to - x_from
         dist = math.sqrt(float(d @ d))
         if dist < 1e-12:
             return None
-        if self.checker == "spheres":
-            x_new, valid, checks = self.world.sphere_checker(self.scene).steer(
-                x_from, x_to, dist, self.step_size, self.resolution, self._low, self._high, self.bisection)
-            self.edges_checked += 1
-            self.collision_checks += checks
-            return Edge(x_new, min(dist, self.step_size)) if valid else None
         if dist <= self.step_size:
             x_new = np.array(x_to, dtype=np.float64)
         else:

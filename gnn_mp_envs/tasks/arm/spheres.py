@@ -29,7 +29,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from gnn_mp_envs.tasks.arm.urdf import FIXED, PRISMATIC, REVOLUTE, URDFRobot, read_urdf
+from llvmlite import ir
 from numba import types
+from numba.core import cgutils
+from numba.core.extending import intrinsic
 from numba.experimental import structref
 
 #: Obstacle kinds of the compiled tests.
@@ -48,6 +51,9 @@ TABLE_CELLS = 1 << 17
 #: made them) need not walk again.
 MEMO_STATES = 128
 _TABLES: dict[tuple, tuple] = {}
+#: Steering refuses motions shorter than this (joint-space L2), as :meth:`Problem.steer
+#: <gnn_mp_envs.core.problem.Problem.steer>` does.
+ZERO_LENGTH = 1e-12
 #: Format tag of the sphere model files.
 MODEL_FORMAT = "gnn-mp-envs sphere model, version 1"
 
@@ -800,12 +806,37 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                 k_next = kk + 1
 
 
-def _steer_run(a, target, d, step, resolution, low, high, bisection, arrays, x_new):
-    """Steer from ``a`` toward ``target``, ``d`` away (joint-space L2), by at most ``step`` and check that
-    edge, in one call: ``x_new`` = ``target`` when ``d <= step``, else ``a + (step / d)(target - a)``.
-    Returns :func:`_run`'s answer for the edge ``a -> x_new``. The same floats as
-    :meth:`ArmProblem.steer <gnn_mp_envs.tasks.arm.problem.ArmProblem.steer>`."""
+@intrinsic
+def _fma(typingctx, x, y, z):
+    """``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``: exact on every CPU, in hardware or not).
+    numpy's ``d @ d`` of a short vector sums so (OpenBLAS's ``ddot``: one fused multiply-add per
+    entry, in order); tests/test_spheres.py holds the two equal."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        f64 = ir.DoubleType()
+        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(f64, [f64, f64, f64]), "llvm.fma.f64")
+        return builder.call(fma, args)
+
+    return sig, codegen
+
+
+def _steer_run(a, target, step, resolution, low, high, bisection, arrays, x_new, distance):
+    """Steer from ``a`` toward ``target`` by at most ``step`` (joint-space L2) and check that edge, in
+    one call. ``distance[0]`` = ``|target - a|``, summed as numpy's ``d @ d`` sums (:func:`_fma`, in
+    order); below ``ZERO_LENGTH`` nothing else is done (answer 1). Else ``x_new`` = ``target`` when
+    the distance is at most ``step``, else ``a + (step / distance)(target - a)``, and the answer is
+    :func:`_run`'s for the edge ``a -> x_new``. The same floats as :meth:`ArmProblem.steer
+    <gnn_mp_envs.tasks.arm.problem.ArmProblem.steer>` with the pybullet checker."""
     dof = a.shape[0]
+    s = 0.0
+    for j in range(dof):
+        dj = target[j] - a[j]
+        s = _fma(dj, dj, s)
+    d = math.sqrt(s)
+    distance[0] = d
+    if d < ZERO_LENGTH:
+        return 1
     if d <= step:
         for j in range(dof):
             x_new[j] = target[j]
@@ -941,6 +972,7 @@ class SphereChecker:
         self._gaps = self._known = self._queue = np.zeros(0)
         self._tables = self._joint_tables(robot, joints, held)
         self._steer_run = _kernels()["steer_run"]
+        self._distance = np.zeros(1)          # where the steer kernel writes the distance it measured
         self._memo_q = np.full((MEMO_STATES, self.dof), np.nan)
         self._memo_clear = np.zeros((MEMO_STATES, n + len(self._pairs)))
         self._memo_meta = np.zeros(2, dtype=np.int64)      # rows filled, next row to write
@@ -1099,18 +1131,22 @@ class SphereChecker:
                 return r > 0, abs(int(r))
             self._grow_for(float(np.linalg.norm(b - a)), resolution)
 
-    def steer(self, a: np.ndarray, target: np.ndarray, distance: float, step: float, resolution: float,
-              low: np.ndarray, high: np.ndarray, bisection: bool = True) -> tuple[np.ndarray, bool, int]:
-        """Steer from ``a`` toward ``target``, ``distance`` away (joint-space L2), by at most ``step`` and
-        check the edge as :meth:`check_motion` does, in one compiled call: ``(x_new, valid, states looked
-        at)``."""
-        run = self._steer_run
+    def steer(self, a: np.ndarray, target: np.ndarray, step: float, resolution: float, low: np.ndarray,
+              high: np.ndarray, bisection: bool = True) -> tuple[np.ndarray, float, bool, int]:
+        """Steer from ``a`` toward ``target`` by at most ``step`` (joint-space L2) and check the edge as
+        :meth:`check_motion` does, in one compiled call: ``(x_new, distance to target, valid, states
+        looked at)``; a distance below :data:`ZERO_LENGTH` is a refused motion, nothing checked
+        ``(x_new undefined, distance, False, 0)``."""
+        run, distance = self._steer_run, self._distance
         x_new = np.empty(self.dof)
         while True:
-            r = run(a, target, distance, step, resolution, low, high, bisection, self._packed, x_new)
+            r = run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
             if r != 0:
-                return x_new, r > 0, abs(int(r))
-            self._grow_for(min(step, distance), resolution)
+                d = distance[0]
+                if d < ZERO_LENGTH:
+                    return x_new, float(d), False, 0
+                return x_new, float(d), r > 0, abs(int(r))
+            self._grow_for(min(step, float(distance[0])), resolution)
 
     def _grow_for(self, length: float, resolution: float) -> None:
         """Room for an edge of ``length`` checked every ``resolution`` (the kernel answered 0: too few)."""
