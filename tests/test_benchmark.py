@@ -273,3 +273,28 @@ def test_the_time_budget_is_the_tasks_unless_given():
     assert args.ompl_time_limit == 5.0
     with pytest.raises(bm.BenchmarkError, match="--ompl-time-limit must be > 0"):
         bm.validate_args(bm.BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=1, ompl_time_limit=0.0))
+
+
+def test_paths_are_rechecked_after_every_timed_run_with_the_verdicts_of_an_inline_recheck(monkeypatch):
+    """The re-check's work (pybullet at 10x the resolution on the arms) must not evict the caches of the
+    next timed run: every path_valid call comes after the last planning run. Its verdicts are those of
+    re-checking each path right after its run (run_episode's default), and no report carries a path."""
+    from gnn_mp_envs import evaluation
+    from gnn_mp_envs.tasks.maze2d.task import Maze2DProblem
+    events: list[str] = []
+    plan, path_valid = evaluation.plan_problem, Maze2DProblem.path_valid
+    monkeypatch.setattr(evaluation, "plan_problem", lambda *a, **k: events.append("plan") or plan(*a, **k))
+    monkeypatch.setattr(Maze2DProblem, "path_valid",
+                        lambda self, *a, **k: events.append("recheck") or path_valid(self, *a, **k))
+    from train.benchmark.args import env_kwargs_for
+    args = tiny_args(problems=3, samplers=["uniform", "goal-bias"], max_nodes=3000)
+    report = bm.run_benchmark(args)
+    records = [r for runs in report["runs"].values() for r in runs]
+    solved = sum(r["success"] for r in records)
+    assert solved >= 2 and events.count("plan") == 6 and events.count("recheck") == 2 * solved
+    assert events.index("recheck") > len(events) - 1 - events[::-1].index("plan")     # all plans first
+    inline = [bm.run_episode("maze2d", env_kwargs_for(args), r["sampler"], r["problem"], args.seed) for r in records]
+    keys = ("success", "nodes_expanded", "collision_checks", "path_valid", "path_valid_fine")
+    assert [{k: r[k] for k in keys} for r in records] == [{k: r[k] for k in keys} for r in inline]
+    assert all(set(r) == set(i) for r, i in zip(records, inline)), "a record kept its path or lost a key"
+    json.dumps(report)

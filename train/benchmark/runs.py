@@ -56,8 +56,10 @@ def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any
 
 def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index: int, seed: int,
                 checkpoint: str | None = None, settings: tuple[tuple[str, Any], ...] = (),
-                snapshot_iterations: Iterable[int] = ()) -> dict[str, Any]:
-    """Plan problem ``index`` with one sampler; the record of counters (and optional snapshots)."""
+                snapshot_iterations: Iterable[int] = (), recheck: bool = True) -> dict[str, Any]:
+    """Plan problem ``index`` with one sampler; the record of counters (and optional snapshots).
+    ``recheck=False`` leaves the returned path's re-check to :func:`recheck_episode` (the record
+    carries the path until then)."""
     from gnn_mp_envs.evaluation import plan_problem, problem_seed
     snapshots_at = set(snapshot_iterations)
     env = cached_env(task, env_kwargs, render=bool(snapshots_at))
@@ -74,26 +76,47 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
         raise BenchmarkError(f"sampler {sampler_name!r} on {task} problem {index}: {fault(exc)}") from None
     record = {"sampler": sampler_name, "problem": int(index), "seed": problem_seed(seed, index), **run.counters(),
               "family": getattr(env.problem, "family", None)}   # the problem's scene family (tables per family)
-    # every returned path re-checked edge by edge with the problem's own checker (after the counters
-    # were read, so the re-check counts nowhere): a planner or checker fault shows as False; and,
-    # independently of the planner's edge checks, at PATH_CHECK_REFINE times its resolution
-    # (what the resolution skipped over shows as path_valid_fine False)
-    solution = env.planner.solution if run.success else None
-    record["path_valid"] = record["path_valid_fine"] = None
-    if solution is not None:      # only a real True counts (a plugin task's NaN is no verdict)
-        try:
-            record["path_valid"] = verdict(env.problem.path_valid(solution.states, solution.controls))
-            record["path_valid_fine"] = verdict(env.problem.path_valid(solution.states, solution.controls,
-                                                                       refine=PATH_CHECK_REFINE))
-        except (Exception, SystemExit) as exc:
-            raise BenchmarkError(f"task {task}'s path_valid on problem {index}: {fault(exc)}") from None
     # where the planning loop's wall time went: inside env.step (the planner) and outside it (the sampler)
     record["planner_time_s"] = record.pop("env_time_s")
     record["sampler_time_s"] = max(run.wall_time_s - run.env_time_s, 0.0)
+    record["path_valid"] = record["path_valid_fine"] = None
+    solution = env.planner.solution if run.success else None
+    if solution is not None:
+        if recheck:
+            _recheck(task, env.problem, record, solution.states, solution.controls)
+        else:
+            record[_PATH] = (solution.states, solution.controls)
     if snapshots_at:
         snapshots.append((run.iterations, run.nodes_expanded, env.render()))
         record["snapshots"] = snapshots
     return record
+
+
+#: Key of a record's returned path until :func:`recheck_episode` re-checks it (never in a report).
+_PATH = "_path_to_recheck"
+
+
+def recheck_episode(task: str, env_kwargs: dict[str, Any], record: dict[str, Any]) -> dict[str, Any]:
+    """The re-check of a record :func:`run_episode` made with ``recheck=False``: its problem is made
+    again (the split's ``record["problem"]``-th) and its path re-checked; the record, with its verdicts."""
+    if _PATH not in record:
+        return record
+    env = cached_env(task, env_kwargs)
+    states, controls = record.pop(_PATH)
+    _recheck(task, env.task.problem(env.split, record["problem"]), record, states, controls)
+    return record
+
+
+def _recheck(task: str, problem: Any, record: dict[str, Any], states: np.ndarray, controls: np.ndarray) -> None:
+    """Every returned path re-checked edge by edge with the problem's own checker (uncounted): a planner
+    or checker fault shows as False; and, independently of the planner's edge checks, at
+    PATH_CHECK_REFINE times its resolution (what the resolution skipped over shows as path_valid_fine
+    False). Only a real True counts (a plugin task's NaN is no verdict)."""
+    try:
+        record["path_valid"] = verdict(problem.path_valid(states, controls))
+        record["path_valid_fine"] = verdict(problem.path_valid(states, controls, refine=PATH_CHECK_REFINE))
+    except (Exception, SystemExit) as exc:
+        raise BenchmarkError(f"task {task}'s path_valid on problem {record['problem']}: {fault(exc)}") from None
 
 
 def fault(exc: BaseException) -> str:
@@ -108,6 +131,10 @@ def fault(exc: BaseException) -> str:
 
 def _run_episode_job(job: tuple) -> dict[str, Any]:
     return run_episode(*job)
+
+
+def _recheck_episode_job(job: tuple) -> dict[str, Any]:
+    return recheck_episode(*job)
 
 
 def checkpoint_of(args: BenchmarkArgs, name: str) -> str | None:
@@ -163,8 +190,11 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
 
     # sampler-major: a worker runs one sampler over the problems, warm, as a user plans with it. Tried
     # problem-major (every sampler per problem in turn): the switching cost the learned rows their
-    # caches, maze2d gnn 1.12-1.17x uniform's wall time against 0.89-0.91x (two alternated runs each)
-    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings)
+    # caches, maze2d gnn 1.12-1.17x uniform's wall time against 0.89-0.91x (two alternated runs each).
+    # The returned paths are re-checked after all timed runs, not between them: the re-check's
+    # pybullet work at 10x the resolution evicted the next run's caches (Panda, sphere checker: the
+    # first planner step 290 instead of 155 us, the median run 15% slower).
+    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings, (), False)
             for name, checkpoint, settings in learned for i in indices]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
 
@@ -172,18 +202,38 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         runs[record["sampler"]].append(record)
         bar.update(1)
 
+    def rechecked(record: dict[str, Any]) -> None:
+        row = runs[record["sampler"]]
+        row[next(k for k, r in enumerate(row) if r["problem"] == record["problem"])] = record
+        bar.update(1)
+
+    def dispatch(own: WorkerPool | None) -> None:
+        """Both phases on one set of workers: the timed runs, then the re-checks of their paths."""
+        phases = ((lambda: jobs, finished, _run_episode_job),
+                  (lambda: [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r],
+                   rechecked, _recheck_episode_job))
+        for k, (todo, done, fn) in enumerate(phases):
+            todo = todo()
+            if not todo:
+                continue
+            if k == 1:
+                bar.reset(total=len(todo))
+                bar.set_description(f"{args.task} re-check")
+            if args.ray is not None:
+                run_on_ray(args.ray, args.workers, args.modules, todo, done, fn)
+            elif own is not None:
+                own.run(todo, done, fn)
+            else:
+                for job in todo:
+                    done(fn(job))
+
     reason = None
     try:
-        if args.ray is not None:
-            _run_on_ray(args, jobs, finished)
-        elif pool is not None:
-            pool.run(jobs, finished, _run_episode_job)
-        elif min(args.workers, len(jobs)) <= 1:
-            for job in jobs:
-                finished(_run_episode_job(job))
+        if pool is not None or args.ray is not None or min(args.workers, len(jobs)) <= 1:
+            dispatch(pool)
         else:                                    # never more processes than jobs
             with WorkerPool(min(args.workers, len(jobs)), args.modules) as own:
-                own.run(jobs, finished, _run_episode_job)
+                dispatch(own)
     except KeyboardInterrupt:
         reason = "interrupted"
     except BrokenProcessPool:
@@ -192,6 +242,9 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         reason = str(exc)
     finally:
         bar.close()
+        for row in runs.values():       # a run stopped before its re-check keeps no verdict
+            for r in row:
+                r.pop(_PATH, None)
 
     for name in runs:
         runs[name].sort(key=lambda r: r["problem"])
@@ -211,8 +264,3 @@ class BenchmarkIncomplete(BenchmarkError):
         super().__init__(message)
         self.report = report
         self.interrupted = interrupted
-
-
-def _run_on_ray(args: BenchmarkArgs, jobs: list[tuple], finished) -> None:
-    """Run the benchmark's ``jobs`` on ``args.workers`` Ray actors (:func:`train.workers.run_on_ray`)."""
-    run_on_ray(args.ray, args.workers, args.modules, jobs, finished, _run_episode_job)
