@@ -137,6 +137,36 @@ def test_bad_actions_raise_value_error(bad):
         env.step(bad)
 
 
+def test_the_compiled_observation_row_is_numpys_row_bit_for_bit():
+    """Where a problem's ``difference`` is the plain ``a - b`` (maze2d, the arms), ``GraphObservation.add``
+    writes a node's row in one compiled pass: every array of the observation equals the numpy path's
+    (the float64 differences rounded to float32) over whole BiRRT and RRT runs; the pendulum's wrapped
+    differences keep the numpy path."""
+    from gnn_mp_envs.envs.observation import GraphObservation
+    for env_id, kwargs in (("GNNMP/Maze2DRRT-v0", {}), ("GNNMP/Maze2DBiRRT-v0", {}),
+                           ("GNNMP/PendulumRRT-v0", {"max_nodes": 300})):
+        env = gym.make(env_id, **kwargs).unwrapped
+        obs, _ = env.reset(seed=3)
+        assert (env._obs._write is None) == (env_id == "GNNMP/PendulumRRT-v0")
+        sampler = np.random.default_rng(3)
+        for _ in range(150):
+            obs, _, terminated, truncated, _ = env.step(sampler.uniform(env._low, env._high).astype(np.float32))
+            if terminated or truncated:
+                break
+        oracle = GraphObservation(env.state_dim, env.max_nodes, env._obs.obstacles.shape)
+        oracle.reset(env.problem, env.planner.tree, env.task.obstacle_rows(env.problem))
+        oracle._write = None
+        oracle.num_nodes[0] = 0
+        for i in range(len(env.planner.tree)):
+            oracle.add(env.planner.tree, i)
+        oracle.active_tree[0] = env.planner.active_tree
+        got, want = env._obs.as_dict(), oracle.as_dict()
+        assert len(env.planner.tree) > 20
+        for key in want:
+            assert got[key].dtype == want[key].dtype and np.array_equal(got[key], want[key]), (env_id, key)
+        env.close()
+
+
 def test_the_compiled_action_clip_is_numpys_clip_bit_for_bit():
     """``step`` clips a sampler's float array in one compiled pass (``compiled_clip_finite``; the same
     loop in Python without numba): the values of ``np.minimum(np.maximum(action, low), high)`` in

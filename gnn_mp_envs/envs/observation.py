@@ -33,6 +33,7 @@ from gymnasium import spaces
 
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore
+from gnn_mp_envs.utils.compiled import lazy_njit
 
 #: glibc ``mallopt`` parameters (see ``man mallopt``).
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
@@ -99,6 +100,26 @@ def observation_space(low: np.ndarray, high: np.ndarray, max_nodes: int,
     })
 
 
+def _write_row(i: int, states: np.ndarray, tree_id: np.ndarray, parents: np.ndarray, endpoints: np.ndarray,
+               nodes: np.ndarray, node_features: np.ndarray, parent: np.ndarray, mask: np.ndarray,
+               num_nodes: np.ndarray) -> None:
+    """:meth:`GraphObservation.add` for a problem whose ``difference`` is the plain ``a - b``, in one
+    pass: the same float64 differences, rounded to float32 on the store as numpy's assignment does."""
+    d = states.shape[1]
+    for c in range(d):
+        nodes[i, c] = states[i, c]
+        node_features[i, c] = endpoints[0, c] - states[i, c]
+        node_features[i, d + c] = endpoints[1, c] - states[i, c]
+    node_features[i, 2 * d] = tree_id[i]
+    parent[i] = parents[i]
+    mask[i] = 1
+    num_nodes[0] = i + 1
+
+
+#: :func:`_write_row` compiled (numba), or None without numba.
+compiled_write_row = lazy_njit(_write_row)
+
+
 class GraphObservation:
     """Preallocated observation arrays; :meth:`add` writes one row per new node."""
 
@@ -115,6 +136,7 @@ class GraphObservation:
         self.active_tree = np.zeros(1, dtype=np.int64)
         self.obstacles = np.zeros(obstacles, dtype=np.float32)
         self._problem: Problem | None = None
+        self._write = None
         #: The feature columns ``[x_init - x_n, x_goal - x_n]`` as a (N, 2, d) view: both differences
         #: of a new node are computed and written in one operation each.
         self._differences = self.node_features[:, :2 * state_dim].reshape(max_nodes, 2, state_dim)
@@ -126,11 +148,14 @@ class GraphObservation:
 
     def __getstate__(self) -> dict:
         # the difference view is rebuilt on the copy's own arrays (a copied view would be detached)
-        return {k: v for k, v in self.__dict__.items() if k != "_differences"}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_differences", "_write")}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._differences = self.node_features[:, :2 * self.state_dim].reshape(self.max_nodes, 2, self.state_dim)
+        problem = self._problem
+        self._write = (compiled_write_row() if problem is not None and type(problem).difference is Problem.difference
+                       else None)
 
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
@@ -154,11 +179,17 @@ class GraphObservation:
             self.obstacles[:k, 1:] = obstacle_rows
         self._problem = problem
         self._endpoints = np.stack([problem.start, problem.goal])
+        # the compiled row write where the features are plain differences (the wrapped ones stay numpy's)
+        self._write = compiled_write_row() if type(problem).difference is Problem.difference else None
         for i in range(len(tree)):
             self.add(tree, i)
 
     def add(self, tree: TreeStore, i: int) -> None:
         """Write node ``i`` of ``tree`` (nodes arrive in index order)."""
+        if self._write is not None:
+            self._write(i, tree.states, tree.tree_id, tree.parent, self._endpoints, self.nodes, self.node_features,
+                        self.parent, self.mask, self.num_nodes)
+            return
         x = tree.states[i]
         self.nodes[i] = x
         self._differences[i] = self._problem.difference(self._endpoints, x)    # [x_init - x, x_goal - x]
