@@ -42,6 +42,31 @@ def test_nearest_matches_brute_force_per_tree(n):
             assert store.nearest(x, t, metric) == expected
 
 
+def test_a_small_trees_compiled_nearest_node_is_the_first_argmin_of_the_problems_distance():
+    """Below the k-d tree's threshold, a problem naming its metric (the pendulum: weighted, one angle
+    wrapped) gets its nearest node in one compiled call: per tree, the first node of least
+    ``problem.distance`` (the brute-force oracle), also among exact ties, and the node the scan through
+    ``problem.nearest_row`` picks."""
+    problem = PendulumTask().problem("test", 0)
+    rng = np.random.default_rng(4)
+    store = TreeStore(900, 2, num_trees=2)
+    assert store._scan is not None
+    for k in range(900):
+        x = problem.sample_uniform(rng) if k % 7 else store.states[int(rng.integers(max(store.size, 1)))].copy()
+        store.add(x, -1, int(rng.integers(2)))      # every 7th a copy of an earlier node: ties
+    for _ in range(300):
+        x = problem.sample_uniform(rng)
+        x[0] = rng.choice([-np.pi + 1e-3, np.pi - 1e-3, x[0]])
+        for t in (0, 1):
+            members = np.flatnonzero(store.tree_id[:store.size] == t)
+            expected = members[int(np.argmin(problem.distance(store.states[members], x)))]
+            got = store.nearest(x, t, problem)
+            assert type(got) is int and got == expected
+            scan, store._scan = store._scan, None
+            assert store.nearest(x, t, problem) == got
+            store._scan = scan
+
+
 def test_nearest_respects_pendulum_angle_wrap():
     problem = PendulumTask().problem("test", 0)
     rng = np.random.default_rng(2)

@@ -79,6 +79,31 @@ def _nearest_row_loop(states: np.ndarray, x: np.ndarray, weights: np.ndarray, pe
 compiled_nearest_row = lazy_njit(_nearest_row_loop)
 
 
+def _nearest_node_loop(states: np.ndarray, k: int, x: np.ndarray, weights: np.ndarray, periodic: np.ndarray,
+                       index: np.ndarray) -> int:
+    """``index[j]`` of the row ``j`` of ``states[:k]`` nearest ``x`` (:func:`_nearest_row_loop`): a small
+    tree's nearest node in one compiled call, without the slice and the lookup in Python."""
+    return index[_nearest_row(states[:k], x, weights, periodic)[0]]
+
+
+def compiled_nearest_node():
+    """:func:`_nearest_node_loop` compiled (numba, calling the compiled :func:`_nearest_row_loop`), or None
+    without numba."""
+    global _nearest_row
+    if _NEAREST_NODE and _nearest_row is not None:
+        return _NEAREST_NODE[0]
+    _nearest_row = compiled_nearest_row()
+    if _nearest_row is None:
+        return None
+    from numba import njit
+    _NEAREST_NODE[:] = [njit(cache=True)(_nearest_node_loop)]
+    return _NEAREST_NODE[0]
+
+
+_nearest_row = None
+_NEAREST_NODE: list = []
+
+
 class InvalidProblemError(ValueError):
     """A problem that cannot be planned: wrong dimension, start or goal invalid."""
 

@@ -20,6 +20,8 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial import cKDTree
 
+from gnn_mp_envs.core.problem import compiled_nearest_node
+
 KD_MIN_NODES = 1024
 KD_MIN_BUFFER = 512
 
@@ -53,6 +55,7 @@ class TreeStore:
         self._tree_size = [0] * num_trees
         self._kd: list[cKDTree | None] = [None] * num_trees
         self._kd_count = [0] * num_trees
+        self._scan = compiled_nearest_node()
         self.size = 0
 
     def __len__(self) -> int:
@@ -88,7 +91,10 @@ class TreeStore:
         """Global index of the node of ``tree`` closest to ``x`` under ``metric.distance``."""
         k = self._tree_size[tree]
         states = self._tree_states[tree]
-        if k < KD_MIN_NODES:            # a small tree: one scan
+        if k < KD_MIN_NODES:            # a small tree: one scan (one compiled call where the problem names its metric)
+            named = getattr(metric, "nearest_metric", None)
+            if named is not None and self._scan is not None:
+                return self._scan(states, k, x, *named, self._tree_index[tree])
             return int(self._tree_index[tree][metric.nearest_row(states[:k], x)[0]])
         indexed = self._kd_count[tree]
         if k - indexed > max(KD_MIN_BUFFER, indexed // 8):
