@@ -154,7 +154,7 @@ class BiRRT(TreePlanner):
         b = 1 - a
         i = self._extend(a, sample, result.added)
         if i is not None:
-            j = self._connect(b, self.tree.states[i].copy(), result.added)
+            j = self._connect(b, self.tree.states[i], result.added)    # a node's row never changes
             if j is not None:
                 from_start, from_goal = (i, j) if a == 0 else (j, i)
                 head = self._path(self.tree.path_to_root(from_start))

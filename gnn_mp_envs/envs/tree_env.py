@@ -224,7 +224,8 @@ class TreePlanningEnv(gym.Env):
         return self._observation(), self._info()
 
     def step(self, action):
-        self._check_open("step")
+        if self._closed:
+            self._check_open("step")
         planner = self.planner
         if planner is None:
             raise RuntimeError("call reset() before step()")
@@ -295,7 +296,7 @@ class TreePlanningEnv(gym.Env):
             "edges": p.edges_checked,
             "collision_checks": p.collision_checks,
             "iterations": pl.iterations,
-            "path_length": float("inf") if sol is None else sol.length,
+            "path_length": math.inf if sol is None else sol.length,
         }
         if sol is not None:
             info["path"] = sol.states.copy()

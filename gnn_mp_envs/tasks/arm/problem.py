@@ -160,7 +160,9 @@ class ArmProblem(Problem):
                 return None
             self.edges_checked += 1
             self.collision_checks += checks
-            return Edge(x_new, min(dist, self.step_size)) if valid else None
+            if not valid:
+                return None
+            return Edge(x_new, dist if dist <= self.step_size else self.step_size)
         d = x_to - x_from
         dist = math.sqrt(float(d @ d))
         if dist < 1e-12:

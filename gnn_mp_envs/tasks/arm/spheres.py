@@ -1137,16 +1137,16 @@ class SphereChecker:
         :meth:`check_motion` does, in one compiled call: ``(x_new, distance to target, valid, states
         looked at)``; a distance below :data:`ZERO_LENGTH` is a refused motion, nothing checked
         ``(x_new undefined, distance, False, 0)``."""
-        run, distance = self._steer_run, self._distance
+        distance = self._distance
         x_new = np.empty(self.dof)
-        while True:
-            r = run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
-            if r != 0:
-                d = distance[0]
-                if d < ZERO_LENGTH:
-                    return x_new, float(d), False, 0
-                return x_new, float(d), r > 0, abs(int(r))
+        r = self._steer_run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
+        while r == 0:
             self._grow_for(min(step, float(distance[0])), resolution)
+            r = self._steer_run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
+        d = float(distance[0])
+        if d < ZERO_LENGTH:
+            return x_new, d, False, 0
+        return (x_new, d, True, r) if r > 0 else (x_new, d, False, -r)
 
     def _grow_for(self, length: float, resolution: float) -> None:
         """Room for an edge of ``length`` checked every ``resolution`` (the kernel answered 0: too few)."""
