@@ -466,3 +466,28 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
             in_big = np.c_[(world_small - trans[b_index]) @ rot[b_index], small[:, 3]]
             assert not _touching(in_big, tree, big), (names, q)
     assert border_seen       # some table has cells next to ones that are not free
+
+
+def test_the_kernel_views_each_array_of_its_table_as_the_array_it_names(world):
+    """The kernel reads its arrays through a table of addresses and shapes (no reference counts), so a
+    row read as another dtype or shape would read foreign memory: every view the kernel takes must be
+    the row of the same name, dtype and dimensions in ``_FIELDS``, and the table must hold each array's
+    own address and shape; an array of another dtype is refused when the table is built."""
+    import inspect
+    import re
+
+    from gnn_mp_envs.tasks.arm import spheres
+    source = inspect.getsource(spheres._run)
+    views = re.findall(r"^    (\w+) = _view(\d)\(arrays, (\d+), np\.(\w+)\)$", source, flags=re.M)
+    declared = [(name, np.dtype(dtype).name, ndim) for name, dtype, ndim in spheres._FIELDS]
+    assert [(name, np.dtype(dtype).name, int(ndim)) for name, ndim, _, dtype in views] == declared
+    assert [int(row) for _, _, row, _ in views] == list(range(len(spheres._FIELDS)))
+    checker = world.sphere_checker(())
+    for (name, _, ndim), array, row in zip(spheres._FIELDS, checker._packed_arrays, checker._packed):
+        assert row[0] == array.ctypes.data and tuple(row[1:1 + ndim]) == array.shape, name
+    kept = checker._q
+    checker._q = kept.astype(np.float32)
+    with pytest.raises(TypeError, match="'q' must be a C-contiguous 1-D float64 array"):
+        checker._pack()
+    checker._q = kept
+    checker._pack()

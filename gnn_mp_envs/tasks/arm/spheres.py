@@ -30,10 +30,9 @@ import numpy as np
 
 from gnn_mp_envs.tasks.arm.urdf import FIXED, PRISMATIC, REVOLUTE, URDFRobot, read_urdf
 from llvmlite import ir
-from numba import types
+from numba import carray, types
 from numba.core import cgutils
 from numba.core.extending import intrinsic
-from numba.experimental import structref
 
 #: Obstacle kinds of the compiled tests.
 BOX, CYLINDER, SPHERE = 0, 1, 2
@@ -59,25 +58,45 @@ MODEL_FORMAT = "gnn-mp-envs sphere model, version 1"
 
 
 # ---------------------------------------------------------------------- what the kernel reads
-@structref.register
-class CheckerArraysType(types.StructRef):
-    """The numba type of :class:`CheckerArrays`."""
+#: Every array the kernel reads, in the order of its table (:meth:`SphereChecker._pack`): name, dtype,
+#: dimensions.
+_FIELDS = (("q", np.float64, 1), ("gaps", np.float64, 2), ("known", np.bool_, 1), ("reach", np.float64, 2),
+           ("pair_reach", np.float64, 2), ("delta", np.float64, 1), ("pdelta", np.float64, 1),
+           ("curve", np.float64, 1), ("pcurve", np.float64, 1), ("omega", np.float64, 2), ("vel", np.float64, 2),
+           ("queue", np.int64, 2), ("parent", np.int64, 1), ("origin_r", np.float64, 3),
+           ("origin_t", np.float64, 2), ("kind", np.int64, 1), ("axis", np.float64, 2), ("q_index", np.int64, 1),
+           ("q_fixed", np.float64, 1), ("link_root", np.int64, 1), ("self_root", np.int64, 1),
+           ("nodes", np.float64, 2), ("first_child", np.int64, 1), ("child_count", np.int64, 1),
+           ("pairs", np.int64, 2), ("exempt", np.bool_, 2), ("ob_kind", np.int64, 1), ("ob_centre", np.float64, 2),
+           ("ob_rot", np.float64, 3), ("ob_size", np.float64, 2), ("rot", np.float64, 3), ("trans", np.float64, 2),
+           ("stack", np.int64, 1), ("pair_stack", np.int64, 2), ("pair_moving", np.int64, 1), ("pcell", np.float64, 1),
+           ("table_at", np.int64, 1), ("table_joint", np.int64, 2), ("table_low", np.float64, 2),
+           ("table_step", np.float64, 2), ("table_dim", np.int64, 2), ("table", np.int32, 1),
+           ("memo_q", np.float64, 2), ("memo_clear", np.float64, 2), ("memo_meta", np.int64, 1))
 
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+@intrinsic
+def _voidptr(typingctx, address):
+    """The int64 ``address`` as a ``void*`` (for :func:`numba.carray`)."""
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+
+    return types.voidptr(types.int64), codegen
 
 
-class CheckerArrays(structref.StructRefProxy):
-    """Every array the kernel reads, in one object: one argument to type-check per call instead of
-    thirty (a compiled call costs about 75 ns per array argument)."""
+def _view1(table, i, dtype):
+    """Row ``i`` of the kernel's table as the 1-D array it describes (no reference count: see ``_pack``)."""
+    return carray(_voidptr(table[i, 0]), (table[i, 1],), dtype)
 
 
-_FIELDS = ("q", "gaps", "known", "reach", "pair_reach", "delta", "pdelta", "curve", "pcurve", "omega", "vel", "queue", "parent", "origin_r", "origin_t",
-           "kind", "axis", "q_index", "q_fixed", "link_root", "self_root", "nodes", "first_child", "child_count",
-           "pairs", "exempt", "ob_kind", "ob_centre", "ob_rot", "ob_size", "rot", "trans", "stack", "pair_stack", "pair_moving",
-           "pcell", "table_at", "table_joint", "table_low", "table_step", "table_dim", "table", "memo_q", "memo_clear",
-           "memo_meta")
-structref.define_proxy(CheckerArrays, CheckerArraysType, list(_FIELDS))
+def _view2(table, i, dtype):
+    """Row ``i`` of the kernel's table as a 2-D array."""
+    return carray(_voidptr(table[i, 0]), (table[i, 1], table[i, 2]), dtype)
+
+
+def _view3(table, i, dtype):
+    """Row ``i`` of the kernel's table as a 3-D array."""
+    return carray(_voidptr(table[i, 0]), (table[i, 1], table[i, 2], table[i, 3]), dtype)
 
 
 # ---------------------------------------------------------------------- the model file
@@ -482,8 +501,8 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     scratch arrays hold fewer than ``n + 1`` states (the caller grows them and calls again). The
     same arithmetic as :meth:`ArmProblem.check_motion <gnn_mp_envs.tasks.arm.problem.ArmProblem.check_motion>`.
 
-    ``arrays`` (:class:`CheckerArrays`) holds the robot's kinematics and spheres, the scene and the
-    scratch space.
+    ``arrays`` (the table of :meth:`SphereChecker._pack`) holds the robot's kinematics and spheres, the
+    scene and the scratch space.
 
     A state collides when a leaf of a link's obstacle tree touches an obstacle or a leaf of a
     checked link pair's self-collision trees touches the other's (depth first from the roots).
@@ -508,18 +527,52 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
     changes), and an edge whose start is one of them takes them instead of walking again. They are
     lower bounds of distances, so only the work depends on what the checker saw before, never an
     answer or a count."""
-    q, gaps, known, reach, pair_reach = arrays.q, arrays.gaps, arrays.known, arrays.reach, arrays.pair_reach
-    curve, pcurve, omega, vel, pair_moving = arrays.curve, arrays.pcurve, arrays.omega, arrays.vel, arrays.pair_moving
-    pcell, table_at, table_joint, table_low = arrays.pcell, arrays.table_at, arrays.table_joint, arrays.table_low
-    table_step, table_dim, table = arrays.table_step, arrays.table_dim, arrays.table
-    memo_q, memo_clear, memo_meta = arrays.memo_q, arrays.memo_clear, arrays.memo_meta
-    delta, pdelta, queue, parent, origin_r = arrays.delta, arrays.pdelta, arrays.queue, arrays.parent, arrays.origin_r
-    origin_t, kind, axis, q_index, q_fixed = arrays.origin_t, arrays.kind, arrays.axis, arrays.q_index, arrays.q_fixed
-    link_root, self_root, nodes, first_child = arrays.link_root, arrays.self_root, arrays.nodes, arrays.first_child
-    child_count, pairs, exempt, ob_kind, ob_centre = (arrays.child_count, arrays.pairs, arrays.exempt, arrays.ob_kind,
-                                                      arrays.ob_centre)
-    ob_rot, ob_size, rot, trans, stack, pair_stack = (arrays.ob_rot, arrays.ob_size, arrays.rot, arrays.trans,
-                                                      arrays.stack, arrays.pair_stack)
+    # the arrays of ``arrays``, the table of :meth:`SphereChecker._pack` (rows in :data:`_FIELDS` order)
+    q = _view1(arrays, 0, np.float64)
+    gaps = _view2(arrays, 1, np.float64)
+    known = _view1(arrays, 2, np.bool_)
+    reach = _view2(arrays, 3, np.float64)
+    pair_reach = _view2(arrays, 4, np.float64)
+    delta = _view1(arrays, 5, np.float64)
+    pdelta = _view1(arrays, 6, np.float64)
+    curve = _view1(arrays, 7, np.float64)
+    pcurve = _view1(arrays, 8, np.float64)
+    omega = _view2(arrays, 9, np.float64)
+    vel = _view2(arrays, 10, np.float64)
+    queue = _view2(arrays, 11, np.int64)
+    parent = _view1(arrays, 12, np.int64)
+    origin_r = _view3(arrays, 13, np.float64)
+    origin_t = _view2(arrays, 14, np.float64)
+    kind = _view1(arrays, 15, np.int64)
+    axis = _view2(arrays, 16, np.float64)
+    q_index = _view1(arrays, 17, np.int64)
+    q_fixed = _view1(arrays, 18, np.float64)
+    link_root = _view1(arrays, 19, np.int64)
+    self_root = _view1(arrays, 20, np.int64)
+    nodes = _view2(arrays, 21, np.float64)
+    first_child = _view1(arrays, 22, np.int64)
+    child_count = _view1(arrays, 23, np.int64)
+    pairs = _view2(arrays, 24, np.int64)
+    exempt = _view2(arrays, 25, np.bool_)
+    ob_kind = _view1(arrays, 26, np.int64)
+    ob_centre = _view2(arrays, 27, np.float64)
+    ob_rot = _view3(arrays, 28, np.float64)
+    ob_size = _view2(arrays, 29, np.float64)
+    rot = _view3(arrays, 30, np.float64)
+    trans = _view2(arrays, 31, np.float64)
+    stack = _view1(arrays, 32, np.int64)
+    pair_stack = _view2(arrays, 33, np.int64)
+    pair_moving = _view1(arrays, 34, np.int64)
+    pcell = _view1(arrays, 35, np.float64)
+    table_at = _view1(arrays, 36, np.int64)
+    table_joint = _view2(arrays, 37, np.int64)
+    table_low = _view2(arrays, 38, np.float64)
+    table_step = _view2(arrays, 39, np.float64)
+    table_dim = _view2(arrays, 40, np.int64)
+    table = _view1(arrays, 41, np.int32)
+    memo_q = _view2(arrays, 42, np.float64)
+    memo_clear = _view2(arrays, 43, np.float64)
+    memo_meta = _view1(arrays, 44, np.int64)
     dof = q.shape[0]
     links = parent.shape[0]
     n_ob = ob_kind.shape[0]
@@ -844,7 +897,8 @@ def _steer_run(a, target, step, resolution, low, high, bisection, arrays, x_new,
         r = step / d
         for j in range(dof):
             x_new[j] = a[j] + r * (target[j] - a[j])
-    return _run(1, arrays.gaps[:0], arrays.known[:0], a, x_new, resolution, low, high, bisection, arrays)
+    return _run(1, _view2(arrays, 1, np.float64)[:0], _view1(arrays, 2, np.bool_)[:0], a, x_new, resolution, low,
+                high, bisection, arrays)
 
 
 _KERNELS: dict[str, Any] = {}
@@ -859,6 +913,8 @@ def _kernels() -> dict[str, Any]:
             raise ImportError("the sphere checker needs numba: pip install numba") from None
         g = globals()
         g["_gap"] = njit(cache=True, nogil=True, inline="always")(g["_gap"])
+        for view in ("_view1", "_view2", "_view3"):
+            g[view] = njit(cache=True, nogil=True, inline="always")(g[view])
         g["_forward_kinematics"] = njit(cache=True, nogil=True)(g["_forward_kinematics"])
         g["_position"] = njit(cache=True, nogil=True)(g["_position"])
         g["_velocities"] = njit(cache=True, nogil=True)(g["_velocities"])
@@ -1100,15 +1156,29 @@ class SphereChecker:
         self._grow(max(self._known.shape[0], 130))
 
     def _pack(self) -> None:
-        """(Re)build the :class:`CheckerArrays` the kernel reads (after the scene or the scratch changed)."""
-        self._packed = CheckerArrays(
-            self._q, self._gaps, self._known, self._reach, self._pair_reach, self._delta, self._pdelta, self._curve,
-            self._pcurve, self._omega, self._vel, self._queue,
-            self._parent, self._origin_r, self._origin_t, self._kind, self._axis, self._q_index, self._q_fixed,
-            self._root, self._self_root, self.model.nodes, self.model.first_child, self.model.child_count, self._pairs,
-            self._exempt, self._ob_kind, self._ob_centre, self._ob_rot, self._ob_size, self._rot, self._trans,
-            self._stack, self._pair_stack, self._pair_moving, self._pcell, *self._tables, self._memo_q, self._memo_clear,
-            self._memo_meta)
+        """(Re)build the table of the arrays the kernel reads (after the scene or the scratch changed): per
+        array of :data:`_FIELDS`, its address and shape. The kernel views them through :func:`numba.carray`,
+        arrays without a reference count: read from an object, 45 arrays took 45 atomic increments and
+        decrements per call, a fifth of the kernel's time. So the arrays must outlive the table: it is
+        kept with them (``_packed_arrays``), and every array replaced (a scene, more scratch) is
+        replaced through here."""
+        arrays = (self._q, self._gaps, self._known, self._reach, self._pair_reach, self._delta, self._pdelta,
+                  self._curve, self._pcurve, self._omega, self._vel, self._queue, self._parent, self._origin_r,
+                  self._origin_t, self._kind, self._axis, self._q_index, self._q_fixed, self._root, self._self_root,
+                  self.model.nodes, self.model.first_child, self.model.child_count, self._pairs, self._exempt,
+                  self._ob_kind, self._ob_centre, self._ob_rot, self._ob_size, self._rot, self._trans, self._stack,
+                  self._pair_stack, self._pair_moving, self._pcell, *self._tables, self._memo_q, self._memo_clear,
+                  self._memo_meta)
+        table = np.zeros((len(_FIELDS), 4), dtype=np.int64)
+        for row, (array, (name, dtype, ndim)) in enumerate(zip(arrays, _FIELDS, strict=True)):
+            if not (type(array) is np.ndarray and array.dtype == dtype and array.ndim == ndim
+                    and array.flags.c_contiguous):
+                raise TypeError(f"the sphere kernel's {name!r} must be a C-contiguous {ndim}-D "
+                                f"{np.dtype(dtype).name} array, got {getattr(array, 'dtype', type(array))} "
+                                f"{getattr(array, 'shape', '')}")
+            table[row, 0] = array.ctypes.data
+            table[row, 1:1 + ndim] = array.shape
+        self._packed, self._packed_arrays = table, arrays
 
     def valid(self, states: np.ndarray) -> np.ndarray:
         """Whether each row of ``states`` is collision-free (joint limits are the caller's)."""
