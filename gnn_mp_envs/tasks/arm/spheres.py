@@ -50,6 +50,9 @@ TABLE_CELLS = 1 << 17
 #: made them) need not walk again.
 MEMO_STATES = 128
 _TABLES: dict[tuple, tuple] = {}
+#: Walks compare squared distances where they differ by more than this factor (far above rounding), so
+#: that a node's pruning and the least clearance are those of comparing the distances themselves.
+SQUARES_MARGIN = 1.0 + 1e-12
 #: Steering refuses motions shorter than this (joint-space L2), as :meth:`Problem.steer
 #: <gnn_mp_envs.core.problem.Problem.steer>` does.
 ZERO_LENGTH = 1e-12
@@ -269,14 +272,17 @@ def _forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fi
                 trans[link, i] += v * acc
 
 
-def _gap(cx, cy, cz, r, kind, ox, oy, oz, r00, r01, r02, r10, r11, r12, r20, r21, r22, sx, sy, sz):
-    """Distance from the sphere ``(c, r)`` to an obstacle, negative or zero when they touch: a box of
-    half extents ``s``, a cylinder of radius ``sx`` and half height ``sy`` along its z, or a sphere of
-    radius ``sx``; centred at ``o``, rotated by ``R`` (rows ``r0*``, ``r1*``, ``r2*``). Exact. Scalars
-    only: a compiled call with array arguments costs more than the test."""
+def _dist2(cx, cy, cz, kind, ox, oy, oz, r00, r01, r02, r10, r11, r12, r20, r21, r22, sx, sy, sz):
+    """The squared distance from the point ``c`` to an obstacle's core (0 inside) and the radius the
+    obstacle adds: a box of half extents ``s`` (adds 0), a cylinder of radius ``sx`` and half height
+    ``sy`` along its z (adds 0), or a sphere of radius ``sx`` (its core is its centre, it adds ``sx``);
+    centred at ``o``, rotated by ``R`` (rows ``r0*``, ``r1*``, ``r2*``). A sphere ``(c, r)`` is
+    ``sqrt(d2) - r - adds`` from the obstacle (negative or zero: they touch; exact), so walks can compare
+    squares and take the root only where the distance itself is needed. Scalars only: a compiled call
+    with array arguments costs more than the test."""
     dx, dy, dz = cx - ox, cy - oy, cz - oz
     if kind == 2:
-        return math.sqrt(dx * dx + dy * dy + dz * dz) - r - sx
+        return dx * dx + dy * dy + dz * dz, sx
     lx = r00 * dx + r10 * dy + r20 * dz          # local = R^T d
     ly = r01 * dx + r11 * dy + r21 * dz
     lz = r02 * dx + r12 * dy + r22 * dz
@@ -287,12 +293,12 @@ def _gap(cx, cy, cz, r, kind, ox, oy, oz, r00, r01, r02, r10, r11, r12, r20, r21
         ex = ex if ex > 0.0 else 0.0
         ey = ey if ey > 0.0 else 0.0
         ez = ez if ez > 0.0 else 0.0
-        return math.sqrt(ex * ex + ey * ey + ez * ez) - r
+        return ex * ex + ey * ey + ez * ez, 0.0
     er = math.sqrt(lx * lx + ly * ly) - sx
     ez = abs(lz) - sy
     er = er if er > 0.0 else 0.0
     ez = ez if ez > 0.0 else 0.0
-    return math.sqrt(er * er + ez * ez) - r
+    return er * er + ez * ez, 0.0
 
 
 def _position(n, k, bisection, queue):
@@ -756,20 +762,33 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
             for o in range(n_ob):
                 if exempt[o, link]:
                     continue
-                least = 1e300
+                # the link's least clearance so far: only a node nearer than it can lower it (the same
+                # minimum as the obstacle's own least, then the link's)
+                least = clearance
                 top = 0
                 stack[0] = root
                 while top >= 0:
                     node = stack[top]
                     top -= 1
-                    x, y, z = nodes[node, 0], nodes[node, 1], nodes[node, 2]
-                    g = _gap(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z,
-                             t2 + m20 * x + m21 * y + m22 * z, nodes[node, 3], ob_kind[o],
-                             ob_centre[o, 0], ob_centre[o, 1], ob_centre[o, 2],
-                             ob_rot[o, 0, 0], ob_rot[o, 0, 1], ob_rot[o, 0, 2], ob_rot[o, 1, 0], ob_rot[o, 1, 1],
-                             ob_rot[o, 1, 2], ob_rot[o, 2, 0], ob_rot[o, 2, 1], ob_rot[o, 2, 2],
-                             ob_size[o, 0], ob_size[o, 1], ob_size[o, 2])
+                    x, y, z, r = nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3]
+                    d2, adds = _dist2(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z,
+                                      t2 + m20 * x + m21 * y + m22 * z, ob_kind[o],
+                                      ob_centre[o, 0], ob_centre[o, 1], ob_centre[o, 2],
+                                      ob_rot[o, 0, 0], ob_rot[o, 0, 1], ob_rot[o, 0, 2], ob_rot[o, 1, 0],
+                                      ob_rot[o, 1, 1], ob_rot[o, 1, 2], ob_rot[o, 2, 0], ob_rot[o, 2, 1],
+                                      ob_rot[o, 2, 2], ob_size[o, 0], ob_size[o, 1], ob_size[o, 2])
                     nc = child_count[node]
+                    # squares first, the root (a long-latency instruction, a tenth of the kernel's time)
+                    # only where needed: farther than tau by a margin far above rounding, the node is
+                    # pruned as below; its distance counts only if it may be the least so far
+                    reach_ = tau + r + adds
+                    if d2 > reach_ * reach_ * SQUARES_MARGIN:
+                        near = least + r + adds
+                        if d2 < near * near * SQUARES_MARGIN:
+                            g = math.sqrt(d2) - r - adds
+                            least = g if g < least else least
+                        continue
+                    g = math.sqrt(d2) - r - adds
                     if g > tau or (g > 0.0 and nc == 0):
                         least = g if g < least else least
                         continue
@@ -781,7 +800,7 @@ def _run(mode, qs, out, a, b, resolution, low, high, bisection, arrays):
                         stack[top] = c
                 if hit:
                     break
-                clearance = least if least < clearance else clearance
+                clearance = least
             if hit:
                 break
             if rec >= 0:
@@ -912,7 +931,7 @@ def _kernels() -> dict[str, Any]:
         except ImportError:      # pragma: no cover - numba is a dependency
             raise ImportError("the sphere checker needs numba: pip install numba") from None
         g = globals()
-        g["_gap"] = njit(cache=True, nogil=True, inline="always")(g["_gap"])
+        g["_dist2"] = njit(cache=True, nogil=True, inline="always")(g["_dist2"])
         for view in ("_view1", "_view2", "_view3"):
             g[view] = njit(cache=True, nogil=True, inline="always")(g[view])
         g["_forward_kinematics"] = njit(cache=True, nogil=True)(g["_forward_kinematics"])
