@@ -86,22 +86,24 @@ def _nearest_node_loop(states: np.ndarray, k: int, x: np.ndarray, weights: np.nd
     return index[_nearest_row(states[:k], x, weights, periodic)[0]]
 
 
-def compiled_nearest_node():
-    """:func:`_nearest_node_loop` compiled (numba, calling the compiled :func:`_nearest_row_loop`), or None
-    without numba."""
-    global _nearest_row
-    if _NEAREST_NODE and _nearest_row is not None:
-        return _NEAREST_NODE[0]
-    _nearest_row = compiled_nearest_row()
-    if _nearest_row is None:
-        return None
-    from numba import njit
-    _NEAREST_NODE[:] = [njit(cache=True)(_nearest_node_loop)]
-    return _NEAREST_NODE[0]
-
-
-_nearest_row = None
+#: The scan :func:`_nearest_node_loop` calls: the loop itself, the compiled one once compiled.
+_nearest_row = _nearest_row_loop
 _NEAREST_NODE: list = []
+
+
+def compiled_nearest_node():
+    """:func:`_nearest_node_loop` compiled (numba, calling the compiled :func:`_nearest_row_loop`; built
+    on first use, cached on disk), or None without numba."""
+    global _nearest_row
+    if not _NEAREST_NODE:
+        loop = compiled_nearest_row()
+        if loop is None:
+            _NEAREST_NODE.append(None)
+        else:
+            from numba import njit
+            _nearest_row = loop
+            _NEAREST_NODE.append(njit(cache=True)(_nearest_node_loop))
+    return _NEAREST_NODE[0]
 
 
 class InvalidProblemError(ValueError):
