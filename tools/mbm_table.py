@@ -68,7 +68,7 @@ def tables(report: dict[str, Any]) -> str:
                 continue
             f = row_figures(runs, max_nodes, limit)
             cells.append(f"{f['solved']}/{f['n']}, {_fmt(f['iterations'])} it, {_fmt(f['checks'])} checks, "
-                         f"{_fmt(f['time_ms'])} ms")
+                         f"{_fmt(f['time_ms'], 1)} ms")
         out.append(f"| {scene} | " + " | ".join(cells) + " |")
     out += ["", "All scenes beside the published figures (iterations: median / mean / p95):", "",
             "| planner | solved | iterations | collision checks | time |", "|---|---|---|---|---|"]
@@ -77,7 +77,7 @@ def tables(report: dict[str, Any]) -> str:
         its = "-" if f["iterations"] is None else \
             f"{_fmt(f['iterations'])} / {_fmt(f['mean_iterations'])} / {_fmt(f['p95_iterations'])}"
         out.append(f"| {name} (ours) | {f['solved']}/{f['n']} | {its} | {_fmt(f['checks'])} | "
-                   f"{_fmt(f['time_ms'])} ms median |")
+                   f"{_fmt(f['time_ms'], 1)} ms median |")
     out.append(f"| VAMP RRTConnect (published) | {VAMP['solved']} | {VAMP['iterations']} | - | {VAMP['time']} |")
     out.append(f"| cuRobo (published) | {CUROBO['solved']} | - | - | - |")
     learned = [n for n in names if n not in CLASSICAL and n != "uniform"]
@@ -88,11 +88,11 @@ def tables(report: dict[str, Any]) -> str:
                               ("held-out (bookshelf_thin, cage)", set(HELD_OUT_SCENES))):
             base = row_figures([r for r in report["runs"]["uniform"] if r.get("family") in scenes], max_nodes, limit)
             out.append(f"| {label} | uniform | {base['solved']}/{base['n']} | {_fmt(base['checks'])} | "
-                       f"{_fmt(base['time_ms'])} |")
+                       f"{_fmt(base['time_ms'], 1)} |")
             for name in learned:
                 f = row_figures([r for r in report["runs"][name] if r.get("family") in scenes], max_nodes, limit)
                 out.append(f"| {label} | {name} | {f['solved']}/{f['n']} | {_fmt(f['checks'])} "
-                           f"({f['checks'] / base['checks']:.2f}x) | {_fmt(f['time_ms'])} "
+                           f"({f['checks'] / base['checks']:.2f}x) | {_fmt(f['time_ms'], 1)} "
                            f"({f['time_ms'] / base['time_ms']:.2f}x) |")
     return "\n".join(out)
 

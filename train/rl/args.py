@@ -33,6 +33,9 @@ _ENV_DEFAULTS = {name: p.default for name, p in inspect.signature(make_rl_env).p
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 
 LIBS = ("sb3", "torchrl")
+#: Upper bounds of the candidates' and rewards' scales: beyond them candidates are uniform over the box
+#: anyway, or rewards overflow the returns; a larger value is a typo.
+MAX_LOCAL_SCALE, MAX_TARGET_SCALE, MAX_REWARD_SCALE = 1e3, 1e2, 1e6
 ALGOS = ("ppo", "sac")
 #: (lib, algo) -> registry name of the sampler a run's policy becomes
 SAMPLER_NAMES = {("sb3", "ppo"): "rl-ppo", ("sb3", "sac"): "rl-sac", ("torchrl", "ppo"): "rl-ppo-torchrl"}
@@ -95,9 +98,10 @@ class RLArgs(RunFlags):
     candidates: int = arg(_ENV_DEFAULTS["candidates"], "pick: candidates per step (target, near-target, newest, "
                           "greedy, the rest uniform)", parse=size_int)
     local_scale: float = arg(_ENV_DEFAULTS["local_scale"], "pick: std of the newest/greedy candidates, in extensions",
-                             parse=positive_float)
+                             parse=bounded(float, 0, True, "a positive number of extensions", MAX_LOCAL_SCALE))
     target_scale: float = arg(_ENV_DEFAULTS["target_scale"], "pick: std of the near-target candidate, as a "
-                              "fraction of the box", parse=positive_float)
+                              "fraction of the box", parse=bounded(float, 0, True, "a positive fraction of the box",
+                                                                   MAX_TARGET_SCALE))
     action_frame: str = arg(_ENV_DEFAULTS["action_frame"], "box: policy actions in [-1, 1] are offsets from the "
                             "active tree's target (target) or the rescaled state box (absolute)",
                             choices=("target", "absolute"))
@@ -112,7 +116,7 @@ class RLArgs(RunFlags):
     progress_reward: float = arg(_ENV_DEFAULTS["progress_reward"], "reward shaping: coef of the potential-based "
                                  "progress term (ProgressReward; 0: the env's reward only)", parse=non_negative_float)
     reward_scale: float = arg(_ENV_DEFAULTS["reward_scale"], "multiply every reward by this (returns of order 1)",
-                              parse=positive_float)
+                              parse=bounded(float, 0, True, "a positive number", MAX_REWARD_SCALE))
     # --- networks (the shared TreeEncoder + the library's head)
     hidden_channels: int = arg(32, "TreeEncoder node embedding width", parse=size_int)
     num_layers: int = arg(2, "TreeEncoder message-passing layers", parse=non_negative_int)
