@@ -191,9 +191,8 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     # sampler-major: a worker runs one sampler over the problems, warm, as a user plans with it. Tried
     # problem-major (every sampler per problem in turn): the switching cost the learned rows their
     # caches, maze2d gnn 1.12-1.17x uniform's wall time against 0.89-0.91x (two alternated runs each).
-    # The returned paths are re-checked after all timed runs, not between them: the re-check's
-    # pybullet work at 10x the resolution evicted the next run's caches (Panda, sphere checker: the
-    # first planner step 290 instead of 155 us, the median run 15% slower).
+    # The returned paths are re-checked after all timed runs, not between them: the re-check's pybullet
+    # work at 10x the resolution evicted the next run's caches (docs/journal, 2026-12-05, the re-check).
     jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings, (), False)
             for name, checkpoint, settings in learned for i in indices]
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
@@ -207,25 +206,23 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         row[next(k for k, r in enumerate(row) if r["problem"] == record["problem"])] = record
         bar.update(1)
 
+    def run_jobs(own: WorkerPool | None, todo: list[tuple], done, fn) -> None:
+        if args.ray is not None:
+            run_on_ray(args.ray, args.workers, args.modules, todo, done, fn)
+        elif own is not None:
+            own.run(todo, done, fn)
+        else:
+            for job in todo:
+                done(fn(job))
+
     def dispatch(own: WorkerPool | None) -> None:
         """Both phases on one set of workers: the timed runs, then the re-checks of their paths."""
-        phases = ((lambda: jobs, finished, _run_episode_job),
-                  (lambda: [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r],
-                   rechecked, _recheck_episode_job))
-        for k, (todo, done, fn) in enumerate(phases):
-            todo = todo()
-            if not todo:
-                continue
-            if k == 1:
-                bar.reset(total=len(todo))
-                bar.set_description(f"{args.task} re-check")
-            if args.ray is not None:
-                run_on_ray(args.ray, args.workers, args.modules, todo, done, fn)
-            elif own is not None:
-                own.run(todo, done, fn)
-            else:
-                for job in todo:
-                    done(fn(job))
+        run_jobs(own, jobs, finished, _run_episode_job)
+        rechecks = [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r]
+        if rechecks:
+            bar.reset(total=len(rechecks))
+            bar.set_description(f"{args.task} re-check")
+            run_jobs(own, rechecks, rechecked, _recheck_episode_job)
 
     reason = None
     try:
