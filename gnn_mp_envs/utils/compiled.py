@@ -1,7 +1,8 @@
-"""Optional numba compilation of the planner's innermost loops.
+"""Lazy numba compilation of the planner's innermost loops.
 
-numba is not a core dependency: without it each loop runs as the plain Python function it is
-written as (the same operations, so the same floats), and tests hold the two to equality.
+Each loop is written as a plain Python function and compiled on first use; where numba cannot be
+imported (the sphere checker needs it, the other tasks do not) the loop runs as that function (the
+same operations, so the same floats), and tests hold the two to equality.
 """
 
 from __future__ import annotations
