@@ -23,6 +23,8 @@ from gnn_mp_envs.utils.compiled import lazy_njit
 #: The independent re-check of returned paths (``path_valid(..., refine=...)``) interpolates edges this
 #: many times finer than the planner's collision-checking resolution.
 PATH_CHECK_REFINE = 10
+#: Steering refuses motions shorter than this (the problem's distance): a zero-length edge adds nothing.
+ZERO_LENGTH = 1e-12
 
 
 
@@ -225,7 +227,7 @@ class Problem:
     def steer(self, x_from: np.ndarray, x_to: np.ndarray) -> Edge | None:
         """Extend from ``x_from`` toward ``x_to`` by at most ``step_size``; None if blocked."""
         d = float(self.distance(x_to, x_from))
-        if d < 1e-12:
+        if d < ZERO_LENGTH:
             return None
         x_new = x_to if d <= self.step_size else self.interpolate(x_from, x_to, self.step_size / d)
         x_new = self.normalize(np.asarray(x_new, dtype=np.float64))

@@ -120,6 +120,14 @@ def _write_row(i: int, states: np.ndarray, tree_id: np.ndarray, parents: np.ndar
 compiled_write_row = lazy_njit(_write_row)
 
 
+def _row_writer(problem: Problem | None):
+    """The compiled row write for ``problem`` where its features are plain differences; None (numpy's
+    path, e.g. the pendulum's wrapped angles) otherwise."""
+    if problem is None or type(problem).difference is not Problem.difference:
+        return None
+    return compiled_write_row()
+
+
 class GraphObservation:
     """Preallocated observation arrays; :meth:`add` writes one row per new node."""
 
@@ -153,9 +161,7 @@ class GraphObservation:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._differences = self.node_features[:, :2 * self.state_dim].reshape(self.max_nodes, 2, self.state_dim)
-        problem = self._problem
-        self._write = (compiled_write_row() if problem is not None and type(problem).difference is Problem.difference
-                       else None)
+        self._write = _row_writer(self._problem)
 
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
@@ -179,8 +185,7 @@ class GraphObservation:
             self.obstacles[:k, 1:] = obstacle_rows
         self._problem = problem
         self._endpoints = np.stack([problem.start, problem.goal])
-        # the compiled row write where the features are plain differences (the wrapped ones stay numpy's)
-        self._write = compiled_write_row() if type(problem).difference is Problem.difference else None
+        self._write = _row_writer(problem)
         for i in range(len(tree)):
             self.add(tree, i)
 

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import Edge, Problem
+from gnn_mp_envs.core.problem import ZERO_LENGTH, Edge, Problem
 from gnn_mp_envs.tasks.arm.scenes import Obstacle, Scene
 from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld
 
@@ -156,7 +156,7 @@ class ArmProblem(Problem):
         if self.checker == "spheres":
             x_new, dist, valid, checks = self.world.sphere_checker(self.scene).steer(
                 x_from, x_to, self.step_size, self.resolution, self._low, self._high, self.bisection)
-            if dist < 1e-12:
+            if dist < ZERO_LENGTH:
                 return None
             self.edges_checked += 1
             self.collision_checks += checks
@@ -165,7 +165,7 @@ class ArmProblem(Problem):
             return Edge(x_new, dist if dist <= self.step_size else self.step_size)
         d = x_to - x_from
         dist = math.sqrt(float(d @ d))
-        if dist < 1e-12:
+        if dist < ZERO_LENGTH:
             return None
         if dist <= self.step_size:
             x_new = np.array(x_to, dtype=np.float64)

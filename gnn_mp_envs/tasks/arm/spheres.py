@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from gnn_mp_envs.core.problem import ZERO_LENGTH
 from gnn_mp_envs.tasks.arm.urdf import FIXED, PRISMATIC, REVOLUTE, URDFRobot, read_urdf
 from llvmlite import ir
 from numba import carray, types
@@ -53,9 +54,6 @@ _TABLES: dict[tuple, tuple] = {}
 #: Walks compare squared distances where they differ by more than this factor (far above rounding), so
 #: that a node's pruning and the least clearance are those of comparing the distances themselves.
 SQUARES_MARGIN = 1.0 + 1e-12
-#: Steering refuses motions shorter than this (joint-space L2), as :meth:`Problem.steer
-#: <gnn_mp_envs.core.problem.Problem.steer>` does.
-ZERO_LENGTH = 1e-12
 #: Format tag of the sphere model files.
 MODEL_FORMAT = "gnn-mp-envs sphere model, version 1"
 
@@ -1228,10 +1226,11 @@ class SphereChecker:
         ``(x_new undefined, distance, False, 0)``."""
         distance = self._distance
         x_new = np.empty(self.dof)
-        r = self._steer_run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
-        while r == 0:
-            self._grow_for(min(step, float(distance[0])), resolution)
+        while True:
             r = self._steer_run(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
+            if r != 0:
+                break
+            self._grow_for(min(step, float(distance[0])), resolution)
         d = float(distance[0])
         if d < ZERO_LENGTH:
             return x_new, d, False, 0

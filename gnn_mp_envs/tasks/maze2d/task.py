@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import Edge, InvalidProblemError, Problem
+from gnn_mp_envs.core.problem import ZERO_LENGTH, Edge, InvalidProblemError, Problem
 from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task, check_keys
 
@@ -341,7 +341,7 @@ class Maze2DProblem(Problem):
         tx, ty = x_to.tolist()
         dx, dy = tx - fx, ty - fy
         d = math.sqrt(dx * dx + dy * dy)        # pair_distance(x_to, x_from)
-        if d < 1e-12:
+        if d < ZERO_LENGTH:
             return None
         if d <= self.step_size:
             nx, ny = tx, ty
