@@ -145,7 +145,7 @@ def cmd_samplers() -> int:
 
 #: One-task flags a suite would not use (it keeps --seed, --workers, --render and --import).
 SUITE_IGNORED = ("task", "samplers", "problems", "split", "max_nodes", "scene", "checker", "ray", "json", "plot",
-                 "ompl_log", "ompl_time_limit", "checkpoints", "settings")
+                 "ompl_log", "ompl_time_limit", "checkpoints", "settings", "success_plot", "save_paths", "recheck")
 
 
 def cmd_benchmark(ns: argparse.Namespace) -> int:
@@ -167,6 +167,7 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         defaults = bm.BenchmarkArgs()
         ignored = [f"--{f.name.replace('_', '-')}".replace("--checkpoints", "--checkpoint").replace("--settings",
                                                                                                       "--setting")
+                   .replace("--recheck", "--no-recheck")
                    for f in dataclasses.fields(bm.BenchmarkArgs)
                    if f.name in SUITE_IGNORED and getattr(args, f.name) != getattr(defaults, f.name)]
         if ignored:

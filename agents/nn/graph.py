@@ -177,6 +177,35 @@ def to_pyg(obs: Mapping, features: str = "node_features") -> Data | Batch:
     return out
 
 
+#: The arrays of ``TreePlanningEnv.export_tree``, the input of :func:`tree_data`.
+TREE_KEYS = ("states", "parent", "tree_id", "cost", "controls", "edges", "start", "goal", "path_nodes")
+
+
+def tree_data(tree: Mapping) -> Data:
+    """A tree exported by ``TreePlanningEnv.export_tree`` (or loaded back from ``np.savez``) as a
+    PyTorch Geometric ``Data``: ``pos`` the node states (float64, exact), ``x`` the same as float32
+    (what a model reads), ``edge_index`` the tree edges in both directions (the order of
+    :func:`tree_edge_index`, as :func:`to_pyg`), and per node ``parent``, ``tree_id``, ``cost``,
+    ``controls``; ``start`` and ``goal`` ``(1, d)``; ``path_nodes`` the returned path (empty
+    until solved)."""
+    missing = [k for k in TREE_KEYS if k not in tree]
+    if missing:
+        raise ValueError(f"tree_data: not an export_tree() result, missing {missing}")
+    states = torch.as_tensor(np.asarray(tree["states"], dtype=np.float64))
+    n = states.shape[0]
+    parent = torch.as_tensor(np.asarray(tree["parent"], dtype=np.int64))
+    if states.dim() != 2 or parent.shape != (n,):
+        raise ValueError(f"tree_data: states must be (n, d) and parent (n,), got {tuple(states.shape)} and "
+                         f"{tuple(parent.shape)}")
+    return Data(x=states.float(), pos=states, edge_index=tree_edge_index(parent, n), parent=parent,
+                tree_id=torch.as_tensor(np.asarray(tree["tree_id"], dtype=np.int64)),
+                cost=torch.as_tensor(np.asarray(tree["cost"], dtype=np.float64)),
+                controls=torch.as_tensor(np.asarray(tree["controls"], dtype=np.float64)),
+                start=torch.as_tensor(np.asarray(tree["start"], dtype=np.float64)).reshape(1, -1),
+                goal=torch.as_tensor(np.asarray(tree["goal"], dtype=np.float64)).reshape(1, -1),
+                path_nodes=torch.as_tensor(np.asarray(tree["path_nodes"], dtype=np.int64)), num_nodes=n)
+
+
 def to_pyg_per_graph(obs: Mapping, features: str = "node_features") -> Data | Batch:
     """Reference for :func:`to_pyg`: one ``Data`` per element, then ``Batch.from_data_list``.
 

@@ -261,6 +261,35 @@ class TreePlanningEnv(gym.Env):
         self._closed = True
         super().close()
 
+    def export_tree(self) -> dict[str, np.ndarray]:
+        """The tree(s) of the current episode as plain numpy arrays (copies), to keep or save
+        (``np.savez(file, **env.unwrapped.export_tree())``); ``agents.nn.graph.tree_data`` turns
+        them into a PyTorch Geometric ``Data``. ``n`` nodes in insertion order (the observation's
+        rows), ``d`` the state dimension, ``c`` the control dimension (0 for geometric tasks):
+
+        * ``states`` ``(n, d)`` float64, ``parent`` ``(n,)`` int64 (-1 for a root),
+          ``tree_id`` ``(n,)`` int64 (0: the start's tree, 1: BiRRT's goal tree),
+          ``cost`` ``(n,)`` float64 (cost-to-come from the node's root), ``controls`` ``(n, c)``
+          float64 (the control of the edge into the node; zeros for a root);
+        * ``edges`` ``(n - roots, 2)`` int64: ``[parent, child]`` per tree edge, children in order;
+        * ``start``, ``goal`` ``(d,)`` float64; ``path_nodes`` ``(k,)`` int64: the returned path's
+          nodes, start to goal (empty until solved; BiRRT's path crosses from one tree to the other
+          once, an edge of neither tree).
+        """
+        self._check_open("export_tree")
+        if self.planner is None:
+            raise RuntimeError("call reset() before export_tree()")
+        tree, n = self.planner.tree, self.planner.tree.size
+        parent = tree.parent[:n].copy()
+        children = np.flatnonzero(parent >= 0)
+        sol = self.planner.solution
+        return {"states": tree.states[:n].copy(), "parent": parent, "tree_id": tree.tree_id[:n].copy(),
+                "cost": tree.cost[:n].copy(), "controls": tree.controls[:n].copy(),
+                "edges": np.stack([parent[children], children], axis=1).astype(np.int64),
+                "start": np.array(self.problem.start, dtype=np.float64),
+                "goal": np.array(self.problem.goal, dtype=np.float64),
+                "path_nodes": (np.zeros(0, np.int64) if sol is None else np.asarray(sol.nodes, np.int64).copy())}
+
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
         if type(action) is np.ndarray and action.dtype.kind == "f":     # a sampler's float array: the common case

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
+from gnn_mp_envs.registration import BUILTIN_TASKS
 from train.args import import_modules as import_plugins
 from train.args import (UsageError, arg, check_output_path, check_ray_address, figure_path, name_list, non_negative_int,
                         positive_float, positive_int, seed_int, worker_count)
@@ -54,7 +55,8 @@ MAX_PROBLEMS = 1_000_000
 class BenchmarkArgs:
     """Flags of one benchmark run (one task, several samplers)."""
 
-    task: str = arg("maze2d", "task family (built in: maze2d, pendulum, arm; --import adds others)")
+    task: str = arg("maze2d", f"task family (built in: {', '.join(t.name for t in BUILTIN_TASKS)}; --import adds "
+                    "others)")
     samplers: list[str] = arg(["uniform", "goal-bias"], "comma-separated sampler names (see `gnn-mp "
                               "samplers`; OMPL rows: ompl-rrtconnect / ompl-rrt for maze2d and arm, "
                               "ompl-rrt / ompl-kpiece for the pendulum)", parse=name_list)
@@ -77,12 +79,20 @@ class BenchmarkArgs:
     render: Path | None = arg(None, "write tree-growth images of problem 0 for each sampler", metavar="DIR")
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
+    success_plot: Path | None = arg(None, "write the success-vs-time figure: the share of problems solved by each "
+                                    "time budget, a curve per row (Planner Arena's progress view)", parse=figure_path)
+    save_paths: bool = arg(False, "store each solved run's returned path in --json (its states, and the controls "
+                           "of a kinodynamic task's edges)")
+    recheck: bool = arg(True, "skip re-checking the returned paths (the longest phase with pybullet): success is "
+                        "then the planner's word, unverified, and marked so in the table and --json")
     ompl_time_limit: float | None = arg(None, "seconds per problem: OMPL's solve limit (an OMPL row's success) and "
                                         "the axis of the success-vs-time figure (default: the task's, 10 s for "
                                         "most)",
                                         parse=positive_float)
     checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable): a .pt, or the SB3 .zip of a "
-                                       "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it)",
+                                       "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it); "
+                                       "a SAMPLER that is no registered name is a row of its own, run by the sampler of "
+                                       "the file's kind (--samplers uniform,rl-ppo,mine --checkpoint mine=PATH)",
                                        flag="--checkpoint", metavar="SAMPLER=PATH", parse=checkpoint_pair,
                                        append=True)
     settings: list[tuple] = arg([], "a sampler setting instead of the one stored with its weights, e.g. "
@@ -190,8 +200,9 @@ def validate_args(args: BenchmarkArgs) -> None:
             supported = ", ".join(ompl_rows_for(args.task)) or "none"
             raise BenchmarkError(f"OMPL planner {name!r} is not available for task {args.task!r} "
                                  f"(supported: {supported})")
-        if name not in known:
-            raise BenchmarkError(f"unknown sampler {name!r}; known: {', '.join(known)}")
+        if name not in known and not (name in args.checkpoints and not is_ompl(name)):   # else a row of its own
+            raise BenchmarkError(f"unknown sampler {name!r}; known: {', '.join(known)} (a row of your own: "
+                                 f"--checkpoint {name}=PATH)")
     for name, _, _ in args.settings:
         if name not in args.samplers or is_ompl(name):
             raise BenchmarkError(f"--setting given for {name!r}, which is not one of the --samplers")
@@ -205,7 +216,16 @@ def validate_args(args: BenchmarkArgs) -> None:
             raise BenchmarkError(f"missing checkpoint for sampler {name!r}: {path} is not a file")
         if not os.access(path, os.R_OK):
             raise BenchmarkError(f"checkpoint of sampler {name!r} is not readable: {path}")
+        if name not in SAMPLERS:                # a labelled row: the sampler that runs the file's kind
+            from agents.registry import sampler_for_checkpoint
+            try:
+                sampler_for_checkpoint(path)
+            except ValueError as exc:
+                raise BenchmarkError(f"--checkpoint {name}={path}: {str(exc).splitlines()[0]}") from None
+    if args.save_paths and args.json is None:
+        raise BenchmarkError("--save-paths stores the paths in the --json report: give --json FILE too")
     for flag, path, is_dir in (("--json", args.json, False), ("--plot", args.plot, False),
+                               ("--success-plot", args.success_plot, False),
                                ("--render", args.render, True), ("--ompl-log", args.ompl_log, True)):
         if path is not None:
             check_output_path(flag, Path(path), is_dir)

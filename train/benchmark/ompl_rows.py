@@ -62,7 +62,8 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
                   file=sys.stderr) as bar:
             results = ompl_runner.run_ompl(args.task, indices, split=args.split, task_kwargs=task_kwargs,
                                            planner=planner, time_limit=time_limit_s(args), seed=args.seed,
-                                           on_problem=lambda _: bar.update(1), modules=args.modules)
+                                           on_problem=lambda _: bar.update(1), modules=args.modules,
+                                           keep_paths=args.save_paths)
     except ompl_runner.OMPLUnavailableError:
         raise BenchmarkError(OMPL_INSTALL_HINT) from None
     except subprocess.TimeoutExpired as exc:
@@ -71,7 +72,15 @@ def run_ompl_rows(args: BenchmarkArgs, planner_row: str, indices: list[int]) -> 
     except (ValueError, NotImplementedError, RuntimeError) as exc:
         raise BenchmarkError(f"{planner_row} on {args.task}: {exc}".replace("\n", " ")) from None
     # OMPL's RNG is seeded once per runner call (with --seed + 1), so the run's seed is --seed.
-    return [_ompl_record(planner_row, i, args.seed, r) for i, r in zip(indices, results)]
+    records = [_ompl_record(planner_row, i, args.seed, r) for i, r in zip(indices, results)]
+    if args.save_paths:     # OMPL's own path: its states; a control planner's controls and durations per edge
+        for record, result in zip(records, results):
+            solved = record["success"] and result.get("path") is not None
+            record["path"] = result["path"] if solved else None
+            record["path_controls"] = result.get("controls") if solved else None
+            if solved and result.get("durations") is not None:
+                record["path_durations"] = result["durations"]
+    return records
 
 
 def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path) -> Path | None:

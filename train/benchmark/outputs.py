@@ -1,4 +1,4 @@
-"""One benchmark from flags to files: run, print the table, write --json/--plot/--render/--ompl-log."""
+"""One benchmark from flags to files: run, print the table, write the outputs the flags ask for."""
 
 from __future__ import annotations
 
@@ -10,14 +10,14 @@ from typing import Any
 from gnn_mp_envs.utils.io import atomic_write_text
 from train.benchmark.args import BenchmarkArgs
 from train.benchmark.ompl_rows import write_ompl_logs
-from train.benchmark.plots import plot_report, render_growth
+from train.benchmark.plots import plot_report, plot_success_vs_time, render_growth
 from train.benchmark.runs import BenchmarkIncomplete, run_benchmark
 from train.benchmark.tables import families_of, format_family_table, format_table
 from train.workers import WorkerPool
 
 
 def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path]:
-    """Write the requested --json / --plot / --render / --ompl-log outputs."""
+    """Write the requested --json / --plot / --success-plot / --render / --ompl-log outputs."""
     written: dict[str, Path] = {}
     if args.json is not None:
         write_json(args.json, report)
@@ -25,6 +25,9 @@ def write_outputs(args: BenchmarkArgs, report: dict[str, Any]) -> dict[str, Path
     if args.plot is not None:
         plot_report(report, args.plot)
         written["plot"] = args.plot
+    if args.success_plot is not None:
+        plot_success_vs_time(report, args.success_plot)
+        written["success_plot"] = args.success_plot
     if args.render is not None:
         for i, path in enumerate(render_growth(args, args.render)):
             written[f"render{i}"] = path

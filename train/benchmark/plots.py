@@ -87,25 +87,38 @@ def plot_success_vs_time(report: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    from train.benchmark.stats import solved as is_solved
-    limit, max_nodes = report.get("time_limit_s", 10.0), report["max_nodes"]
-    times = [r["wall_time_s"] for runs in report["runs"].values() for r in runs if r.get("wall_time_s")]
-    grid = np.geomspace(max(min(times, default=1e-3) / 2, 1e-4), limit, 200)
+    grid, curves = success_curves(report)
+    max_nodes = report["max_nodes"]
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for name, runs in report["runs"].items():
-        solved = np.array([r["wall_time_s"] for r in runs if is_solved(r, max_nodes) and r.get("wall_time_s") is not None])
-        ax.step(grid, [(solved <= t).sum() / max(len(runs), 1) for t in grid], where="post", label=name)
+    for name, fractions in curves.items():
+        ax.step(grid, fractions, where="post", label=name)
     ax.set_xscale("log")
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("time budget [s] (planning loop incl. inference; OMPL: solve time)")
     ax.set_ylabel("fraction of problems solved")
-    ax.set_title(f"{report['task']}: {report['problems']} problems, node budget {max_nodes:,}", fontsize=9)
+    unverified = "; paths not re-checked (--no-recheck)" if report.get("rechecked") is False else ""
+    ax.set_title(f"{report['task']}: {report['problems']} problems, node budget {max_nodes:,}{unverified}", fontsize=9)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120)
     plt.close(fig)
+
+
+def success_curves(report: dict[str, Any], points: int = 200) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The success-vs-time figure's data: time budgets (log-spaced up to the report's time limit) and,
+    per row, the share of its problems solved (:func:`~train.benchmark.stats.solved`) within each."""
+    from train.benchmark.stats import solved as is_solved
+    limit, max_nodes = report.get("time_limit_s", 10.0), report["max_nodes"]
+    times = [r["wall_time_s"] for runs in report["runs"].values() for r in runs if r.get("wall_time_s")]
+    grid = np.geomspace(max(min(min(times, default=1e-3) / 2, limit / 10), 1e-4), limit, points)
+    curves = {}
+    for name, runs in report["runs"].items():
+        solved = np.sort([r["wall_time_s"] for r in runs
+                          if is_solved(r, max_nodes) and r.get("wall_time_s") is not None])
+        curves[name] = np.searchsorted(solved, grid, side="right") / max(len(runs), 1)
+    return grid, curves
 
 
 def snapshot_schedule(max_nodes: int) -> list[int]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Iterable
 
@@ -44,10 +45,12 @@ def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any
     measured wall time (the benchmark reseeds it and resets the env before each problem)."""
     import json
 
-    from agents.registry import load_sampler
+    from agents.registry import SAMPLERS, load_sampler, sampler_for_checkpoint
     key = (name, task, checkpoint, json.dumps(settings, sort_keys=True))   # values may be dicts (unhashable)
     if key not in _SAMPLERS:
-        sampler = load_sampler(name, task=task, seed=0, checkpoint=checkpoint, **dict(settings))
+        # a row of the user's own name (--checkpoint mine=PATH): the sampler that runs the file's kind
+        base = name if name in SAMPLERS or checkpoint is None else sampler_for_checkpoint(checkpoint)
+        sampler = load_sampler(base, task=task, seed=0, checkpoint=checkpoint, **dict(settings))
         if env is not None:
             sampler.act(env.reset(seed=0, options={"index": 0})[0])
         _SAMPLERS[key] = sampler
@@ -56,10 +59,12 @@ def cached_sampler(name: str, task: str, checkpoint: str | None = None, env: Any
 
 def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index: int, seed: int,
                 checkpoint: str | None = None, settings: tuple[tuple[str, Any], ...] = (),
-                snapshot_iterations: Iterable[int] = (), recheck: bool = True) -> dict[str, Any]:
+                snapshot_iterations: Iterable[int] = (), recheck: bool = True,
+                keep_path: bool = False) -> dict[str, Any]:
     """Plan problem ``index`` with one sampler; the record of counters (and optional snapshots).
     ``recheck=False`` leaves the returned path's re-check to :func:`recheck_episode` (the record
-    carries the path until then)."""
+    carries the path until then). ``keep_path``: the record keeps the returned path (``path``, and
+    ``path_controls`` where the task has controls; None when not solved), as ``--save-paths`` does."""
     from gnn_mp_envs.evaluation import plan_problem, problem_seed
     snapshots_at = set(snapshot_iterations)
     env = cached_env(task, env_kwargs, render=bool(snapshots_at))
@@ -86,10 +91,23 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
             _recheck(task, env.problem, record, solution.states, solution.controls)
         else:
             record[_PATH] = (solution.states, solution.controls)
+    if keep_path:
+        record.update(path_record(solution))
     if snapshots_at:
         snapshots.append((run.iterations, run.nodes_expanded, env.render()))
         record["snapshots"] = snapshots
     return record
+
+
+def path_record(solution: Any) -> dict[str, Any]:
+    """A run's returned path as the report stores it (``--save-paths``): ``path`` the states, start to
+    goal, ``path_controls`` row *i* the control of the edge into state *i* (row 0 zeros; None for a
+    geometric task); both None when not solved."""
+    if solution is None:
+        return {"path": None, "path_controls": None}
+    controls = np.asarray(solution.controls)
+    return {"path": np.asarray(solution.states, dtype=np.float64).tolist(),
+            "path_controls": controls.astype(np.float64).tolist() if controls.size else None}
 
 
 #: Key of a record's returned path until :func:`recheck_episode` re-checks it (never in a report).
@@ -193,8 +211,10 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     # caches, maze2d gnn 1.12-1.17x uniform's wall time against 0.89-0.91x (two alternated runs each).
     # The returned paths are re-checked after all timed runs, not between them: the re-check's pybullet
     # work at 10x the resolution evicted the next run's caches (docs/journal, 2026-12-05, the re-check).
-    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings, (), False)
+    jobs = [(args.task, env_kwargs, name, i, args.seed, checkpoint, settings, (), False, args.save_paths)
             for name, checkpoint, settings in learned for i in indices]
+    if not args.recheck:       # never silently: success without the re-check is the planner's word
+        tqdm.write(f"{args.task}: {NO_RECHECK}", file=sys.stderr)
     bar = tqdm(total=len(jobs), desc=f"{args.task}", unit="run", disable=not args.progress, file=sys.stderr)
 
     def finished(record: dict[str, Any]) -> None:
@@ -219,12 +239,16 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         """Both phases on one set of workers: the timed runs, then the re-checks of their paths."""
         run_jobs(own, jobs, finished, _run_episode_job)
         rechecks = [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r]
-        if rechecks:
+        if rechecks and args.recheck:
+            tqdm.write(f"{args.task}: re-checking the {len(rechecks)} returned paths edge by edge at the planner's "
+                       f"resolution and {PATH_CHECK_REFINE}x finer (untimed; --no-recheck skips it)", file=sys.stderr)
+            start = time.perf_counter()
             bar.reset(total=len(rechecks))
             bar.set_description(f"{args.task} re-check")
             run_jobs(own, rechecks, rechecked, _recheck_episode_job)
+            recheck_s.append(time.perf_counter() - start)
 
-    reason = None
+    reason, recheck_s = None, []
     try:
         if pool is not None or args.ray is not None or min(args.workers, len(jobs)) <= 1:
             dispatch(pool)
@@ -239,6 +263,8 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         reason = str(exc)
     finally:
         bar.close()
+        if recheck_s:
+            print(f"{args.task}: re-check done in {recheck_s[0]:.1f} s", file=sys.stderr)
         for row in runs.values():       # a run stopped before its re-check keeps no verdict
             for r in row:
                 r.pop(_PATH, None)
@@ -251,6 +277,11 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         raise BenchmarkIncomplete(f"{reason}; {done} of {len(jobs) + len(indices) * sum(map(is_ompl, args.samplers))} "
                                   "runs finished", {**report, "partial": True}, interrupted=reason == "interrupted")
     return report
+
+
+#: What ``--no-recheck`` announces (and the table's note says).
+NO_RECHECK = ("--no-recheck: the returned paths are not re-checked; success counts every path the planner "
+              "returned (unverified)")
 
 
 class BenchmarkIncomplete(BenchmarkError):

@@ -67,6 +67,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "scene": args.scene,
         "checker": args.checker,
         "samplers": list(args.samplers),
+        "rechecked": bool(args.recheck),      # False: --no-recheck, success unverified
         "runs": {name: [{k: v for k, v in r.items() if k != "snapshots"} for r in runs[name]]
                  for name in args.samplers},
     }

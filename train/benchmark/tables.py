@@ -23,6 +23,8 @@ def path_check_note(report: dict[str, Any]) -> str:
     planner's resolution and, independently, at ``PATH_CHECK_REFINE`` times finer; rows with
     failures are named."""
     from gnn_mp_envs.core.problem import PATH_CHECK_REFINE
+    if report.get("rechecked") is False:
+        return UNVERIFIED_NOTE
     runs = report["runs"]
     checked = [r for rows in runs.values() for r in rows if r.get("path_valid") is not None]
     fine = [r for rows in runs.values() for r in rows if r.get("path_valid_fine") is not None]
@@ -41,6 +43,10 @@ def path_check_note(report: dict[str, Any]) -> str:
     return "returned paths re-checked: " + "; ".join(notes)
 
 
+#: The note of a report made with ``--no-recheck`` (in place of the re-check's counts).
+UNVERIFIED_NOTE = ("returned paths NOT re-checked (--no-recheck): success is the planner's word, unverified "
+                   "(OMPL rows: re-checked by their runner)")
+
 #: What every table of a report counts as solved (:func:`train.benchmark.stats.solved`).
 SOLVED_NOTE = "solved = a path found within {:,} nodes that passes the re-check"
 
@@ -57,8 +63,9 @@ def success_rate(report: dict[str, Any], name: str) -> float | None:
 
 def format_table(report: dict[str, Any]) -> str:
     """A fixed-width table: success rate and median [q25, q75] per metric."""
-    header = ["sampler", "success", "nodes expanded", "edges", "collision checks", "path length*",
-              "wall time [ms]", "sampler / planner [ms]"]
+    unverified = report.get("rechecked") is False
+    header = ["sampler", "success (unverified)" if unverified else "success", "nodes expanded", "edges",
+              "collision checks", "path length*", "wall time [ms]", "sampler / planner [ms]"]
     rows = [header]
     for name, s in report["results"].items():
         rate = success_rate(report, name)
@@ -80,7 +87,10 @@ def format_table(report: dict[str, Any]) -> str:
     from gnn_mp_envs.registration import TASK_SPECS
     spec = TASK_SPECS.get(report["task"])
     unit = f" ({spec.path_unit})" if spec is not None else ""
-    notes = [f"{SOLVED_NOTE.format(report['max_nodes']).replace('solved', 'success', 1)}; median [q25, q75] over "
+    solved_note = SOLVED_NOTE.format(report['max_nodes']).replace('solved', 'success', 1)
+    if unverified:
+        solved_note = solved_note.replace("that passes the re-check", "(not re-checked)")
+    notes = [f"{solved_note}; median [q25, q75] over "
              f"the problems; *path length{unit} over successful runs only",
              "edges = extensions checked, blocked ones and goal connections included (so they can exceed nodes)",
              "wall time = planning loop incl. sampler inference (OMPL: solve time); it varies with machine load, "
