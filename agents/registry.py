@@ -4,6 +4,7 @@
     sampler = load_sampler("gnn", task="arm")                              # the shipped weights
     sampler = load_sampler("gnn", task="arm", checkpoint="runs/.../model.pt")
     sampler = load_sampler("uniform", bounds=(low, high))                  # a box of your own
+    sampler = load_sampler(sampler_for_checkpoint(path), checkpoint=path)  # whichever sampler runs the file
 
 A factory receives ``(low, high, task, seed, checkpoint, **settings)``; the registry refuses,
 in one line each, an unknown name, an unknown task, bounds that are not the task's, a setting
@@ -35,17 +36,40 @@ class SamplerEntry:
     settings: tuple[str, ...] | None = ()
     #: Whether it needs weights (then ``task=`` or ``checkpoint=``).
     learned: bool = False
+    #: The checkpoint kinds it loads (:func:`sampler_for_checkpoint`: a file's sampler from its kind).
+    kinds: tuple[str, ...] = ()
 
 
 SAMPLERS: dict[str, SamplerEntry] = {}
 
 
 def register_sampler(name: str, factory: Callable[..., "Sampler"], description: str = "", *,
-                     settings: tuple[str, ...] | None = (), learned: bool = False) -> None:
-    """Add a sampler to the registry (names are unique)."""
+                     settings: tuple[str, ...] | None = (), learned: bool = False,
+                     kinds: tuple[str, ...] = ()) -> None:
+    """Add a sampler to the registry (names are unique); ``kinds``: the checkpoint kinds it loads, so
+    that a file of one of them runs as this sampler under a name of its own
+    (``gnn-mp benchmark --checkpoint NAME=PATH``, :func:`sampler_for_checkpoint`)."""
     if name in SAMPLERS:
         raise ValueError(f"sampler {name!r} is already registered")
-    SAMPLERS[name] = SamplerEntry(factory, description, settings, learned)
+    SAMPLERS[name] = SamplerEntry(factory, description, settings, learned, tuple(kinds))
+
+
+def sampler_for_checkpoint(checkpoint: str | Path) -> str:
+    """The registered sampler that runs ``checkpoint``, from the kind the file holds (the first sampler
+    registered with that kind: ``rl/torchrl-ppo-pick`` -> ``rl-ppo-torchrl``, ``tree/gnn`` -> ``gnn``;
+    an SB3 ``.zip`` of a ``gnn-mp train rl`` run reads as its policy's kind). One-line ``ValueError``
+    (a :class:`~agents.checkpoints.CheckpointError` for a file that is no checkpoint)."""
+    missing = missing_learned_modules()
+    if missing:
+        raise ValueError(missing_extra_message(f"checkpoint {checkpoint}", missing))
+    from agents.checkpoints import read_checkpoint
+    kind = read_checkpoint(checkpoint)["kind"]
+    for name, entry in SAMPLERS.items():
+        if kind in entry.kinds:
+            return name
+    runs = sorted({k for entry in SAMPLERS.values() for k in entry.kinds})
+    raise ValueError(f"{checkpoint}: a {kind!r} checkpoint, which no registered sampler runs (samplers run "
+                     f"{', '.join(runs)})")
 
 
 def available_samplers() -> list[str]:
@@ -164,25 +188,33 @@ def _lazy(module: str, function: str, name: str) -> Callable[..., "Sampler"]:
 register_sampler("uniform", _uniform, "uniform over the state bounds")
 register_sampler("goal-bias", _goal_bias, "uniform with 5% samples at the active tree's target",
                  settings=("goal_bias",))
+#: The checkpoint kinds of the built-in learned samplers (``agents.tree.samplers.NAME_KINDS``,
+#: ``agents.rl.sampler.RL_SAMPLERS``; written out so that listing the registry imports no torch).
+BUILTIN_KINDS: dict[str, tuple[str, ...]] = {
+    "gnn": ("tree/gnn", "tree/gnn-scorer"), "cvae": ("tree/cvae",), "gnn-cvae": ("tree/gnn-cvae",),
+    "rl-ppo": ("rl/sb3-ppo", "rl/sb3-ppo-pick"), "rl-sac": ("rl/sb3-sac",),
+    "rl-ppo-torchrl": ("rl/torchrl-ppo", "rl/torchrl-ppo-pick")}
 register_sampler("gnn", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn"),
                  "learned (Algorithm 1): causal tree GNN, a node-mixture over the tree (pendulum: a scorer of "
                  "16 uniform candidates); shipped weights per task with their uniform/goal mix",
-                 settings=None, learned=True)
+                 settings=None, learned=True, kinds=BUILTIN_KINDS["gnn"])
 register_sampler("cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "cvae"),
                  "learned baseline (Ichter et al. 2018): CVAE on start, goal and obstacles; ignores the tree",
-                 settings=None, learned=True)
+                 settings=None, learned=True, kinds=BUILTIN_KINDS["cvae"])
 register_sampler("gnn-cvae", _lazy("agents.tree.samplers", "load_tree_sampler", "gnn-cvae"),
-                 "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True)
+                 "learned baseline: CVAE conditioned on the causal GNN's tree context", settings=None, learned=True,
+                 kinds=BUILTIN_KINDS["gnn-cvae"])
 for _name, _what, _ships in (("rl-ppo", "SB3 PPO", "shipped for maze2d, pendulum, arm and panda-mbm"),
                              ("rl-sac", "SB3 SAC", "no shipped weights"),
                              ("rl-ppo-torchrl", "TorchRL PPO", "shipped for pendulum and arm")):
     register_sampler(_name, _lazy("agents.rl.sampler", "load_rl_sampler", _name),
                      f"{_what} policy over the tree view (gnn-mp train rl; {_ships})",
-                     settings=("uniform_mix", "deterministic", "proposals"), learned=True)
+                     settings=("uniform_mix", "deterministic", "proposals"), learned=True, kinds=BUILTIN_KINDS[_name])
 register_sampler("gnn-pick", _lazy("agents.rl.sampler", "load_rl_sampler", "gnn-pick"),
                  "the shipped rl-ppo picker's candidates, picked by the supervised model alone (what RL adds over "
                  "it): the picker's own scorer prior, or the task's gnn mixture density",
                  settings=("uniform_mix", "deterministic", "proposals"), learned=True)
 
 
-__all__ = ["SAMPLERS", "SamplerEntry", "available_samplers", "descriptions", "load_sampler", "register_sampler"]
+__all__ = ["BUILTIN_KINDS", "SAMPLERS", "SamplerEntry", "available_samplers", "descriptions", "load_sampler",
+           "register_sampler", "sampler_for_checkpoint"]

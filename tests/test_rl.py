@@ -80,8 +80,8 @@ def test_view_matches_the_env_tree(task):
     env = make_rl_env(task, view_nodes=16, copy_observations=True)
     obs, _ = env.reset(seed=1)
     rng = np.random.default_rng(0)
-    for _ in range(60):
-        obs, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+    for _ in range(60):      # a candidate index (a float in [-1, 1] was read as candidate 0 before issue 51)
+        obs, *_ = env.step(int(rng.integers(env.action_space.n)))
     full = env.unwrapped._obs.as_dict()
     n = int(full["num_nodes"][0])
     rows = view_rows(full["parent"], n, 16)
@@ -612,7 +612,7 @@ def test_reward_scale_is_gymnasiums_transform_reward_with_the_same_rewards():
     plain.reset(seed=3)
     rng = np.random.default_rng(0)
     for _ in range(40):
-        action = rng.uniform(-1, 1, 2).astype(np.float32)
+        action = int(rng.integers(scaled.action_space.n))     # a candidate (a 2-vector was read as candidate 0)
         _, r_scaled, term, trunc, _ = scaled.step(action)
         _, r_plain, *_ = plain.step(action)
         assert type(r_scaled) is float and r_scaled == float(r_plain) * 0.01
@@ -739,6 +739,9 @@ def test_torchrl_training_on_ray_actors_writes_a_local_runs_directory(tmp_path):
     (["--ray"], "--lib torchrl"),
     (["--lib", "torchrl", "--ray", "--parallel"], "choose one"),
     (["--lib", "torchrl", "--ray", "--ray-workers", "8", "--n-envs", "4"], "--ray-workers 8 > --n-envs 4"),
+    # issue 51 item 12: TorchRL's RayCollector stacked 2 and 1 envs' batches (a 34-line traceback)
+    (["--lib", "torchrl", "--ray", "--ray-workers", "2", "--n-envs", "3"],
+     "--n-envs 3 does not split evenly over --ray-workers 2"),
 ])
 def test_train_rl_ray_flags_are_refused_in_one_line_before_any_work(argv, fragment, tmp_path, capsys):
     """An unreachable Ray address fails at once (a socket check, not Ray's minutes of retries), and

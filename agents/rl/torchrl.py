@@ -114,11 +114,13 @@ def make_pick_actor(observation_space: spaces.Dict, *, action_spec=None, head_hi
                     head: str = "linear", **encoder_kw) -> ProbabilisticActor:
     """A candidate picker: ``PickPolicy`` -> ``"logits"`` -> a categorical over the candidates.
 
-    The action is the candidate's index, as an env wrapped with
-    ``GymEnv(id, categorical_action_encoding=True)`` takes it; pass the TorchRL env's
-    ``action_spec`` to act in its encoding (TorchRL's default for a ``Discrete`` space is one-hot:
-    ``GymEnv(id)`` gets one-hot actions, and an index would be misread). ``return_log_prob=True``
-    as ``ClipPPOLoss`` needs; ``head``: :class:`~agents.rl.pick.PickPolicy`'s. ``encoder_kw`` go to
+    The action is in the encoding of ``action_spec``, the TorchRL env's: a one-hot vector (a
+    ``OneHot`` spec) or the candidate's index (``Categorical``, what
+    ``GymEnv(id, categorical_action_encoding=True)`` takes). Without a spec it is one-hot, TorchRL's
+    default for a ``Discrete`` space, so ``GymEnv(id)`` and this actor work together as they are (an
+    index read as one-hot by TorchRL would become candidate 0 every step; a one-hot vector sent to an
+    env that reads indices is refused in one line). ``return_log_prob=True`` as ``ClipPPOLoss`` needs;
+    ``head``: :class:`~agents.rl.pick.PickPolicy`'s. ``encoder_kw`` go to
     ``CandidateEncoder.from_space`` (``hidden``, ``embed``, ``tree_context``, ...).
     """
     from torchrl.data import Categorical as IndexSpec
@@ -126,7 +128,7 @@ def make_pick_actor(observation_space: spaces.Dict, *, action_spec=None, head_hi
     from torchrl.modules import OneHotCategorical
     if action_spec is not None and not isinstance(action_spec, (OneHot, IndexSpec)):
         raise ValueError(f"a picker acts in a Discrete action space (one-hot or index), not {type(action_spec).__name__}")
-    one_hot = isinstance(action_spec, OneHot)
+    one_hot = action_spec is None or isinstance(action_spec, OneHot)
     from agents.rl.pick import PickPolicy
     encoder = CandidateEncoder.from_space(observation_space, **encoder_kw)
     policy = PickPolicy(encoder.config(), hidden=list(head_hidden), activation="tanh", head=head)

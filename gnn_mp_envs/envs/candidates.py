@@ -499,6 +499,36 @@ def candidate_space(state_dim: int, count: int, low: np.ndarray, high: np.ndarra
                                              dtype=np.float32)}
 
 
+def candidate_index(action: Any, count: int) -> int:
+    """The candidate index ``action`` names: one integer in ``[0, count)`` (a Python or numpy integer, a
+    0-d or one-element integer array, an integral float). Anything else is refused in one line: above
+    all a vector (a one-hot action, ``count`` long, or an array of several indices), which an earlier
+    reading turned silently into its first element, so a one-hot action always picked candidate 0."""
+    if type(action) is int or isinstance(action, np.integer):          # SB3, TorchRL's index encoding, sample()
+        k = int(action)
+    else:
+        try:
+            a = np.asarray(action)
+        except Exception:                                              # an object numpy cannot read
+            a = None
+        if a is None or a.dtype.kind not in "iuf" or a.size != 1:
+            if a is not None and a.dtype.kind in "iufb" and a.size != 1:
+                what = f"an array of shape {a.shape}"
+            else:
+                what = "a bool" if a is not None and a.dtype.kind == "b" else f"a {type(action).__name__}"
+            hint = (" (a one-hot vector? send its index; a TorchRL actor acts in the env's encoding when built "
+                    "with action_spec=env.action_spec)" if a is not None and a.shape[-1:] == (count,) and a.size > 1
+                    else "")
+            raise ValueError(f"action must be one candidate index, an integer in [0, {count}); got {what}{hint}")
+        value = a.reshape(())[()]
+        if a.dtype.kind == "f" and not (float(value).is_integer() and 0 <= value < count):   # NaN, inf fail too
+            raise ValueError(f"action must be one candidate index, an integer in [0, {count}); got {float(value):g}")
+        k = int(value)
+    if not 0 <= k < count:
+        raise ValueError(f"action must be one candidate index, an integer in [0, {count}); got {k}")
+    return k
+
+
 class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Actions are ``Discrete(K)``: the index of one of the step's ``K`` candidates.
 
@@ -549,9 +579,7 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         if self._cands is None:
             raise RuntimeError("call reset() before step()")
-        k = int(np.asarray(action).reshape(-1)[0])
-        if not 0 <= k < self.candidate_set.count:
-            raise ValueError(f"action must be a candidate index in [0, {self.candidate_set.count}), got {action!r}")
+        k = candidate_index(action, self.candidate_set.count)
         sample, candidate = self._cands[k], k
         if self.uniform_mix > 0.0 and self._rng.random() < self.uniform_mix:
             box = self.env.action_space
@@ -562,6 +590,6 @@ class CandidatePickWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._with_candidates(obs), reward, terminated, truncated, info
 
 
-__all__ = ["CANDIDATE_KINDS", "CandidatePickWrapper", "CandidatePrior", "CandidateSet", "DEFAULT_CANDIDATES", "DEFAULT_LOCAL_SCALE",
+__all__ = ["CANDIDATE_KINDS", "CandidatePickWrapper", "candidate_index", "CandidatePrior", "CandidateSet", "DEFAULT_CANDIDATES", "DEFAULT_LOCAL_SCALE",
            "DEFAULT_TARGET_SCALE",
            "candidate_space", "feature_width", "wrap_into_box"]

@@ -273,6 +273,9 @@ class TargetRelativeAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         self.action_space = spaces.Box(np.full(d, ACTION_LOW, np.float32), np.full(d, ACTION_HIGH, np.float32))
 
     def action(self, action):
+        if np.shape(action) != self._low.shape:      # before any arithmetic: one line, not numpy's broadcast error
+            raise ValueError(f"action must have shape {self._low.shape} in [{ACTION_LOW:g}, {ACTION_HIGH:g}] (an "
+                             f"offset from the active tree's target in box spans); got shape {np.shape(action)}")
         base = self.env.unwrapped
         problem = base.problem
         target = problem.start if int(base.planner.active_tree) == 1 else problem.goal

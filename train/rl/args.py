@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from gnn_mp_envs.envs.wrappers import ACTIONS, RL_MAX_EPISODE_STEPS, make_rl_env
-from train.args import (arg, bounded, non_negative_float, non_negative_int, positive_float, positive_int, seed_int,
-                        size_int, temperature_float, worker_count)
+from train.args import (arg, bounded, minutes_float, non_negative_float, non_negative_int, positive_float, positive_int,
+                        seed_int, size_int, temperature_float, worker_count)
 from train.run import RunFlags
 
 #: The defaults of ``make_rl_env``: the flags of the MDP take them, so a run trains the MDP of the
@@ -73,6 +73,10 @@ class RLArgs(RunFlags):
                     "active_tree)")
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
+    minutes: float | None = arg(None, "wall-time budget of the training loop (evaluations included): the run stops at "
+                                "the first rollout after it, then evaluates once more; without an explicit "
+                                "--total-steps, no step limit (the steps reached depend on the machine: the run "
+                                "prints them, and --total-steps N repeats them exactly)", parse=minutes_float)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
     hyperparams: Path | None = arg(None, "YAML hyperparameter file in RL Zoo's format (a section per RL env id; "
                                    "gnn-mp: holds the flags RL Zoo has no key for; explicit flags win); default: the "
@@ -274,6 +278,9 @@ def check_args(args: RLArgs) -> None:
         if args.ray_workers > args.n_envs:
             raise ValueError(f"--ray-workers {args.ray_workers} > --n-envs {args.n_envs}: every actor steps at "
                              "least one env")
+        if args.n_envs % args.ray_workers:      # TorchRL's RayCollector stacks the actors' batches: equal shapes
+            raise ValueError(f"--n-envs {args.n_envs} does not split evenly over --ray-workers {args.ray_workers}: "
+                             "every actor steps the same number of envs (--n-envs a multiple of --ray-workers)")
         if args.ray != "local":
             from train.args import UsageError, check_ray_address
             try:
@@ -475,7 +482,7 @@ def memory_bytes() -> int:
 
 
 #: Flags a resumed run may change: the step budget, where and how it runs, what it reports.
-RESUME_FREE_FLAGS = ("total_steps", "resume", "overwrite", "ship", "threads", "progress", "out", "device",
+RESUME_FREE_FLAGS = ("total_steps", "minutes", "resume", "overwrite", "ship", "threads", "progress", "out", "device",
                      "parallel", "modules", "ray", "ray_workers",
                      "hyperparams")      # the file's path (the checkout may have moved); its values are compared
 

@@ -17,7 +17,7 @@ import sys
 import dataclasses
 from typing import Any
 
-from train.args import OneLineParser, UsageError, add_dataclass_arguments, from_namespace, import_modules
+from train.args import MAX_COUNT, OneLineParser, UsageError, add_dataclass_arguments, from_namespace, import_modules
 from train.rl.args import RLArgs, check_args, hyperparams_file, read_hyperparams
 
 
@@ -92,6 +92,8 @@ def parse(argv: list[str]) -> RLArgs:
         checker.parse_args(tokens)           # a bad value names the file
     args = from_namespace(RLArgs, parser.parse_args(tokens + argv))
     args.hyperparams = path
+    if args.minutes is not None and not any(a == "--total-steps" or a.startswith("--total-steps=") for a in argv):
+        args.total_steps = MAX_COUNT         # --minutes alone: the clock ends the run, not the file's step count
     try:
         check_args(args)
     except ValueError as exc:

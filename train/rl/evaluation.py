@@ -76,6 +76,17 @@ class Evaluator:
     def due(self, steps: int) -> bool:
         return steps >= self.next_at
 
+    def time_up(self) -> bool:
+        """Whether ``--minutes`` of wall time have passed since the training loop started (this object's
+        creation; evaluations included): the scripts then stop at the next rollout's start."""
+        minutes = getattr(self.args, "minutes", None)
+        return minutes is not None and time.perf_counter() - self.started >= 60.0 * minutes
+
+    def stopped_note(self, steps: int) -> str:
+        """The line a run stopped by ``--minutes`` prints: where it stopped and how to repeat it."""
+        return (f"--minutes {self.args.minutes:g}: stopped at step {steps:,} (the steps depend on this machine's speed; "
+                f"--total-steps {steps} repeats this run exactly)")
+
     def sampler(self, policy: Any, uniform_mix: float | None = None):
         from agents.rl.policies import PickPolicy
         from agents.rl.sampler import PickSampler, RLSampler

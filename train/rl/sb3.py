@@ -30,6 +30,7 @@ from agents.rl.policies import policy_from_sb3, warm_start_encoder
 from agents.rl.sb3 import CandidatePickPolicy
 from agents.rl.sb3_files import read_sb3_zip, sb3_policy_kwargs
 from gnn_mp_envs.envs.wrappers import make_rl_env
+from train.args import MAX_COUNT
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
@@ -42,11 +43,20 @@ class EvalCallback(BaseCallback):
     def __init__(self, evaluator: Evaluator, run: TrainingRun) -> None:
         super().__init__()
         self.evaluator, self.run = evaluator, run
+        self.rollout_starts, self.stopped_at = False, None
 
     def _on_training_start(self) -> None:
         self._on_step()   # the untrained policy: the learning curve's first point
 
+    def _on_rollout_start(self) -> None:
+        self.rollout_starts = True
+
     def _on_step(self) -> bool:
+        if self.rollout_starts:
+            self.rollout_starts = False
+            if self.evaluator.time_up():   # --minutes: stop before this rollout (its first env step is not trained on)
+                self.stopped_at = self.num_timesteps - self.training_env.num_envs
+                return False
         if self.evaluator.due(self.num_timesteps):
             row = self.evaluator(self.num_timesteps)
             self.model.save(self.run.path("model.zip"))
@@ -60,7 +70,7 @@ class EvalCallback(BaseCallback):
 class ProgressCallback(BaseCallback):
     """A tqdm bar over environment steps (SB3's own needs ``rich``)."""
 
-    def __init__(self, total: int) -> None:
+    def __init__(self, total: int | None) -> None:
         super().__init__()
         self.total, self.bar = total, None
 
@@ -174,7 +184,8 @@ def train(args: RLArgs) -> RunResult:
         evaluator.restore()
 
     # 4. learn (the model saved as model.zip at every evaluation: what --resume continues)
-    callbacks = [EvalCallback(evaluator, run)] + ([ProgressCallback(args.total_steps)] if args.progress else [])
+    bar_total = None if args.total_steps >= MAX_COUNT else args.total_steps      # --minutes alone: no step limit
+    callbacks = [EvalCallback(evaluator, run)] + ([ProgressCallback(bar_total)] if args.progress else [])
     started = time.perf_counter()
     remaining = max(args.total_steps - model.num_timesteps, 0)
     try:
@@ -186,6 +197,9 @@ def train(args: RLArgs) -> RunResult:
             raise
         raise error from None
     train_time = time.perf_counter() - started
+    if callbacks[0].stopped_at is not None:      # --minutes: the steps trained on, what --total-steps repeats
+        model.num_timesteps = callbacks[0].stopped_at
+        print(evaluator.stopped_note(model.num_timesteps))
 
     # 5. final evaluation, learning curve, --tune-mix, --ship
     best = evaluator.finish(model.num_timesteps)

@@ -33,6 +33,7 @@ from agents.checkpoints import load_training_state, save_training_state
 from agents.rl.policies import policy_from_torchrl, warm_start_encoder
 from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
+from train.args import MAX_COUNT
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.run import RunError, TrainingRun, non_finite_policy
@@ -176,8 +177,9 @@ def train(args: RLArgs) -> RunResult:
     # 2. actor and critic, each over its own encoder: a categorical over the candidates (pick) or a
     #    TanhNormal on [-1, 1] over a TreeEncoder (box)
     if args.action == "pick":
-        actor = make_pick_actor(observation_space, head_hidden=args.pi_arch, head=args.pick_head,
-                                **args.candidate_kwargs())
+        from torchrl.data import Categorical
+        actor = make_pick_actor(observation_space, action_spec=Categorical(action_space.n), head_hidden=args.pi_arch,
+                                head=args.pick_head, **args.candidate_kwargs())     # indices, as make_env's envs read
         value = make_pick_value(observation_space, head_hidden=args.net_arch, **args.candidate_kwargs())
     else:
         actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
@@ -227,7 +229,7 @@ def train(args: RLArgs) -> RunResult:
           f"{frames_per_batch} frames per batch, run directory {run.dir}")
 
     # 4. the loop: collect a batch, GAE, epochs of minibatch updates, log, evaluate
-    bar = tqdm(total=args.total_steps, initial=steps, unit="step", disable=not args.progress, dynamic_ncols=True)
+    bar = tqdm(total=None if args.total_steps >= MAX_COUNT else args.total_steps, initial=steps, unit="step", disable=not args.progress, dynamic_ncols=True)
     started, batch_bytes = time.perf_counter(), 0
     if evaluator.due(steps):
         row = evaluator(steps)
@@ -236,6 +238,9 @@ def train(args: RLArgs) -> RunResult:
     try:
         for batch in collected(collector, args, state_path):
             if steps >= args.total_steps:
+                break
+            if evaluator.time_up():        # --minutes: this batch is not trained on
+                bar.write(evaluator.stopped_note(steps))
                 break
             keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
             steps += batch.numel()
