@@ -29,6 +29,10 @@ a model that always proposes a point inside a wall.
 
 Deterministic: the share is a function of the observations seen; the only draw is the mixture's
 one ``rng.random()`` per step (:class:`~agents.samplers.base.ModelSampler`). Numpy only.
+
+**Per tree.** The statistics are those of the observation's tree (:class:`~agents.samplers.trees.TreeStates`,
+keyed on the tree's content): a sampler fed two envs planning the same problem keeps each tree's
+statistics apart and scores each sample against the tree it was drawn for, as one sampler per env would.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ import math
 from typing import Mapping
 
 import numpy as np
+
+from agents.samplers.trees import TreeStates, tree_size
 
 #: Sources the bandit tells apart (a goal-bias sample is neither and is not scored).
 UNIFORM, MODEL, OTHER = 0, 1, 2
@@ -75,34 +81,38 @@ class AdaptiveShare:
         self.axes = list(zip(low.tolist(), scale.tolist(), np.asarray(periodic, bool).tolist()))
         self.top, self.floor, self.discount, self.power = float(top), float(floor), float(discount), float(power)
         self.prior, self.prior_weight = float(prior), float(prior_weight)
+        self._trees: TreeStates[_TreeStats] = TreeStates(lambda: _TreeStats(self))
         self.clear()
 
     def clear(self) -> None:
-        """Forget the episode."""
-        # per source (uniform, model), plain floats: a step updates two numbers of each
-        self.pulls = [self.prior_weight, self.prior_weight]
-        self.useful = [self.prior, self.prior]
-        self.visited: set[tuple] = set()
-        self.seen = 0                       # observation rows already scored
-        self.pending: int | None = None     # the source of the last sample, until its outcome is read
-        self.episode: tuple | None = None
-        self.share = self.top
-        #: Samples drawn from each source this episode (uniform, model, other): what the sampler did.
-        self.drawn = np.zeros(3, dtype=np.int64)
+        """Forget the episode (every tree's)."""
+        self._trees.clear()
+        self._tree = _TreeStats(self)
+
+    # the statistics of the tree of the last observation
+    #: Per source (uniform, model), discounted pulls and useful steps.
+    pulls = property(lambda self: self._tree.pulls)
+    useful = property(lambda self: self._tree.useful)
+    #: Coverage cells reached, rows already scored, the source of the last sample until its outcome is read.
+    visited = property(lambda self: self._tree.visited)
+    seen = property(lambda self: self._tree.seen)
+    pending = property(lambda self: self._tree.pending)
+    #: The model's share for the next sample.
+    share = property(lambda self: self._tree.share)
+    #: Samples drawn from each source this episode (uniform, model, other): what the sampler did.
+    drawn = property(lambda self: self._tree.drawn)
 
     # ------------------------------------------------------------------ per step
     def observe(self, obs: Mapping) -> float:
-        """Score the last sample's outcome from ``obs`` and return the model's share for the next one."""
-        n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
-        episode = (np.asarray(obs["start"]).tobytes(), np.asarray(obs["goal"]).tobytes())
-        if episode != self.episode or n < self.seen:
-            self.clear()
-            self.episode = episode
+        """Score the last sample drawn for the observation's tree from ``obs`` and return the model's
+        share for the next one."""
+        tree = self._tree = self._trees.of(obs)
+        n = tree_size(obs)
         useful = self._new_cells(obs, n)
-        source = self.pending
+        source = tree.pending
         if source is not None and source != OTHER:
             # both sources' statistics decay; the pulled one gains a pull and its outcome (plain floats)
-            pulls, hits, discount = self.pulls, self.useful, self.discount
+            pulls, hits, discount = tree.pulls, tree.useful, self.discount
             pulls[0] *= discount
             pulls[1] *= discount
             hits[0] *= discount
@@ -111,23 +121,24 @@ class AdaptiveShare:
             hits[source] += float(useful)
             rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
             relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
-            self.share = self.floor + (self.top - self.floor) * relative ** self.power
-        self.pending = None
-        return self.share
+            tree.share = self.floor + (self.top - self.floor) * relative ** self.power
+        tree.pending = None
+        return tree.share
 
     def chose(self, source: int) -> None:
-        """The source of the sample just handed out (scored at the next :meth:`observe`)."""
-        self.pending = source
-        self.drawn[source] += 1
+        """The source of the sample just handed out (scored at the next :meth:`observe` of its tree)."""
+        self._tree.pending = source
+        self._tree.drawn[source] += 1
 
     def _new_cells(self, obs: Mapping, n: int) -> bool:
-        """Mark the cells of rows ``seen..n-1``; whether any was new."""
-        if n <= self.seen:
+        """Mark the cells of rows ``seen..n-1`` of the current tree; whether any was new."""
+        stats = self._tree
+        if n <= stats.seen:
             return False
         # float32 rows as Python floats: the same values as a float64 copy, without the copy
-        rows = np.asarray(obs["nodes"][self.seen:n]).tolist()
-        trees = np.asarray(obs["node_features"][self.seen:n, -1]).tolist()
-        cells, top, floor, visited = self.cells, self.cells - 1, math.floor, self.visited
+        rows = np.asarray(obs["nodes"][stats.seen:n]).tolist()
+        trees = np.asarray(obs["node_features"][stats.seen:n, -1]).tolist()
+        cells, top, floor, visited = self.cells, self.cells - 1, math.floor, stats.visited
         size = len(visited)
         for tree, row in zip(trees, rows):
             key = [tree]
@@ -135,8 +146,24 @@ class AdaptiveShare:
                 i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
                 key.append(i % cells if periodic else (0 if i < 0 else top if i > top else i))
             visited.add(tuple(key))
-        self.seen = n
+        stats.seen = n
         return len(visited) > size
+
+
+class _TreeStats:
+    """One tree's statistics (:class:`AdaptiveShare`), from the prior."""
+
+    __slots__ = ("pulls", "useful", "visited", "seen", "pending", "share", "drawn")
+
+    def __init__(self, owner: AdaptiveShare) -> None:
+        # per source (uniform, model), plain floats: a step updates two numbers of each
+        self.pulls = [owner.prior_weight, owner.prior_weight]
+        self.useful = [owner.prior, owner.prior]
+        self.visited: set[tuple] = set()
+        self.seen = 0                       # observation rows already scored
+        self.pending: int | None = None     # the source of the last sample, until its outcome is read
+        self.share = owner.top
+        self.drawn = np.zeros(3, dtype=np.int64)
 
 
 __all__ = ["DEFAULTS", "GUARANTEE_FACTOR", "MODEL", "OTHER", "UNIFORM", "AdaptiveShare"]

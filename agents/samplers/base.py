@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Mapping
 import numpy as np
 
 from agents.samplers.adaptive import MODEL, OTHER, UNIFORM, AdaptiveShare
+from agents.samplers.trees import TreeStates
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 
 if TYPE_CHECKING:
@@ -292,8 +293,9 @@ class ModelSampler(Sampler):
         super().reset(seed)
         if getattr(self, "adaptive", None) is not None:
             self.adaptive.clear()
-        self._forwards: dict = {}        # refresh key -> [value, model samples left]
-        self._episode: tuple | None = None
+        #: Per tree (keyed on its content: two envs of one problem are two trees): refresh key ->
+        #: [forward's value, model samples left].
+        self._forwards: TreeStates[dict] = TreeStates(dict)
         if not hasattr(self, "forward_time_s"):
             #: Seconds spent in the model's forward passes, and their count, since construction
             #: (resets keep them): the inference share of a step, which ``tools/tune_proposals`` reports.
@@ -313,23 +315,15 @@ class ModelSampler(Sampler):
         return int(np.asarray(obs["active_tree"]).reshape(-1)[0])
 
     def refreshed(self, obs: Mapping, forward):
-        """``forward(obs)``, run once per ``proposals`` model samples of the same episode and
+        """``forward(obs)``, run once per ``proposals`` model samples of the same tree and
         :meth:`refresh_key` (every time for ``proposals=1``)."""
         if self.proposals == 1:
             return self.timed(forward, obs)
-        n = int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
-        episode = (np.asarray(obs["start"]).tobytes(), np.asarray(obs["goal"]).tobytes())
-        if (self._episode is None or episode != self._episode[0] or n < self._episode[1]
-                or np.asarray(obs["nodes"][self._episode[2]]).tobytes() != self._episode[3]):
-            # another episode, or another tree of it (rows are append-only: the anchor row stays)
-            self._forwards.clear()
-            self._episode = (episode, n, n - 1, np.asarray(obs["nodes"][n - 1]).tobytes())
-        else:
-            self._episode = (episode, n, *self._episode[2:])
+        forwards = self._forwards.of(obs)      # the observation's tree's (another episode, another env: another)
         key = self.refresh_key(obs)
-        entry = self._forwards.get(key)
+        entry = forwards.get(key)
         if entry is None or entry[1] <= 0:
-            entry = self._forwards[key] = [self.timed(forward, obs), self.proposals]
+            entry = forwards[key] = [self.timed(forward, obs), self.proposals]
         entry[1] -= 1
         return entry[0]
 

@@ -124,6 +124,10 @@ class TreeGNNSampler(_EngineSampler):
     def model_sample(self, obs: Mapping) -> np.ndarray:
         active, cumulative, shift = self.refreshed(obs, self.mixture)
         e = self.engine
+        if self.proposals > 1 and (len(cumulative) > e.n or not e.same_tree(obs)):
+            # a forward of this tree reused after the engine read another one (one sampler, several envs):
+            # its rows again (append-only and causal: the values the forward drew on)
+            e.ingest(obs)
         # the method, not np.searchsorted: the same search without the dispatcher's ~1.5 us
         m = min(int(cumulative.searchsorted(self.rng.random() * (1 - 1e-12), "right")), len(cumulative) - 1)
         sigma = self.sigma_scale * np.exp(e.log_sigma[m, active])
