@@ -252,20 +252,58 @@ def test_page_commands_run(page, docs_runner):
     assert failure is None, failure
 
 
+def headings(page: Path) -> set[str]:
+    """The anchors of a page's headings as the site makes them (Python-Markdown's ``toc`` slugs), and
+    its ``{#id}`` attributes."""
+    from markdown.extensions.toc import slugify
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
+    titles = [re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", m).replace("`", "")
+              for m in re.findall(r"^#+\s+(.*?)\s*#*\s*$", text, re.M)]
+    return {slugify(t, "-") for t in titles} | set(re.findall(r"\{\s*#([\w-]+)", text))
+
+
+def broken_relative_links(pages: list[Path], root: Path = ROOT) -> list[str]:
+    """Every relative link or image of ``pages`` that names no file of the repository, or an anchor
+    (``page.md#part``, ``#part``) that its page has no heading for; not inside code blocks."""
+    broken = []
+    for page in pages:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
+        for target in re.findall(r"\]\(\s*([^)\s]+)\)", text):
+            if re.match(r"[a-z]+:", target):
+                continue
+            path, _, anchor = target.partition("#")
+            file = (page.parent / path) if path else page
+            if not file.exists():
+                broken.append(f"{page.relative_to(root)}: {target}")
+            elif anchor and file.suffix == ".md" and anchor not in headings(file):
+                broken.append(f"{page.relative_to(root)}: {target} (no such heading)")
+    return broken
+
+
 def test_every_relative_link_of_the_docs_names_a_file_that_exists():
     """README and every page under docs/ (generated results pages and the journal included): a
-    relative link or image names a file of the repository (anchors are not checked)."""
+    relative link or image names a file of the repository, and a link's anchor a heading of its page
+    (the README is not part of the site, whose build checks the pages' anchors too)."""
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
-    missing = []
-    for page in pages:
-        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)     # not inside code blocks
-        for target in re.findall(r"\]\(([^)\s]+)\)", text):
-            if re.match(r"[a-z]+:", target) or target.startswith("#"):
-                continue
-            path = target.split("#")[0]
-            if path and not (page.parent / path).exists():
-                missing.append(f"{page.relative_to(ROOT)}: {target}")
-    assert not missing, missing
+    assert broken_relative_links(pages) == []
+
+
+def test_a_broken_link_fails_the_link_check(tmp_path):
+    """The check's oracle: a page with a missing file and a missing anchor beside good links."""
+    page = tmp_path / "page.md"
+    page.write_text("# Top part\n\n[a](#top-part) [b](#nowhere) [c](missing.md) [d](page.md#top-part)\n"
+                    "```text\n[e](not-checked.md)\n```\n")
+    assert broken_relative_links([page], tmp_path) == ["page.md: #nowhere (no such heading)", "page.md: missing.md"]
+
+
+def test_the_journal_index_lists_every_journal_page():
+    """docs/journal/index.md, the journal's one page in the site's navigation, links every page of the
+    journal (a new page is added there)."""
+    journal = ROOT / "docs" / "journal"
+    listed = set(re.findall(r"\]\(([^)#\s]+\.md)\)", (journal / "index.md").read_text()))
+    pages = {p.name for p in journal.glob("*.md")} - {"index.md"}
+    assert pages - listed == set(), f"add these pages to docs/journal/index.md: {sorted(pages - listed)}"
+    assert listed - pages == set()
 
 
 # ---------------------------------------------------------------------------- printed tables

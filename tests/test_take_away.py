@@ -135,11 +135,15 @@ def test_no_recheck_announces_itself_and_marks_success_unverified(tmp_path, caps
     captured = capsys.readouterr()
     report = json.loads(out.read_text())
     assert calls == [] and report["rechecked"] is False
-    assert all(r["path_valid"] is None and r["path_valid_fine"] is None for rows in report["runs"].values() for r in rows)
+    runs = [r for rows in report["runs"].values() for r in rows]
+    assert all(r["path_valid"] is None and r["path_valid_fine"] is None for r in runs)
     assert "maze2d: --no-recheck: the returned paths are not re-checked" in captured.err
     assert "success (unverified)" in captured.out.splitlines()[1]
     assert "returned paths NOT re-checked (--no-recheck)" in captured.out
     assert "(not re-checked)" in captured.out and "re-checking" not in captured.err
+    from train.benchmark.tables import format_family_table, format_field_table
+    for table in (format_family_table(report), format_field_table(report)):     # every table of the report
+        assert "(not re-checked)" in table and "passes the re-check" not in table
 
     assert cli.main([*BENCH, "--json", str(out)]) == 0
     captured = capsys.readouterr()

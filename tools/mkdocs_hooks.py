@@ -4,11 +4,12 @@
   that match it, in name order, titled by their file name (``2026-12-04-sphere-checker.md`` ->
   "2026-12-04 sphere checker"): a new journal page is in the nav without editing ``mkdocs.yml``.
 * **Links to repository files.** Pages link to source files outside ``docs/`` (``../train/cli.py``),
-  which are not part of the site. MkDocs reports such a link as "not found among documentation
-  files", a warning that fails ``mkdocs build --strict``. Such a report is lowered to INFO when
-  the link leaves ``docs/`` *and* names a file that exists in the repository; every other
-  missing target (a page or an image under ``docs/``, a repository file that is not there) stays
-  a warning, and so do missing anchors (``validation: anchors: warn``).
+  which work on GitHub but are not part of the site, where such a link would lead nowhere. On the
+  site, a link that leaves ``docs/`` *and* names a file that exists in the repository becomes its
+  text and the file's path in code ("the README (repository file ``gnn_mp_envs/.../README.md``)"),
+  no link; every other missing target (a page or an image under ``docs/``, a repository file that
+  is not there, an image outside ``docs/``) stays a link that MkDocs reports as a warning, which
+  fails ``mkdocs build --strict``, and so do missing anchors (``validation: anchors: warn``).
 * **Sections of other pages.** ``<!-- include ../results.md json-schema -->`` in a page becomes
   the part of ``docs/results.md`` between ``<!-- section: json-schema -->`` and
   ``<!-- /section: json-schema -->``, its relative links rewritten for the including page (the API
@@ -27,7 +28,6 @@ Nothing here imports torch: importing ``gnn_mp_envs`` registers the ids (numpy a
 from __future__ import annotations
 
 import glob
-import logging
 import os
 import posixpath
 import re
@@ -40,8 +40,8 @@ from mkdocs.exceptions import PluginError
 IDS_MARKER = "<!-- gym-make-ids -->"
 INCLUDE = re.compile(r"^<!-- include (?P<path>\S+) (?P<name>[\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()(?P<target>[^)\s]+)(\))")
-NOT_FOUND = re.compile(r"^Doc file '(?P<page>[^']+)' contains a link '(?P<link>[^']+)', but the target"
-                       r"(?: '[^']*')? is not found among documentation files\.")
+#: A whole link, not an image: ``[text](target)``.
+FULL_LINK = re.compile(r"(?<!!)\[(?P<text>[^\]]*)\]\((?P<target>[^)\s]+)\)")
 #: A Sphinx role in a docstring: ``:class:`~pkg.mod.Name``` and the like.
 ROLE = re.compile(r":(?:py:)?(?:func|class|meth|mod|data|attr|exc|obj|const):`(?P<tilde>~?)(?P<target>[\w.]+)`")
 
@@ -132,37 +132,8 @@ def _matches(pattern: str, docs_dir: str) -> list[str]:
     return found
 
 
-class _RepositoryLinks(logging.Filter):
-    """Lowers "not found among documentation files" to INFO for links to files of the repository
-    outside ``docs/`` (see the module docstring)."""
-
-    def __init__(self, docs_dir: str) -> None:
-        super().__init__()
-        self.docs_dir = Path(docs_dir).resolve()
-        self.root = self.docs_dir.parent
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if record.levelno < logging.WARNING:
-            return True
-        match = NOT_FOUND.match(record.getMessage())
-        if match:
-            path = unquote(urlsplit(match.group("link")).path)
-            target = posixpath.normpath(posixpath.join(posixpath.dirname(match.group("page")), path))
-            resolved = (self.docs_dir / target).resolve()
-            if (target.startswith("../") and resolved.is_relative_to(self.root)
-                    and not resolved.is_relative_to(self.docs_dir) and resolved.exists()):
-                record.levelno, record.levelname = logging.INFO, "INFO"
-                record.msg, record.args = (f"{record.getMessage()} (a repository file outside docs/: "
-                                           f"linked, not part of the site)"), None
-        return True
-
-
 def on_config(config):
     config["nav"] = _expand(config["nav"], config["docs_dir"])
-    logger = logging.getLogger("mkdocs.structure.pages")
-    for old in [f for f in logger.filters if isinstance(f, _RepositoryLinks)]:    # `mkdocs serve` rebuilds
-        logger.removeFilter(old)
-    logger.addFilter(_RepositoryLinks(config["docs_dir"]))
     return config
 
 
@@ -203,12 +174,36 @@ def rebase_links(text: str, source: str, page: str) -> str:
         rebased = posixpath.relpath(resolved, posixpath.dirname(page) or ".")
         return f"{match.group(1)}{rebased}{hash_}{anchor}{match.group(3)}"
 
+    return outside_code(text, lambda part: LINK.sub(rebase, part))
+
+
+def outside_code(text: str, change) -> str:
+    """``text`` with ``change`` applied to the parts outside fenced code blocks."""
     fence = re.compile(r"^( *)```.*?^\1```", re.M | re.S)
     out, last = [], 0
-    for block in fence.finditer(text):                  # not inside code blocks
-        out += [LINK.sub(rebase, text[last:block.start()]), block.group(0)]
+    for block in fence.finditer(text):
+        out += [change(text[last:block.start()]), block.group(0)]
         last = block.end()
-    return "".join([*out, LINK.sub(rebase, text[last:])])
+    return "".join([*out, change(text[last:])])
+
+
+def repository_links(markdown: str, page: str, docs_dir: str) -> str:
+    """The page's links to files of the repository outside ``docs/`` as text: the link's text and the
+    file's path from the repository root in code (see the module docstring). Links to files that are
+    not there are left for MkDocs to report."""
+    docs = Path(docs_dir).resolve()
+    root = docs.parent
+
+    def as_text(match: re.Match) -> str:
+        target = match.group("target")
+        if re.match(r"[a-z]+:", target) or target.startswith(("/", "#")):
+            return match.group(0)
+        path = unquote(urlsplit(target).path)
+        resolved = (docs / posixpath.dirname(page) / path).resolve()
+        if resolved.is_relative_to(docs) or not resolved.is_relative_to(root) or not resolved.is_file():
+            return match.group(0)
+        return f"{match.group('text')} (repository file `{resolved.relative_to(root).as_posix()}`)"
+    return outside_code(markdown, lambda part: FULL_LINK.sub(as_text, part))
 
 
 def include_sections(markdown: str, page: str, docs_dir: str) -> str:
@@ -220,6 +215,7 @@ def include_sections(markdown: str, page: str, docs_dir: str) -> str:
 
 def on_page_markdown(markdown, page, config, files):
     markdown = include_sections(markdown, page.file.src_uri, config["docs_dir"])
+    markdown = repository_links(markdown, page.file.src_uri, config["docs_dir"])
     if page.file.src_uri == "api/environments.md":
         if IDS_MARKER not in markdown:
             raise PluginError(f"docs/api/environments.md lost its marker {IDS_MARKER}")

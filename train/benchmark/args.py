@@ -51,22 +51,45 @@ def setting_triple(text: str) -> tuple[str, str, Any]:
 #: Problems per benchmark row at most: a job list and its records stay in memory (about 1 kB a run).
 MAX_PROBLEMS = 1_000_000
 
+
+def time_limits_help() -> str:
+    """Each built-in task's time budget (``TaskSpec.time_limit_s``), grouped: ``10 s for maze2d, ...``."""
+    groups: dict[float, list[str]] = {}
+    for spec in BUILTIN_TASKS:
+        groups.setdefault(spec.time_limit_s, []).append(spec.name)
+    return "; ".join(f"{limit:g} s for {', '.join(names)}" for limit, names in groups.items())
+
+
+def builtin_tasks(where=lambda spec: True) -> str:
+    """The built-in tasks (``gnn_mp_envs.registration.BUILTIN_TASKS``) ``where`` holds, for help texts."""
+    return ", ".join(spec.name for spec in BUILTIN_TASKS if where(spec))
+
+
+def ompl_rows_help() -> str:
+    """The OMPL rows of each built-in task, grouped: ``ompl-rrtconnect / ompl-rrt for maze2d, arm, ...``."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for spec in BUILTIN_TASKS:
+        if spec.ompl_planners:
+            groups.setdefault(spec.ompl_planners, []).append(spec.name)
+    return "; ".join(" / ".join(OMPL_PREFIX + p for p in planners) + " for " + ", ".join(names)
+                     for planners, names in groups.items())
+
+
 @dataclass
 class BenchmarkArgs:
     """Flags of one benchmark run (one task, several samplers)."""
 
-    task: str = arg("maze2d", f"task family (built in: {', '.join(t.name for t in BUILTIN_TASKS)}; --import adds "
-                    "others)")
-    samplers: list[str] = arg(["uniform", "goal-bias"], "comma-separated sampler names (see `gnn-mp "
-                              "samplers`; OMPL rows: ompl-rrtconnect / ompl-rrt for maze2d and arm, "
-                              "ompl-rrt / ompl-kpiece for the pendulum)", parse=name_list)
+    task: str = arg("maze2d", f"task family (built in: {builtin_tasks()}; --import adds others)")
+    samplers: list[str] = arg(["uniform", "goal-bias"], "comma-separated sampler names (see `gnn-mp samplers`; OMPL "
+                              f"rows: {ompl_rows_help()})", parse=name_list)
     problems: int = arg(20, "problems 0..N-1 of --split", parse=positive_int)
     split: str = arg("test", "problem split: test (held out, what results report) or val (for tuning)",
                      choices=("val", "test"))
     seed: int = arg(0, "root seed; problem i's sampler seed is derived from (seed, i)", parse=seed_int)
     max_nodes: int | None = arg(None, "tree node budget (default: the environment's)", parse=positive_int)
-    scene: str | None = arg(None, "scene family for tasks with scenes (arm; default: its held-out family)")
-    checker: str | None = arg(None, "collision checker of tasks with several (the MotionBenchMaker robots: "
+    scene: str | None = arg(None, f"scene family of a task with scenes ({builtin_tasks(lambda s: s.scenes)}; "
+                            "default: the task's benchmark family, the held-out one where it has one)")
+    checker: str | None = arg(None, f"collision checker of a task with several ({builtin_tasks(lambda s: s.checkers)}: "
                               "spheres or pybullet; default: the task's first); OMPL rows use the same")
     workers: int = arg(1, "worker processes over problems (with --ray: Ray actors); at most one per job",
                        parse=worker_count)
@@ -80,14 +103,15 @@ class BenchmarkArgs:
     ompl_log: Path | None = arg(None, "write an OMPL benchmark log (Planner Arena) to DIR/<task>.log",
                                 metavar="DIR")
     success_plot: Path | None = arg(None, "write the success-vs-time figure: the share of problems solved by each "
-                                    "time budget, a curve per row (Planner Arena's progress view)", parse=figure_path)
+                                    "time budget, a curve per row (Planner Arena's progress view)", parse=figure_path,
+                                    metavar="FILE")
     save_paths: bool = arg(False, "store each solved run's returned path in --json (its states, and the controls "
                            "of a kinodynamic task's edges)")
     recheck: bool = arg(True, "skip re-checking the returned paths (the longest phase with pybullet): success is "
                         "then the planner's word, unverified, and marked so in the table and --json")
     ompl_time_limit: float | None = arg(None, "seconds per problem: OMPL's solve limit (an OMPL row's success) and "
-                                        "the axis of the success-vs-time figure (default: the task's, 10 s for "
-                                        "most)",
+                                        "the axis of the success-vs-time figure (default: the task's: "
+                                        f"{time_limits_help()})",
                                         parse=positive_float)
     checkpoints: dict[str, Path] = arg({}, "checkpoint of a learned sampler (repeatable): a .pt, or the SB3 .zip of a "
                                        "gnn-mp train rl run (read weights only, rebuilt from the run's config.json beside it); "

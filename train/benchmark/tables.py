@@ -51,6 +51,12 @@ UNVERIFIED_NOTE = ("returned paths NOT re-checked (--no-recheck): success is the
 SOLVED_NOTE = "solved = a path found within {:,} nodes that passes the re-check"
 
 
+def solved_note(report: dict[str, Any]) -> str:
+    """:data:`SOLVED_NOTE` for ``report`` (a ``--no-recheck`` report's paths were not re-checked)."""
+    note = SOLVED_NOTE.format(report["max_nodes"])
+    return note.replace("that passes the re-check", "(not re-checked)") if report.get("rechecked") is False else note
+
+
 def success_rate(report: dict[str, Any], name: str) -> float | None:
     """The share of ``name``'s runs :func:`~train.benchmark.stats.solved`, from the runs when the report
     carries them (a report written by an earlier version stored another meaning), else its stored rate."""
@@ -87,10 +93,7 @@ def format_table(report: dict[str, Any]) -> str:
     from gnn_mp_envs.registration import TASK_SPECS
     spec = TASK_SPECS.get(report["task"])
     unit = f" ({spec.path_unit})" if spec is not None else ""
-    solved_note = SOLVED_NOTE.format(report['max_nodes']).replace('solved', 'success', 1)
-    if unverified:
-        solved_note = solved_note.replace("that passes the re-check", "(not re-checked)")
-    notes = [f"{solved_note}; median [q25, q75] over "
+    notes = [f"{solved_note(report).replace('solved', 'success', 1)}; median [q25, q75] over "
              f"the problems; *path length{unit} over successful runs only",
              "edges = extensions checked, blocked ones and goal connections included (so they can exceed nodes)",
              "wall time = planning loop incl. sampler inference (OMPL: solve time); it varies with machine load, "
@@ -131,7 +134,7 @@ def format_field_table(report: dict[str, Any]) -> str:
         iters = "-" if not it or it.get("median") is None else f"{it['median']:.0f} / {it['mean']:.0f} / {it['p95']:.0f}"
         rows.append([name, f"{solved}/{len(runs)}", times, iters, _cell(s["collision_checks"]),
                      _cell(s["path_length"], 2)])
-    title = (f"{report['task']}: {report['problems']} problems, seed {report['seed']}; {SOLVED_NOTE.format(max_nodes)} "
+    title = (f"{report['task']}: {report['problems']} problems, seed {report['seed']}; {solved_note(report)} "
              f"(OMPL rows: within their {limit:g} s solve limit)")
     notes = ["time: planning loop incl. sampler inference (OMPL: solve time), all runs; iterations: samples drawn "
              "(OMPL: uniform samples its planner drew); checks and initial path length: median [q25, q75]"]
@@ -162,5 +165,5 @@ def format_family_table(report: dict[str, Any]) -> str:
             rows.append([family, name, f"{sum(solved(r, max_nodes) for r in runs)}/{len(runs)}",
                          _median([r.get("iterations") for r in runs]), _median([r["collision_checks"] for r in runs]),
                          _median([r["wall_time_s"] for r in runs], 1e3)])
-    return "\n".join([f"per scene (medians over the scene's problems; {SOLVED_NOTE.format(max_nodes)}):",
+    return "\n".join([f"per scene (medians over the scene's problems; {solved_note(report)}):",
                       *_grid(rows)])
