@@ -158,6 +158,32 @@ def _float_list(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
 
 
+#: The plugin modules this process imported (:func:`import_modules`), in order: module -> the file its
+#: top-level module was loaded from when that came from the current directory (and whether that is a
+#: package's ``__init__.py``), else None. Worker processes and Ray actors import the same
+#: (:func:`plugin_sources`, :func:`import_plugin_sources`).
+_PLUGINS: dict[str, tuple[str, bool] | None] = {}
+#: Top-level modules loaded from the current directory: name -> (file, is a package).
+_FROM_DIRECTORY: dict[str, tuple[str, bool]] = {}
+
+
+def _load_from_file(top: str, file: Path, package: bool) -> None:
+    """Load the top-level module or package ``top`` from ``file`` (a package's ``__init__.py``: its
+    submodules then import through the package's ``__path__``); no directory joins ``sys.path``."""
+    import importlib.util
+    import sys
+    spec = (importlib.util.spec_from_file_location(top, file, submodule_search_locations=[str(file.parent)])
+            if package else importlib.util.spec_from_file_location(top, file))
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[top] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[top]
+        raise
+    _FROM_DIRECTORY[top] = (str(file), package)
+
+
 def _load_from_current_directory(top: str) -> None:
     """Load the top-level module or package ``top`` from the current directory when nothing
     installed provides it (its submodules then import through the package's ``__path__``)."""
@@ -166,21 +192,26 @@ def _load_from_current_directory(top: str) -> None:
     import sys
     if not top.isidentifier() or top in sys.modules or importlib.util.find_spec(top) is not None:
         return
-    here = Path(os.getcwd())
+    here = Path(os.getcwd()).resolve()
     package, plain = here / top / "__init__.py", here / f"{top}.py"
     if package.is_file():
-        spec = importlib.util.spec_from_file_location(top, package, submodule_search_locations=[str(package.parent)])
+        _load_from_file(top, package, True)
     elif plain.is_file():
-        spec = importlib.util.spec_from_file_location(top, plain)
-    else:
-        return
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[top] = module
+        _load_from_file(top, plain, False)
+
+
+def _imported(module: str, load) -> None:
+    """``load()`` (which imports ``module``), its failure as a one-line ``ValueError``; the module recorded
+    as a plugin of this process."""
     try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        del sys.modules[top]
-        raise
+        load()
+    except ImportError as exc:
+        raise ValueError(f"cannot import module {module!r}: {exc}") from None
+    except Exception as exc:     # the module's own code failed: say where, in one line
+        line = str(exc).splitlines()[0] if str(exc) else ""
+        raise ValueError(f"--import {module}: the module raised {type(exc).__name__}"
+                         + (f": {line}" if line else "")) from None
+    _PLUGINS.setdefault(module, _FROM_DIRECTORY.get(module.split(".")[0]))
 
 
 def import_modules(modules: typing.Iterable[str]) -> None:
@@ -189,18 +220,44 @@ def import_modules(modules: typing.Iterable[str]) -> None:
 
     A module that is not installed is looked up in the current directory (``my_pkg.tasks``:
     ``./my_pkg/``), without ``PYTHONPATH=.``: the directory never joins ``sys.path``, so a
-    ``train.py`` or ``agents/`` there cannot shadow this package's own modules."""
+    ``train.py`` or ``agents/`` there cannot shadow this package's own modules. The worker
+    processes and Ray actors of :mod:`train.workers` import the same modules, from the same files."""
     import importlib
     for module in modules:
-        try:
+        def load(module=module):
             _load_from_current_directory(module.split(".")[0])
             importlib.import_module(module)
-        except ImportError as exc:
-            raise ValueError(f"cannot import module {module!r}: {exc}") from None
-        except Exception as exc:     # the module's own code failed: say where, in one line
-            line = str(exc).splitlines()[0] if str(exc) else ""
-            raise ValueError(f"--import {module}: the module raised {type(exc).__name__}"
-                             + (f": {line}" if line else "")) from None
+        _imported(module, load)
+
+
+#: What another process needs to import one plugin module as this one did: its name, and the file
+#: of its top-level module when that came from the current directory (and whether it is a package).
+PluginSource = tuple[str, "str | None", bool]
+
+
+def plugin_sources(modules: typing.Iterable[str] = ()) -> tuple[PluginSource, ...]:
+    """The plugin modules of this process (``modules`` imported first, if not yet), as
+    :func:`import_plugin_sources` imports them in a worker process or Ray actor: by name when
+    installed, else from the file this process loaded, whatever that process's current directory."""
+    import_modules(modules)
+    return tuple((module, *(where or (None, False))) for module, where in _PLUGINS.items())
+
+
+def import_plugin_sources(sources: typing.Iterable[PluginSource]) -> None:
+    """In a worker process or Ray actor: import the parent's plugin modules (:func:`plugin_sources`), a
+    module the parent loaded from its current directory from that file (no directory joins
+    ``sys.path``; a file missing here, on another machine, falls back to an installed module of that
+    name); a one-line ``ValueError`` as :func:`import_modules`."""
+    import importlib
+    import sys
+    for module, file, package in sources:
+        top = module.split(".")[0]
+
+        def load(module=module, top=top, file=file, package=package):
+            if file is not None and top not in sys.modules and Path(file).is_file():
+                _load_from_file(top, Path(file), package)
+            importlib.import_module(module)
+        _imported(module, load)
 
 
 # ---------------------------------------------------------------------------- checks of shared flags

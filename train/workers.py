@@ -8,22 +8,35 @@ A job is a tuple; ``fn(job)`` (a module-level function, so it pickles) runs it i
         pool.run(jobs, finished, fn)
     run_on_ray("local", workers, modules, jobs, finished, fn)
 
-Each worker imports the ``--import`` modules once and keeps what its jobs cache (envs, samplers);
-results do not depend on the worker count or the backend when every job seeds itself. A dead
-worker or Ray actor is a :class:`~concurrent.futures.process.BrokenProcessPool`.
+Each worker imports the plugin modules of this process once (every ``--import`` module, a module
+of the current directory from the file this process loaded: :func:`train.args.plugin_sources`) and
+keeps what its jobs cache (envs, samplers); results do not depend on the worker count or the
+backend when every job seeds itself. A dead worker or Ray actor is a
+:class:`~concurrent.futures.process.BrokenProcessPool`.
+
+Nothing else of the current directory is imported anywhere: Ray puts the driver's current
+directory at the head of every worker's ``sys.path`` (and starts its local workers there), so a
+``train.py`` or ``numpy.py`` there would replace a module of the same name in the actors;
+:func:`start_ray` starts Ray from an empty private directory instead, and the actors work in the
+driver's directory without it on their path. :class:`WithPlugins` carries the plugins into the
+processes other libraries start (SB3's ``SubprocVecEnv``, TorchRL's ``ParallelEnv`` and
+``RayCollector``).
 """
 
 from __future__ import annotations
 
+import atexit
 import multiprocessing
 import os
+import shutil
 import signal
 import sys
+import tempfile
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
-from train.args import UsageError, import_modules
+from train.args import PluginSource, UsageError, import_plugin_sources, plugin_sources
 
 
 def _die_with_parent() -> None:
@@ -41,12 +54,30 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
-def _init_worker(modules: list[str], die_with_parent: bool = True) -> None:
-    """Worker initializer: die with the parent and import the plugin modules. What the jobs need
-    (envs, samplers) is built by the first job that needs it, so one pool serves several tasks."""
+def _init_worker(plugins: Iterable[PluginSource], die_with_parent: bool = True) -> None:
+    """Worker initializer: die with the parent and import the parent's plugin modules. What the jobs
+    need (envs, samplers) is built by the first job that needs it, so one pool serves several tasks."""
     if die_with_parent:
         _die_with_parent()
-    import_modules(modules)
+    import_plugin_sources(plugins)
+
+
+class WithPlugins:
+    """``fn`` as a picklable callable that first imports this process's plugin modules (``--import``,
+    :func:`train.args.plugin_sources`) wherever it is called: how an env builder reaches the processes
+    that SB3's ``SubprocVecEnv``, TorchRL's ``ParallelEnv`` or a ``RayCollector`` start, where a task
+    registered by ``--import`` is otherwise unknown. In this process the imports are already done.
+    (Slots, no ``__dict__``: TorchRL's ``CloudpickleWrapper`` copies a wrapped callable's ``__dict__``
+    into its own, and a ``fn`` there would replace the wrapper's.)"""
+
+    __slots__ = ("wrapped_fn", "plugins")
+
+    def __init__(self, fn: Callable[..., Any], modules: Iterable[str] = ()) -> None:
+        self.wrapped_fn, self.plugins = fn, plugin_sources(modules)
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        import_plugin_sources(self.plugins)
+        return self.wrapped_fn(*args, **kwargs)
 
 
 class WorkerPool:
@@ -57,7 +88,7 @@ class WorkerPool:
     def __init__(self, workers: int, modules: list[str] = ()) -> None:
         context = multiprocessing.get_context(worker_start_method())
         self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker,
-                                            initargs=(list(modules),))
+                                            initargs=(plugin_sources(modules),))
         self.killed = False
 
     def run(self, jobs: list[tuple], finished: Callable[[Any], None], fn: Callable[[tuple], Any]) -> None:
@@ -88,13 +119,38 @@ class WorkerPool:
 
 
 class _JobActor:
-    """A Ray actor: one worker process with what its jobs cache, as a pool's workers."""
+    """A Ray actor: one worker process with what its jobs cache, as a pool's workers. It works in the
+    driver's directory when this machine has it (a job's relative paths), never with it on ``sys.path``."""
 
-    def __init__(self, modules) -> None:
-        _init_worker(modules, die_with_parent=False)
+    def __init__(self, plugins: Iterable[PluginSource], directory: str) -> None:
+        if os.path.isdir(directory):
+            os.chdir(directory)
+        _init_worker(plugins, die_with_parent=False)
 
     def run(self, fn, job: tuple) -> Any:
         return fn(job)
+
+
+#: The empty directory Ray was started from (:func:`start_ray`), removed at exit.
+_RAY_DIRECTORY: list[str] = []
+
+
+def start_ray(address: str | None, **init: Any) -> None:
+    """``ray.init(address, **init)`` from an empty private directory: Ray adds the driver's current
+    directory to every worker's ``sys.path`` (first) and starts a local instance's workers there,
+    so a ``train.py``, ``numpy.py`` or ``agents/`` in the user's directory would be imported by the
+    actors in place of the modules of that name. The directory stays (empty) until this process
+    exits: the workers of a local instance keep it as their working directory."""
+    import ray
+    if not _RAY_DIRECTORY:
+        _RAY_DIRECTORY.append(tempfile.mkdtemp(prefix="gnn-mp-ray-"))
+        atexit.register(shutil.rmtree, _RAY_DIRECTORY[0], True)
+    here = os.getcwd()
+    os.chdir(_RAY_DIRECTORY[0])
+    try:
+        ray.init(address=address, **init)
+    finally:
+        os.chdir(here)
 
 
 def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],
@@ -102,23 +158,25 @@ def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple]
     """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors: a local Ray
     instance (``address="local"``, the flags' ``--ray``) or a cluster (``"auto"`` /
     ``ray://HOST:10001``); ``fn`` a module-level function. Results equal a local run's for the same
-    seed. A job's :class:`~train.args.UsageError` is raised here as it was raised there."""
+    seed. A job's :class:`~train.args.UsageError` is raised here as it was raised there. Every actor
+    imports this process's plugin modules (``modules`` among them)."""
     try:
         import ray
         from ray.util import ActorPool
     except ImportError:
         raise UsageError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
+    plugins = plugin_sources(modules)
     local = address == "local"
     started = not ray.is_initialized()
     if started:
         try:
-            ray.init(address=None if local else address, num_cpus=workers if local else None,
-                     include_dashboard=False, log_to_driver=False, configure_logging=False)
+            start_ray(None if local else address, num_cpus=workers if local else None, include_dashboard=False,
+                      log_to_driver=False, configure_logging=False)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             raise UsageError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
     try:
         actor = ray.remote(num_cpus=1)(_JobActor)
-        pool = ActorPool([actor.remote(modules) for _ in range(max(1, min(workers, len(jobs))))])
+        pool = ActorPool([actor.remote(plugins, os.getcwd()) for _ in range(max(1, min(workers, len(jobs))))])
         for result in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
             finished(result)
     except ray.exceptions.RayTaskError as exc:

@@ -35,6 +35,7 @@ from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_
 from train.rl.evaluation import Evaluator
 from train.rl.memory import sb3_buffer_nbytes
 from train.run import RunError, TrainingRun, non_finite_policy
+from train.workers import WithPlugins
 
 
 class EvalCallback(BaseCallback):
@@ -146,7 +147,8 @@ def train(args: RLArgs) -> RunResult:
 
     # 1. environments: n_envs copies of make_rl_env (the registered RL ids' MDP), seeded
     env_kwargs = {"task": args.task, "split": "train", **args.env_kwargs()}
-    vec_env = make_vec_env(make_rl_env, n_envs=args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
+    # WithPlugins: SubprocVecEnv's processes import the --import modules (a task of the user's) first
+    vec_env = make_vec_env(WithPlugins(make_rl_env), n_envs=args.n_envs, seed=args.seed, env_kwargs=env_kwargs,
                            vec_env_cls=SubprocVecEnv if args.parallel else DummyVecEnv)
 
     # 2. the agent (or the saved one, --resume), the optional warm start of its encoder(s)

@@ -37,6 +37,7 @@ from train.args import MAX_COUNT
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
 from train.rl.evaluation import Evaluator
 from train.run import RunError, TrainingRun, non_finite_policy
+from train.workers import WithPlugins, start_ray
 
 
 def keep_threads(threads: int) -> None:
@@ -94,7 +95,7 @@ def start_workers_deaf_to_ctrl_c(env, workers: int) -> None:
 def make_batched_env(args: RLArgs):
     """``n_envs`` training envs stepped together; env ``i`` draws problems from seed ``seed + i``.
     ``--parallel``: the workers start here, deaf to Ctrl-C (:func:`start_workers_deaf_to_ctrl_c`)."""
-    fns = [partial(make_env, args, args.seed + i) for i in range(args.n_envs)]
+    fns = [WithPlugins(partial(make_env, args, args.seed + i)) for i in range(args.n_envs)]   # --import in workers
     if not args.parallel:
         return SerialEnv(args.n_envs, fns)
     env = ParallelEnv(args.n_envs, fns)
@@ -104,7 +105,7 @@ def make_batched_env(args: RLArgs):
 
 def make_env_group(args: RLArgs, seeds: list[int]) -> SerialEnv:
     """The envs of seeds ``seeds`` stepped together (one Ray actor's share of ``--n-envs``)."""
-    return SerialEnv(len(seeds), [partial(make_env, args, s) for s in seeds])
+    return SerialEnv(len(seeds), [WithPlugins(partial(make_env, args, s)) for s in seeds])   # --import in actors
 
 
 def make_collector(args: RLArgs, env, actor, frames_per_batch: int, total_frames: int):
@@ -115,19 +116,31 @@ def make_collector(args: RLArgs, env, actor, frames_per_batch: int, total_frames
     if args.ray is None:
         return Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames,
                          auto_register_policy_transforms=False)
+    import ray
     from torchrl.collectors.distributed import RayCollector
     local = args.ray == "local"
     groups = [[args.seed + i for i in range(w, args.n_envs, args.ray_workers)] for w in range(args.ray_workers)]
     init = {"address": None if local else args.ray, "include_dashboard": False, "log_to_driver": False,
             "configure_logging": False, **({"num_cpus": args.ray_workers} if local else {})}
     try:
-        collector = RayCollector([partial(make_env_group, args, g) for g in groups], actor,
+        started = not ray.is_initialized()
+        if started:                      # from an empty directory: the actors import nothing of the current one
+            start_ray(**init)
+        collector = RayCollector([WithPlugins(partial(make_env_group, args, g)) for g in groups], actor,
                                  frames_per_batch=frames_per_batch, total_frames=total_frames, sync=True,
                                  ray_init_config=init)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         raise RunError(f"--ray {args.ray}: cannot start the collectors ({str(exc).splitlines()[0]})") from None
+    if started:                          # Ray stops with the collector, as when the collector had started it
+        collector.shutdown = partial(_shutdown_with_ray, collector.shutdown)
     collector.update_policy_weights_(actor)    # the actors start from this policy (a resumed run's too)
     return collector
+
+
+def _shutdown_with_ray(shutdown, *args, **kwargs) -> None:
+    import ray
+    shutdown(*args, **kwargs)
+    ray.shutdown()
 
 
 def collected(collector, args: RLArgs, state_path):
