@@ -79,7 +79,8 @@ class RLArgs(RunFlags):
                                 "prints them, and --total-steps N repeats them exactly)", parse=minutes_float)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
     hyperparams: Path | None = arg(None, "YAML hyperparameter file in RL Zoo's format (a section per RL env id; "
-                                   "gnn-mp: holds the flags RL Zoo has no key for; explicit flags win); default: the "
+                                   "gnn-mp: holds the flags RL Zoo has no key for, but never --out, --overwrite, "
+                                   "--ship, --resume or --import; explicit flags win); default: the "
                                    "task's shipped train/rl/hyperparams/<task>.yml when there is one; none: no file, "
                                    "the flags' own defaults", metavar="FILE")
     resume: bool = arg(False, "continue the run in --out from its last saved SB3 model (model.zip) or TorchRL "
@@ -391,15 +392,26 @@ def _zoo_values(path: Path, name: str, section: dict) -> dict[str, Any]:
     return out
 
 
+#: Flags a hyperparameter file never gives: where the run writes, what it overwrites, continues or ships
+#: into the package, what code it imports. They come from the command line only (a file is refused).
+COMMAND_LINE_ONLY = {"out": "--out", "overwrite": "--overwrite", "ship": "--ship", "resume": "--resume",
+                     "modules": "--import", "hyperparams": "--hyperparams"}
+
+
 def _flag_values(path: Path, values: dict, name: str, skip: tuple[str, ...] = ()) -> dict[str, Any]:
     """A section of flag values (field names; dashes accepted)."""
     import dataclasses
-    fields = {f.name for f in dataclasses.fields(RLArgs)} - {"hyperparams", "lib", "algo", "task", "modules"}
+    fields = {f.name for f in dataclasses.fields(RLArgs)} - {"lib", "algo", "task"} - set(COMMAND_LINE_ONLY)
     out = {}
     for key, value in values.items():
         if key in skip:
             continue
-        flag = {"n_timesteps": "total_steps", "learning_rate": "lr"}.get(str(key), str(key).replace("-", "_"))
+        flag = {"n_timesteps": "total_steps", "learning_rate": "lr", "import": "modules"}.get(
+            str(key), str(key).replace("-", "_"))
+        if flag in COMMAND_LINE_ONLY:
+            raise ValueError(f"--hyperparams {path}: {key!r} in section {name!r} is refused: {COMMAND_LINE_ONLY[flag]} "
+                             "is a command-line flag only (a file never chooses where a run writes, what it "
+                             "overwrites or ships, or what it imports)")
         if flag not in fields:
             raise ValueError(f"--hyperparams {path}: unknown key {key!r} in section {name!r}")
         out[flag] = value
