@@ -17,6 +17,8 @@ from train.args import (UsageError, arg, check_output_path, check_ray_address, f
 OMPL_PREFIX = "ompl-"
 OMPL_INSTALL_HINT = ("OMPL is not installed; install the optional extra with `pip install 'gnn-mp-envs[ompl]'` "
                      "(in a checkout: `pip install -e '.[ompl]'`)")
+#: Prefix of VAMP's rows (gnn_mp_envs/baselines/vamp_runner.py); the rest of the name is VAMP's planner.
+VAMP_PREFIX = "vamp-"
 
 
 class BenchmarkError(UsageError):
@@ -165,9 +167,30 @@ def ompl_rows_for(task: str) -> list[str]:
     return [OMPL_PREFIX + p for p in task_spec_for(task).ompl_planners]
 
 
+def is_vamp(name: str) -> bool:
+    return name.startswith(VAMP_PREFIX)
+
+
+def is_external(name: str) -> bool:
+    """A row planned by another planner through an isolated runner (OMPL's, VAMP's): no sampler of ours."""
+    return is_ompl(name) or is_vamp(name)
+
+
+def vamp_rows_for(task: str) -> list[str]:
+    """VAMP's row names for ``task``: its planners where VAMP has the task's robot (the MotionBenchMaker tasks)."""
+    from gnn_mp_envs.baselines.vamp_runner import VAMP_PLANNERS, VAMP_ROBOTS
+    return [VAMP_PREFIX + p for p in VAMP_PLANNERS] if task in VAMP_ROBOTS else []
+
+
+def vamp_hint() -> str:
+    """The one line that refuses a VAMP row where VAMP is not importable."""
+    from gnn_mp_envs.baselines.vamp_runner import INSTALL_HINT
+    return INSTALL_HINT
+
+
 def known_sampler_names(task: str) -> list[str]:
     from agents.samplers import available_samplers
-    return available_samplers() + ompl_rows_for(task)
+    return available_samplers() + ompl_rows_for(task) + vamp_rows_for(task)
 
 
 def import_modules(modules: list[str]) -> None:
@@ -224,16 +247,23 @@ def validate_args(args: BenchmarkArgs) -> None:
             supported = ", ".join(ompl_rows_for(args.task)) or "none"
             raise BenchmarkError(f"OMPL planner {name!r} is not available for task {args.task!r} "
                                  f"(supported: {supported})")
-        if name not in known and not (name in args.checkpoints and not is_ompl(name)):   # else a row of its own
+        if is_vamp(name) and name not in known:
+            from gnn_mp_envs.baselines.vamp_runner import VAMP_PLANNERS, VAMP_ROBOTS
+            raise BenchmarkError(f"VAMP row {name!r} is not available for task {args.task!r} (VAMP's rows: "
+                                 f"{', '.join(VAMP_PREFIX + p for p in VAMP_PLANNERS)}, for "
+                                 f"{', '.join(VAMP_ROBOTS)})")
+        if name not in known and not (name in args.checkpoints and not is_external(name)):   # else a row of its own
             raise BenchmarkError(f"unknown sampler {name!r}; known: {', '.join(known)} (a row of your own: "
                                  f"--checkpoint {name}=PATH)")
     for name, _, _ in args.settings:
-        if name not in args.samplers or is_ompl(name):
+        if name not in args.samplers or is_external(name):
             raise BenchmarkError(f"--setting given for {name!r}, which is not one of the --samplers")
     from agents.registry import SAMPLERS
     for name, path in args.checkpoints.items():
         if name not in args.samplers:
             raise BenchmarkError(f"--checkpoint given for {name!r}, which is not in --samplers")
+        if is_external(name):
+            raise BenchmarkError(f"--checkpoint given for {name!r}, which has no weights (another planner's row)")
         if name in SAMPLERS and not SAMPLERS[name].learned:
             raise BenchmarkError(f"--checkpoint given for {name!r}, which has no weights (a classical sampler)")
         if not Path(path).is_file():
@@ -255,6 +285,8 @@ def validate_args(args: BenchmarkArgs) -> None:
             check_output_path(flag, Path(path), is_dir)
     if any(is_ompl(n) for n in args.samplers):
         check_ompl()
+    if any(is_vamp(n) for n in args.samplers):
+        check_vamp()
     if args.ray not in (None, "local"):
         check_ray_address(args.ray)
 
@@ -272,6 +304,13 @@ def check_ompl() -> None:
         raise BenchmarkError(f"the OMPL runner is not available in this checkout ({exc})") from None
     if not ompl_runner.ompl_available():
         raise BenchmarkError(OMPL_INSTALL_HINT)
+
+
+def check_vamp() -> None:
+    """Fail early (before any planning) when no interpreter can run VAMP's rows (one line: how to get one)."""
+    from gnn_mp_envs.baselines.vamp_runner import vamp_available
+    if not vamp_available():
+        raise BenchmarkError(vamp_hint())
 
 
 def ompl_available() -> bool:

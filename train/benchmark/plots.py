@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.utils.io import atomic_path
-from train.benchmark.args import BenchmarkArgs, env_kwargs_for, is_ompl, task_spec_for
+from train.benchmark.args import BenchmarkArgs, env_kwargs_for, is_external, task_spec_for
 from train.benchmark.runs import checkpoint_of, run_episode
 
 
@@ -145,13 +145,14 @@ def save_tree_growth(path: Path, title: str, snapshots: list[tuple[int, int, np.
 
 
 def render_growth(args: BenchmarkArgs, directory: Path, index: int = 0) -> list[Path]:
-    """Tree-growth strips of problem ``index`` for every (non-OMPL) sampler; returns the files written."""
+    """Tree-growth strips of problem ``index`` for every sampler of ours (not OMPL's or VAMP's rows); returns the
+    files written."""
     spec = task_spec_for(args.task)
     env_kwargs = env_kwargs_for(args)
     max_nodes = args.max_nodes or spec.max_nodes
     written = []
     for name in args.samplers:
-        if is_ompl(name):
+        if is_external(name):
             continue
         record = run_episode(args.task, env_kwargs, name, index, args.seed, checkpoint_of(args, name),
                              args.sampler_settings(name), snapshot_schedule(max_nodes))

@@ -17,7 +17,9 @@ from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
     env_kwargs_for,
+    is_external,
     is_ompl,
+    is_vamp,
     validate_args,
 )
 from train.args import UsageError
@@ -198,13 +200,16 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     validate_args(args)
     env_kwargs = env_kwargs_for(args)
     indices = list(range(args.problems))
-    learned = [(n, checkpoint_of(args, n), args.sampler_settings(n)) for n in args.samplers if not is_ompl(n)]
+    learned = [(n, checkpoint_of(args, n), args.sampler_settings(n)) for n in args.samplers if not is_external(n)]
     check_env_and_samplers(args.task, env_kwargs, learned, args.problems)
     runs: dict[str, list[dict[str, Any]]] = {name: [] for name in args.samplers}
 
     for name in args.samplers:   # first: an unsupported OMPL combination fails before the long part
         if is_ompl(name):
             runs[name] = run_ompl_rows(args, name, indices)
+        elif is_vamp(name):          # VAMP's paths wait for the re-check below, as ours do
+            from train.benchmark.vamp_rows import run_vamp_rows
+            runs[name] = run_vamp_rows(args, name, indices)
 
     # sampler-major: a worker runs one sampler over the problems, warm, as a user plans with it. Tried
     # problem-major (every sampler per problem in turn): the switching cost the learned rows their
@@ -274,7 +279,7 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
     report = build_report(args, runs)
     if reason is not None:
         done = sum(len(r) for r in runs.values())
-        raise BenchmarkIncomplete(f"{reason}; {done} of {len(jobs) + len(indices) * sum(map(is_ompl, args.samplers))} "
+        raise BenchmarkIncomplete(f"{reason}; {done} of {len(jobs) + len(indices) * sum(map(is_external, args.samplers))} "
                                   "runs finished", {**report, "partial": True}, interrupted=reason == "interrupted")
     return report
 
