@@ -97,9 +97,10 @@ def test_every_problem_converts_to_the_dataset_shapes(robot):
 def test_a_cylinder_is_a_capsule_along_its_own_axis():
     """VAMP puts a capsule's end points length / 2 along the local z of its Euler angles: for a
     cylinder laid along x (turned a quarter about y), those are centre +- (h / 2, 0, 0)."""
-    from gnn_mp_envs.robots.geometry import Obstacle
     s = math.sqrt(0.5)
-    prim, = vamp_primitives([Obstacle("cylinder", (0.05, 0.4), (1.0, 2.0, 3.0), orientation=(0.0, s, 0.0, s))])
+    cylinder = SimpleNamespace(kind="cylinder", size=(0.05, 0.4), position=(1.0, 2.0, 3.0),
+                               quaternion=lambda: (0.0, s, 0.0, s))
+    prim, = vamp_primitives([cylinder])
     axis = np.asarray(euler_matrix(prim["euler_xyz"])) @ [0.0, 0.0, prim["length"] / 2]
     assert np.allclose(axis, [0.2, 0.0, 0.0]) and prim["radius"] == 0.05
 
