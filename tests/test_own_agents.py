@@ -1,6 +1,7 @@
 """A user's own agent: a TorchRL actor on TorchRL's default action encoding, saved with
 ``agents.rl.export.save_rl_checkpoint`` and benchmarked as a row of its own beside the shipped ones
-(issue 51, items 1 and 3); actions the pick envs cannot read are refused in one line."""
+(issue 51, items 1 and 3); actions the pick envs cannot read are refused in one line; ``train rl
+--minutes`` (item 2's budget) and its exact repeat with ``--total-steps``."""
 
 from __future__ import annotations
 
@@ -187,3 +188,52 @@ def test_the_registrys_kinds_are_the_loaders_kinds():
     from agents.rl.sampler import RL_SAMPLERS
     from agents.tree.samplers import NAME_KINDS
     assert BUILTIN_KINDS == {**NAME_KINDS, **RL_SAMPLERS}
+
+
+# ---------------------------------------------------------------------------- item 2: --minutes
+@pytest.mark.parametrize("lib", ["sb3", "torchrl"])
+def test_train_rl_minutes_stops_on_the_clock_and_total_steps_repeats_it(lib, tmp_path, capsys):
+    """--minutes alone (the task file's step count does not apply) stops at a rollout boundary and says
+    where; --total-steps with that number repeats the run: the same evaluations and the same best.pt."""
+    import re
+    import warnings
+
+    from agents.checkpoints import read_checkpoint
+    from train.cli import main
+    tiny = ["train", "rl", "--lib", lib, "--task", "maze2d", "--n-envs", "2", "--n-steps", "16", "--batch-size",
+            "16", "--eval-every", "96", "--eval-problems", "1", "--eval-max-steps", "50", "--no-progress"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main([*tiny, "--minutes", "0.1", "--out", str(tmp_path / "clock")]) == 0
+        out = capsys.readouterr().out          # one rollout at least, however slow the first evaluation
+        steps = int(re.search(r"--minutes 0.1: stopped at step ([\d,]+)", out).group(1).replace(",", ""))
+        assert steps > 0 and steps % 32 == 0, out
+        assert main([*tiny, "--total-steps", str(steps), "--out", str(tmp_path / "steps")]) == 0
+
+    def evaluations(run):
+        rows = json.loads((tmp_path / run / "evaluations.json").read_text())
+        return [{k: v for k, v in r.items() if "wall" not in k} for r in rows]
+    assert evaluations("clock") == evaluations("steps") and evaluations("clock")[-1]["steps"] == steps
+    first, second = (read_checkpoint(tmp_path / run / "best.pt")["state_dict"] for run in ("clock", "steps"))
+    assert all(torch.equal(first[k], second[k]) for k in first)
+
+
+def test_prior_scale_starts_the_shared_head_blind_to_the_prior(tmp_path, capsys):
+    """--prior-scale 0: the pendulum picker reads the prior's logits at weight 0 (a vanishing learning
+    rate keeps it there); without a prior or a shared head the flag is one line."""
+    import warnings
+
+    from agents.checkpoints import read_checkpoint
+    from train.cli import main
+    tiny = ["train", "rl", "--task", "pendulum", "--n-envs", "2", "--n-steps", "16", "--batch-size", "16",
+            "--total-steps", "32", "--eval-problems", "1", "--eval-max-steps", "20", "--lr", "1e-12", "--no-progress"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main([*tiny, "--prior-scale", "0", "--out", str(tmp_path / "blind")]) == 0
+    state = read_checkpoint(tmp_path / "blind" / "policy.pt")["state_dict"]
+    assert abs(float(state["logits.prior_scale"])) < 1e-6
+    capsys.readouterr()                    # the run's own lines (a numba notice on a fresh cache)
+    with pytest.raises(SystemExit) as info:
+        main(["train", "rl", "--task", "maze2d", "--prior-scale", "0", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and len(err) == 1 and "needs --prior and --pick-head shared" in err[0], err

@@ -16,8 +16,9 @@ HYPERPARAMS = ROOT / "train" / "rl" / "hyperparams"
 TASKS = ("maze2d", "pendulum", "arm", "panda-mbm")
 
 #: What each task's file gave its PPO runs (SB3 and TorchRL alike) in the earlier layout.
-PPO = {"maze2d": {"total_steps": 60000, "n_envs": 8, "n_steps": 128, "batch_size": 256, "n_epochs": 4, "lr": 3e-4,
-                  "ent_coef": 0.01, "eval_every": 20000, "eval_problems": 20},
+PPO = {"maze2d": {"total_steps": 200000, "n_envs": 16, "n_steps": 256, "batch_size": 1024, "n_epochs": 4, "lr": 1e-3,
+                  "ent_coef": 0.01, "candidates": 20, "pick_head": "shared", "eval_every": 50000,
+                  "eval_problems": 100},     # issue 51: the five-minute recipe (docs/rl.md)
        "arm": {"total_steps": 200000, "n_envs": 8, "n_steps": 128, "batch_size": 256, "n_epochs": 4, "lr": 3e-4,
                "ent_coef": 0.01, "eval_every": 10000, "eval_problems": 50, "select_on": "collision_checks"},
        "pendulum": {"total_steps": 1000000, "n_envs": 16, "n_steps": 256, "batch_size": 1024, "n_epochs": 4,

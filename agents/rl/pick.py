@@ -54,6 +54,16 @@ class SharedCandidateHead(nn.Module):
         return logits
 
 
+def set_prior_scale(module: nn.Module, scale: float) -> int:
+    """Start every :class:`SharedCandidateHead` with a prior inside ``module`` at weight ``scale`` on the
+    prior's logits (1: the policy is the prior; 0: blind to it); returns how many heads were set."""
+    heads = [m for m in module.modules() if isinstance(m, SharedCandidateHead) and m.prior_scale is not None]
+    with torch.no_grad():
+        for head in heads:
+            head.prior_scale.fill_(float(scale))
+    return len(heads)
+
+
 #: ``PickPolicy(head=...)``: a linear score per candidate slot, or one score shared by the candidates.
 PICK_HEADS = ("linear", "shared")
 
@@ -101,4 +111,4 @@ class PickPolicy(nn.Module):
         return self.logits(self.body(self.encoder.flat(obs)))
 
 
-__all__ = ["PICK_HEADS", "PickPolicy", "SharedCandidateHead", "mlp"]
+__all__ = ["PICK_HEADS", "PickPolicy", "SharedCandidateHead", "mlp", "set_prior_scale"]

@@ -74,7 +74,7 @@ class RLArgs(RunFlags):
     planner: str | None = arg(None, "planner variant (default: the task's benchmark env; maze2d also birrt)")
     total_steps: int = arg(50_000, "environment steps to train for (all envs together)", parse=positive_int)
     minutes: float | None = arg(None, "wall-time budget of the training loop (evaluations included): the run stops at "
-                                "the first rollout after it, then evaluates once more; without an explicit "
+                                "the first rollout after it (it trains one at least), then evaluates once more; without an explicit "
                                 "--total-steps, no step limit (the steps reached depend on the machine: the run "
                                 "prints them, and --total-steps N repeats them exactly)", parse=minutes_float)
     seed: int = arg(0, "seed of the envs' problem draws, the networks and the evaluation", parse=seed_int)
@@ -144,6 +144,9 @@ class RLArgs(RunFlags):
                              "exactly that prior (a linear head, --pi-arch none); PPO learns what to add",
                              metavar="PATH|NAME")
     prior_temperature: float = arg(1.0, "pick: the prior's logits are divided by this", parse=temperature_float)
+    prior_scale: float = arg(1.0, "pick --prior --pick-head shared: the head's starting weight on the prior's logits "
+                             "(1: the policy starts as the prior; 0: blind to it, PPO learns how far to trust it)",
+                             parse=bounded(float, 0, False, "a number in [0, 100]", 100.0))
     encoder: str = arg("tree", "backbone: tree (TreeEncoder, sized by the flags above) or tree-gnn (the supervised GNN "
                        "sampler's causal TreeGNN, its architecture; what --init-from a gnn checkpoint needs)",
                        choices=("tree", "tree-gnn"))
@@ -265,6 +268,9 @@ def check_args(args: RLArgs) -> None:
             if kind != "tree/gnn-scorer":
                 raise ValueError(f"--prior {args.prior}: a {kind} checkpoint; the prior is a GNN sample scorer "
                                  "(tree/gnn-scorer: the pendulum's shipped gnn)")
+        if args.prior_scale != 1.0 and (args.prior is None or args.pick_head != "shared"):
+            raise ValueError(f"--prior-scale {args.prior_scale:g} is the shared head's starting weight on a prior: it "
+                             "needs --prior and --pick-head shared")
     elif args.tree_context or args.prior is not None:
         raise ValueError("--tree-context and --prior are a picker's (--action pick); a box policy always reads the tree")
     if args.device not in ("cpu", "cuda", "auto") and not args.device.startswith("cuda:"):

@@ -43,7 +43,7 @@ def hyperparam_tokens(values: dict[str, Any]) -> list[str]:
 #: Flags that describe a picker (``--action pick``): a box run ignores them in a YAML file, whose
 #: section describes the task's picker (the pendulum's file sets a candidate prior).
 PICK_ONLY_FLAGS = ("candidates", "local_scale", "target_scale", "pi_arch", "pick_head", "candidate_hidden",
-                   "candidate_embed", "tree_context", "prior", "prior_temperature")
+                   "candidate_embed", "tree_context", "prior", "prior_temperature", "prior_scale")
 
 
 def build_parser() -> OneLineParser:

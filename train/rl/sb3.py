@@ -26,6 +26,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 from tqdm import tqdm
 
 from agents.checkpoints import CheckpointError
+from agents.rl.pick import set_prior_scale
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
 from agents.rl.sb3 import CandidatePickPolicy
 from agents.rl.sb3_files import read_sb3_zip, sb3_policy_kwargs
@@ -44,18 +45,20 @@ class EvalCallback(BaseCallback):
     def __init__(self, evaluator: Evaluator, run: TrainingRun) -> None:
         super().__init__()
         self.evaluator, self.run = evaluator, run
-        self.rollout_starts, self.stopped_at = False, None
+        self.rollout_starts, self.rollouts, self.stopped_at = False, 0, None
 
     def _on_training_start(self) -> None:
         self._on_step()   # the untrained policy: the learning curve's first point
 
     def _on_rollout_start(self) -> None:
         self.rollout_starts = True
+        self.rollouts += 1
 
     def _on_step(self) -> bool:
         if self.rollout_starts:
             self.rollout_starts = False
-            if self.evaluator.time_up():   # --minutes: stop before this rollout (its first env step is not trained on)
+            # --minutes: stop before this rollout (its first env step is not trained on); one rollout at least
+            if self.rollouts > 1 and self.evaluator.time_up():
                 self.stopped_at = self.num_timesteps - self.training_env.num_envs
                 return False
         if self.evaluator.due(self.num_timesteps):
@@ -158,8 +161,11 @@ def train(args: RLArgs) -> RunResult:
         print(f"resuming {run.dir} at step {model.num_timesteps:,}")
     else:
         model = build_model(args, vec_env, run.dir)
-        if args.prior is not None:       # CandidatePickPolicy starts its head as the prior
-            print(f"the policy starts as the prior's logits ({args.prior}, temperature {args.prior_temperature})")
+        if args.prior is not None:       # CandidatePickPolicy starts its head as the prior (--prior-scale: its weight)
+            set_prior_scale(model.policy, args.prior_scale)
+            print(f"the policy starts as the prior's logits ({args.prior}, temperature {args.prior_temperature})"
+                  if args.prior_scale == 1.0 else f"the policy reads the prior's logits ({args.prior}, temperature "
+                  f"{args.prior_temperature}) at a starting weight of {args.prior_scale:g}")
     if args.init_from is not None and not args.resume:
         try:
             source = warm_start_encoder(args.init_from, *encoders_of(model))

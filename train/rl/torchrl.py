@@ -30,6 +30,7 @@ from torchrl.record.loggers import TensorboardLogger
 from tqdm import tqdm
 
 from agents.checkpoints import load_training_state, save_training_state
+from agents.rl.pick import set_prior_scale
 from agents.rl.policies import policy_from_torchrl, warm_start_encoder
 from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make_value
 from gnn_mp_envs.envs.wrappers import make_rl_env
@@ -194,6 +195,7 @@ def train(args: RLArgs) -> RunResult:
         actor = make_pick_actor(observation_space, action_spec=Categorical(action_space.n), head_hidden=args.pi_arch,
                                 head=args.pick_head, **args.candidate_kwargs())     # indices, as make_env's envs read
         value = make_pick_value(observation_space, head_hidden=args.net_arch, **args.candidate_kwargs())
+        set_prior_scale(actor, args.prior_scale)         # --prior-scale: the shared head's weight on a prior
     else:
         actor = make_actor(observation_space, action_space, head_hidden=args.net_arch[0],
                            init_scale=float(math.exp(args.log_std_init)), **args.encoder_kwargs())
@@ -252,7 +254,7 @@ def train(args: RLArgs) -> RunResult:
         for batch in collected(collector, args, state_path):
             if steps >= args.total_steps:
                 break
-            if evaluator.time_up():        # --minutes: this batch is not trained on
+            if steps > 0 and evaluator.time_up():      # --minutes: this batch is not trained on (one at least)
                 bar.write(evaluator.stopped_note(steps))
                 break
             keep_threads(args.threads)     # TorchRL raises torch's thread count when a batched env closes
