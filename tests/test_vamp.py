@@ -284,6 +284,9 @@ def test_the_benchmark_rechecks_the_rows_paths(fake_vamp_python, monkeypatch, tm
         assert r["path_valid"] == bool(problem.path_valid(path))
         assert r["path_valid_fine"] == bool(problem.path_valid(path, refine=PATH_CHECK_REFINE))
     assert any(r["path_valid_fine"] is False for r in runs)   # straight lines through the scene: caught
+    from train.benchmark.tables import format_table
+    vamp_line = next(line for line in format_table(report).splitlines() if line.startswith("vamp-rrtconnect"))
+    assert "0.001 [0.001, 0.001]" in vamp_line             # VAMP's 1.234 us, in ms with three decimals
 
 
 # ---------------------------------------------------------------------- with VAMP itself
@@ -349,3 +352,46 @@ def test_vamp_plans_the_benchmark_problems_and_the_recheck_judges_them(monkeypat
         assert 0 < r["wall_time_s"] <= r["vamp"]["call_time"]
         assert r["path_valid"] in (True, False) and r["path_valid_fine"] in (True, False)
         assert r["path_length"] > 0
+
+
+# ---------------------------------------------------------------------- tools/vamp_table
+def _report(task="ur5-mbm"):
+    def run(row, k, scene, ms, iterations, success=True, fine=True, coarse=True):
+        return {"sampler": row, "problem": k, "family": scene, "success": success, "wall_time_s": ms / 1e3,
+                "iterations": iterations, "nodes_expanded": 10, "path_valid": coarse if success else None,
+                "path_valid_fine": fine if success else None}
+    return {"task": task, "problems": 4, "seed": 0, "split": "test", "max_nodes": 5000, "checker": "spheres",
+            "runs": {"uniform": [run("uniform", 0, "box", 2.0, 40), run("uniform", 1, "cage", 30.0, 900),
+                                 run("uniform", 2, "box", 6.0, 60), run("uniform", 3, "cage", 10.0, 300,
+                                                                         success=False)],
+                     "vamp-rrtconnect": [run("vamp-rrtconnect", 0, "box", 0.1, 100),
+                                         run("vamp-rrtconnect", 1, "cage", 0.5, 700, fine=False, coarse=False),
+                                         run("vamp-rrtconnect", 2, "box", 0.3, 300, fine=False),
+                                         run("vamp-rrtconnect", 3, "cage", 1.5, 900)]}}
+
+
+def test_vamp_table_ratios_per_scene():
+    """Hand-computed: box ours median 4 ms, VAMP 0.2 ms (20x), one of VAMP's two paths fails 10x finer;
+    cage ours 20 ms against 1 ms (20x), 1 of 2 solved by ours, VAMP's one path failing both; all
+    scenes 8 ms against 0.4 ms."""
+    from tools.vamp_table import ratio_table
+    rows = {tuple(c.strip() for c in line.split("|")[1:3]): [c.strip() for c in line.split("|")[3:-1]]
+            for line in ratio_table(_report()).splitlines() if line.startswith("| ") and "---" not in line}
+    assert rows["box", "uniform"] == ["2/2", "4.00", "2/2", "0.200", "20x", "50 / 200", "0 / 1 of 2"]
+    assert rows["cage", "uniform"] == ["1/2", "20.00", "2/2", "1.000", "20x", "600 / 800", "1 / 1 of 2"]
+    assert rows["all scenes", "uniform"] == ["3/4", "8.00", "4/4", "0.400", "20x", "180 / 500", "1 / 2 of 4"]
+
+
+def test_vamp_table_refuses_reports_without_the_row(tmp_path, capsys):
+    from tools.vamp_table import main
+    report = _report()
+    del report["runs"]["vamp-rrtconnect"]
+    (tmp_path / "a.json").write_text(json.dumps(report))
+    (tmp_path / "b.json").write_text(json.dumps(_report(task="maze2d")))
+    (tmp_path / "c.json").write_text(json.dumps(_report()))
+    for name, message in (("a.json", "no vamp-rrtconnect row"), ("b.json", "no benchmark report"),
+                          ("missing.json", "cannot read")):
+        assert main([str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert main([str(tmp_path / "c.json")]) == 0 and "| all scenes | uniform |" in capsys.readouterr().out

@@ -8,7 +8,8 @@ Prints, as Markdown: per scene and sampler the problems solved (as the benchmark
 them, :func:`train.benchmark.stats.solved`), median iterations, collision checks and planning time;
 the whole test split beside VAMP's and cuRobo's
 published figures; and each learned row against uniform on the in-distribution scenes (the five
-training scenes) and the held-out ones (``bookshelf_thin``, ``cage``).
+training scenes) and the held-out ones (``bookshelf_thin``, ``cage``). A report with VAMP's row
+(``vamp-rrtconnect``) gets :mod:`tools.vamp_table`'s per-scene ratios ours / VAMP as well.
 """
 
 from __future__ import annotations
@@ -28,7 +29,9 @@ from train.benchmark.stats import solved
 #: commit f6de6a7, RRTConnect on a Ryzen 9 7950X, spherised Panda) and cuRobo's paper.
 VAMP = {"solved": "699/700", "iterations": "104 / 472 / 1,891", "time": "35 us median (343 us p95)"}
 CUROBO = {"solved": "100% of MBM's 800 (with their collision model)"}
-CLASSICAL = ("uniform", "goal-bias", "ompl-rrtconnect", "ompl-rrt")
+CLASSICAL = ("uniform", "goal-bias", "ompl-rrtconnect", "ompl-rrt", "vamp-rrtconnect")
+#: Rows of planners not ours, as the tables label them (VAMP's own row, measured on this machine).
+OTHERS = {"vamp-rrtconnect": "VAMP, measured here"}
 
 
 def _median(values: list[float | None], scale: float = 1.0) -> float | None:
@@ -68,7 +71,7 @@ def tables(report: dict[str, Any]) -> str:
                 continue
             f = row_figures(runs, max_nodes, limit)
             cells.append(f"{f['solved']}/{f['n']}, {_fmt(f['iterations'])} it, {_fmt(f['checks'])} checks, "
-                         f"{_fmt(f['time_ms'], 1)} ms")
+                         f"{_fmt(f['time_ms'], 3 if name in OTHERS else 1)} ms")
         out.append(f"| {scene} | " + " | ".join(cells) + " |")
     out += ["", "All scenes beside the published figures (iterations: median / mean / p95):", "",
             "| planner | solved | iterations | collision checks | time |", "|---|---|---|---|---|"]
@@ -76,8 +79,8 @@ def tables(report: dict[str, Any]) -> str:
         f = row_figures(report["runs"][name], max_nodes, limit)
         its = "-" if f["iterations"] is None else \
             f"{_fmt(f['iterations'])} / {_fmt(f['mean_iterations'])} / {_fmt(f['p95_iterations'])}"
-        out.append(f"| {name} (ours) | {f['solved']}/{f['n']} | {its} | {_fmt(f['checks'])} | "
-                   f"{_fmt(f['time_ms'], 1)} ms median |")
+        out.append(f"| {name} ({OTHERS.get(name, 'ours')}) | {f['solved']}/{f['n']} | {its} | {_fmt(f['checks'])} | "
+                   f"{_fmt(f['time_ms'], 3 if name in OTHERS else 1)} ms median |")
     out.append(f"| VAMP RRTConnect (published) | {VAMP['solved']} | {VAMP['iterations']} | - | {VAMP['time']} |")
     out.append(f"| cuRobo (published) | {CUROBO['solved']} | - | - | - |")
     learned = [n for n in names if n not in CLASSICAL and n != "uniform"]
@@ -110,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mbm_table: {args.report} is a {report.get('task')!r} report, not panda-mbm", file=sys.stderr)
         return 2
     print(tables(report))
+    if "vamp-rrtconnect" in report["runs"]:     # ours against VAMP per scene (tools/vamp_table.py)
+        from tools.vamp_table import ratio_table
+        print("\n" + ratio_table(report))
     return 0
 
 

@@ -15,6 +15,7 @@ from train.benchmark.args import (
     BenchmarkArgs,
     BenchmarkError,
     is_ompl,
+    is_vamp,
     time_limit_s,
 )
 
@@ -100,6 +101,7 @@ def write_ompl_logs(args: BenchmarkArgs, report: dict[str, Any], directory: Path
                           for name in args.samplers}
     total_time = sum(r["time"] or 0.0 for runs in results_by_planner.values() for r in runs)
     settings = {log_name[name]: ({"time_limit": time_limit_s(args), "seed": args.seed + 1} if is_ompl(name)
+                                 else {"vamp_defaults": 1, "halton_skip": args.seed} if is_vamp(name)
                                  else {"max_nodes": report["max_nodes"]})
                 for name in args.samplers}
     # one word: OMPL's ompl_benchmark_statistics.py names the experiment by the line's last word

@@ -11,6 +11,11 @@ def _fmt(x: float | None, digits: int) -> str:
     return f"{x:.{digits}f}"
 
 
+def ms_digits(median_ms: float | None) -> int:
+    """Decimals of a time in ms: none from 1 ms up, three below (VAMP's rows plan in tens of microseconds)."""
+    return 0 if median_ms is None or median_ms >= 1.0 else 3
+
+
 def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -> str:
     if stats["median"] is None:
         return "-"
@@ -79,7 +84,9 @@ def format_table(report: dict[str, Any]) -> str:
         if s.get("sampler_time_s", {}).get("median") is not None:
             split = f"{1e3 * s['sampler_time_s']['median']:.0f} / {1e3 * s['planner_time_s']['median']:.0f}"
         rows.append([name, "-" if rate is None else f"{100 * rate:.0f}%", _cell(s["nodes_expanded"]), _cell(s["edges"]),
-                     _cell(s["collision_checks"]), _cell(s["path_length"], 2), _cell(s["wall_time_s"], 0, 1e3),
+                     _cell(s["collision_checks"]), _cell(s["path_length"], 2),
+                     _cell(s["wall_time_s"], ms_digits(None if s["wall_time_s"]["median"] is None
+                                                       else 1e3 * s["wall_time_s"]["median"]), 1e3),
                      split])
     widths = [max(len(r[c]) for r in rows) for c in range(len(header))]
     lines = ["  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in enumerate(zip(r, widths)))
@@ -96,8 +103,9 @@ def format_table(report: dict[str, Any]) -> str:
     notes = [f"{solved_note(report).replace('solved', 'success', 1)}; median [q25, q75] over "
              f"the problems; *path length{unit} over successful runs only",
              "edges = extensions checked, blocked ones and goal connections included (so they can exceed nodes)",
-             "wall time = planning loop incl. sampler inference (OMPL: solve time); it varies with machine load, "
-             "the counters do not",
+             "wall time = planning loop incl. sampler inference (OMPL: solve time"
+             + ("; VAMP: its own planning time" if any(n.startswith("vamp-") for n in report["results"]) else "")
+             + "); it varies with machine load, the counters do not",
              "sampler / planner = medians of the time in the sampler (inference) and in env.step (the planner)",
              path_check_note(report)]
     return "\n".join([title, *lines, *notes])
@@ -111,10 +119,14 @@ def _grid(rows: list[list[str]]) -> list[str]:
     return lines
 
 
-def _median(values: list[float | None], scale: float = 1.0, digits: int = 0) -> str:
+def _median(values: list[float | None], scale: float = 1.0, digits: int | None = 0) -> str:
+    """The median of the values given, as text (``digits`` None: :func:`ms_digits` of it)."""
     import numpy as np
     data = [v for v in values if v is not None]
-    return "-" if not data else f"{scale * float(np.median(data)):.{digits}f}"
+    if not data:
+        return "-"
+    median = scale * float(np.median(data))
+    return f"{median:.{ms_digits(median) if digits is None else digits}f}"
 
 
 def format_field_table(report: dict[str, Any]) -> str:
@@ -130,7 +142,8 @@ def format_field_table(report: dict[str, Any]) -> str:
         runs = report["runs"][name]
         solved = sum(is_solved(r, max_nodes) for r in runs)
         t, it = s["wall_time_s"], s.get("iterations", {})
-        times = "-" if t["median"] is None else f"{1e3 * t['median']:.0f} / {1e3 * t['p95']:.0f}"
+        d = ms_digits(None if t["median"] is None else 1e3 * t["median"])
+        times = "-" if t["median"] is None else f"{1e3 * t['median']:.{d}f} / {1e3 * t['p95']:.{d}f}"
         iters = "-" if not it or it.get("median") is None else f"{it['median']:.0f} / {it['mean']:.0f} / {it['p95']:.0f}"
         rows.append([name, f"{solved}/{len(runs)}", times, iters, _cell(s["collision_checks"]),
                      _cell(s["path_length"], 2)])
@@ -164,6 +177,6 @@ def format_family_table(report: dict[str, Any]) -> str:
                 continue
             rows.append([family, name, f"{sum(solved(r, max_nodes) for r in runs)}/{len(runs)}",
                          _median([r.get("iterations") for r in runs]), _median([r["collision_checks"] for r in runs]),
-                         _median([r["wall_time_s"] for r in runs], 1e3)])
+                         _median([r["wall_time_s"] for r in runs], 1e3, digits=None)])
     return "\n".join([f"per scene (medians over the scene's problems; {solved_note(report)}):",
                       *_grid(rows)])
