@@ -52,12 +52,19 @@ def exit_now(code: int) -> None:
     """Leave at once after Ctrl-C: outputs are already written (atomically), and tearing down
     torch and friends can take seconds on a busy machine. Worker processes still running
     (a TorchRL ParallelEnv's, an SB3 SubprocVecEnv's) are killed first: they ignore Ctrl-C
-    (see ``train.rl.torchrl``), so nothing else would stop them."""
+    (see ``train.rl.torchrl``), so nothing else would stop them; a Ray instance this process runs
+    (``--ray``) is shut down (its agents would outlive the process)."""
     import gc
     import multiprocessing
     from multiprocessing import util
     for child in multiprocessing.active_children():
         child.kill()
+    ray = sys.modules.get("ray")
+    if ray is not None and getattr(ray, "is_initialized", lambda: False)():
+        try:
+            ray.shutdown()
+        except Exception:       # already half torn down: leaving is what matters
+            pass
     gc.collect()                # drop the killed pool's queues ...
     util._run_finalizers()      # ... and release their semaphores (else the resource tracker warns)
     sys.stdout.flush()
@@ -262,12 +269,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             command = "benchmark: "
             return cmd_benchmark(ns)
         return fail(f"unknown command {ns.command!r}")
-    except UsageError as exc:        # every usage error (CLIError, BenchmarkError, a shared check's): exit 2
-        return fail(f"{command}{exc}")
     except KeyboardInterrupt:
         exit_now(fail("interrupted", 130))
-    except OSError as exc:   # unreadable / unwritable files from any subcommand
-        return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+    except Exception as exc:
+        if raised_by_an_interrupt(exc):   # library code that turned the KeyboardInterrupt into its own error
+            exit_now(fail("interrupted", 130))
+        if isinstance(exc, UsageError):   # every usage error (CLIError, BenchmarkError, a shared check's): exit 2
+            return fail(f"{command}{exc}")
+        if isinstance(exc, OSError):      # unreadable / unwritable files from any subcommand
+            return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+        raise
+
+
+def raised_by_an_interrupt(exc: BaseException) -> bool:
+    """Was ``exc`` raised while a KeyboardInterrupt (Ctrl-C, or SIGTERM: :func:`terminate_as_interrupt`)
+    was being handled? A library's cleanup can answer the interrupt with an error of its own (TorchRL's
+    PPO loss: "Converting a tensordict to boolean value is not permitted"): the run was stopped all the
+    same, and says so in one line."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__context__
+    return False
 
 
 if __name__ == "__main__":

@@ -140,17 +140,27 @@ def start_ray(address: str | None, **init: Any) -> None:
     directory to every worker's ``sys.path`` (first) and starts a local instance's workers there,
     so a ``train.py``, ``numpy.py`` or ``agents/`` in the user's directory would be imported by the
     actors in place of the modules of that name. The directory stays (empty) until this process
-    exits: the workers of a local instance keep it as their working directory."""
+    exits: the workers of a local instance keep it as their working directory.
+
+    SIGTERM keeps the handler it had: ``ray.init`` replaces it (a Python ``sys.exit``, then the C++
+    core worker's failure handler, which answers SIGTERM with a stack dump and SIGABRT); the
+    command's handler ends the run as Ctrl-C does (:func:`train.cli.terminate_as_interrupt`)."""
+    import threading
+
     import ray
     if not _RAY_DIRECTORY:
         _RAY_DIRECTORY.append(tempfile.mkdtemp(prefix="gnn-mp-ray-"))
         atexit.register(shutil.rmtree, _RAY_DIRECTORY[0], True)
+    main_thread = threading.current_thread() is threading.main_thread()
+    sigterm = signal.getsignal(signal.SIGTERM) if main_thread else None
     here = os.getcwd()
     os.chdir(_RAY_DIRECTORY[0])
     try:
         ray.init(address=address, **init)
     finally:
         os.chdir(here)
+        if sigterm is not None:
+            signal.signal(signal.SIGTERM, sigterm)
 
 
 def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],

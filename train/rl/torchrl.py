@@ -29,7 +29,7 @@ from torchrl.record.loggers import TensorboardLogger
 
 from tqdm import tqdm
 
-from agents.checkpoints import load_training_state, save_training_state
+from agents.checkpoints import CheckpointError, load_training_state, save_training_state
 from agents.rl.pick import set_prior_scale
 from agents.rl.policies import policy_from_torchrl, warm_start_encoder
 from agents.rl.torchrl import make_actor, make_pick_actor, make_pick_value, make_value
@@ -215,10 +215,16 @@ def train(args: RLArgs) -> RunResult:
     steps = 0
     optimiser_state = None
     if args.resume:
-        state = load_training_state(state_path)
-        actor.load_state_dict(state["actor"])
-        value.load_state_dict(state["value"])
-        optimiser_state, steps = state["optimiser"], int(state["steps"])
+        try:                             # a damaged or foreign state: one line, as train sampler / critical train
+            state = load_training_state(state_path)
+            actor.load_state_dict(state["actor"])
+            value.load_state_dict(state["value"])
+            optimiser_state, steps = state["optimiser"], int(state["steps"])
+        except CheckpointError as exc:
+            raise RunError(f"--resume: {exc}") from None
+        except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+            raise RunError(f"--resume: {state_path} is not the training state of this run's networks "
+                           f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
         print(f"resuming {run.dir} at step {steps:,}")
     total_frames = max(total_frames - steps, frames_per_batch)
     collector = make_collector(args, env, actor, frames_per_batch, total_frames)
