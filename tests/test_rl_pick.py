@@ -101,17 +101,23 @@ def test_compiled_candidate_features_equal_the_numpy_statement_bit_for_bit(task)
     assert compared >= 20
 
 
-def test_rl_ids_are_the_training_commands_mdp_with_the_time_limit():
-    """gym.make(<RL id>) == make_rl_env(task) == what `gnn-mp train rl` builds: same rewards, same
-    observations for the same seed and actions; TimeLimit in the spec, as RL Zoo reads it."""
+@pytest.mark.parametrize("file", ["none", "the task's"])
+def test_rl_ids_are_the_training_commands_mdp_with_the_time_limit(file):
+    """gym.make(<RL id>) == make_rl_env(task) == what `gnn-mp train rl --hyperparams none` builds: same
+    rewards, same observations for the same seed and actions; with the task's file, the same with the
+    file's env_kwargs (maze2d.yml: 20 candidates, as RL Zoo's env gets them); TimeLimit in the spec, as
+    RL Zoo reads it."""
     from train.rl.cli import parse
     env_id = rl_env_id("GNNMP/Maze2DRRT-v0")
     assert env_id == "GNNMP/Maze2DRRT-RLPick-v0"
     assert gym.spec(env_id).max_episode_steps == RL_MAX_EPISODE_STEPS
     assert gym.spec("GNNMP/ArmBiRRT-RLBox-v0").max_episode_steps == RL_MAX_EPISODE_STEPS
-    args = parse(["--task", "maze2d"])
-    envs = [gym.make(env_id), make_rl_env("maze2d"), make_rl_env("maze2d", split="train", **args.env_kwargs())]
+    args = parse(["--task", "maze2d"] + (["--hyperparams", "none"] if file == "none" else []))
+    kwargs = {} if file == "none" else {"candidates": 20}
+    envs = [gym.make(env_id, **kwargs), make_rl_env("maze2d", **kwargs),
+            make_rl_env("maze2d", split="train", **args.env_kwargs())]
     assert all(isinstance(e.action_space, gym.spaces.Discrete) for e in envs)
+    assert {e.action_space.n for e in envs} == {20 if kwargs else 8}
     runs = []
     for env in envs:
         obs, _ = env.reset(seed=4)
@@ -163,7 +169,7 @@ def test_sb3_run_saves_a_zip_and_resumes(tmp_path):
     assert (tmp_path / "run" / "best_model.zip").is_file()
 
 
-@pytest.mark.parametrize("changed", [["--lr", "0.001"], ["--gamma", "0.9"], ["--candidates", "12"],
+@pytest.mark.parametrize("changed", [["--lr", "0.0005"], ["--gamma", "0.9"], ["--candidates", "12"],
                                      ["--action", "box"], ["--algo", "sac"], ["--task", "pendulum"]])
 def test_a_resume_with_other_flags_is_refused_in_one_line(tmp_path, changed, capsys):
     """`train rl --resume` with a flag that differs from the run's config.json (other than the step

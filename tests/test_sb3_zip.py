@@ -83,6 +83,27 @@ def test_benchmark_takes_a_zip_and_refuses_one_without_its_config_or_of_another_
         assert code == 2 and len(err) == 1 and fragment in err[0], (argv, err)
 
 
+def test_a_runs_zip_is_a_row_of_its_own_beside_the_shipped_one(run_dir, tmp_path):
+    """--samplers rl-ppo,mine --checkpoint mine=RUN/best_model.zip (issue 51): the zip's kind names the
+    sampler (rl-ppo), its row is the run's policy (the counters of --checkpoint rl-ppo=the zip), and the
+    shipped rl-ppo row stays beside it."""
+    from train.cli import main
+    zip_path = run_dir / "best_model.zip"
+    common = ["benchmark", "--task", "maze2d", "--problems", "2", "--seed", "0", "--no-progress"]
+    assert main([*common, "--samplers", "rl-ppo,mine", "--checkpoint", f"mine={zip_path}",
+                 "--json", str(tmp_path / "mine.json")]) == 0
+    assert main([*common, "--samplers", "rl-ppo", "--checkpoint", f"rl-ppo={zip_path}",
+                 "--json", str(tmp_path / "named.json")]) == 0
+    assert main([*common, "--samplers", "rl-ppo", "--json", str(tmp_path / "shipped.json")]) == 0
+    runs = {name: json.loads((tmp_path / f"{name}.json").read_text())["runs"] for name in ("mine", "named", "shipped")}
+    keys = ("success", "nodes_expanded", "collision_checks")
+
+    def counters(rows):
+        return [{k: r[k] for k in keys} for r in rows]
+    assert counters(runs["mine"]["mine"]) == counters(runs["named"]["rl-ppo"])
+    assert counters(runs["mine"]["rl-ppo"]) == counters(runs["shipped"]["rl-ppo"])
+
+
 def test_a_zip_member_holding_code_is_refused_in_one_line(run_dir, tmp_path):
     """The .pth members are read with torch.load(weights_only=True): a pickled global is refused."""
     from agents.checkpoints import CheckpointError, read_checkpoint
