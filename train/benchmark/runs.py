@@ -209,7 +209,7 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
             runs[name] = run_ompl_rows(args, name, indices)
         elif is_vamp(name):          # VAMP's paths wait for the re-check below, as ours do
             from train.benchmark.vamp_rows import run_vamp_rows
-            runs[name] = run_vamp_rows(args, name, indices)
+            runs[name] = run_vamp_rows(args, name, indices, cached_env(args.task, env_kwargs), _PATH)
 
     # sampler-major: a worker runs one sampler over the problems, warm, as a user plans with it. Tried
     # problem-major (every sampler per problem in turn): the switching cost the learned rows their

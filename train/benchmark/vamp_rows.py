@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from train.benchmark.args import VAMP_PREFIX, BenchmarkArgs, BenchmarkError, env_kwargs_for, time_limit_s, vamp_hint
+from train.benchmark.args import VAMP_PREFIX, BenchmarkArgs, BenchmarkError, time_limit_s, vamp_hint
 
 
 def vamp_record(row: str, index: int, seed: int, result: dict[str, Any], family: str | None,
@@ -36,13 +36,12 @@ def vamp_record(row: str, index: int, seed: int, result: dict[str, Any], family:
     }
 
 
-def run_vamp_rows(args: BenchmarkArgs, row: str, indices: list[int]) -> list[dict[str, Any]]:
-    """Plan ``indices`` (the same split and problems as the other rows) with VAMP's planner of ``row``.
-    A solved run's path waits in the record for the benchmark's re-check (``runs._PATH``)."""
+def run_vamp_rows(args: BenchmarkArgs, row: str, indices: list[int], env: Any, path_key: str) -> list[dict[str, Any]]:
+    """Plan ``indices`` (the same split and problems as the other rows: ``env``'s, the benchmark env)
+    with VAMP's planner of ``row``. A solved run's path, ``(states, None)``, waits in the record under
+    ``path_key`` for the benchmark's re-check."""
     from gnn_mp_envs.baselines import vamp_runner
-    from train.benchmark.runs import _PATH, cached_env
 
-    env = cached_env(args.task, env_kwargs_for(args))
     problems = [env.task.problem(env.split, i) for i in indices]
     limit = time_limit_s(args)
     try:
@@ -62,7 +61,7 @@ def run_vamp_rows(args: BenchmarkArgs, row: str, indices: list[int]) -> list[dic
         record = vamp_record(row, index, args.seed, result, getattr(problem, "family", None), limit)
         path = result["path"] if record["success"] else None
         if path is not None:
-            record[_PATH] = (np.asarray(path, dtype=np.float64), None)
+            record[path_key] = (np.asarray(path, dtype=np.float64), None)
         if args.save_paths:
             record["path"] = None if path is None else np.asarray(path, dtype=np.float64).tolist()
             record["path_controls"] = None
