@@ -75,3 +75,52 @@ def test_critical_evaluate_bounds_its_sample_counts(flag, value, capsys):
         main(["evaluate", "--models", "gnn", flag, value])
     err = capsys.readouterr().err.strip().splitlines()
     assert info.value.code == 2 and len(err) == 1 and flag in err[0] and "4,096" in err[0], err
+
+
+def test_the_fuzzer_never_names_a_device_of_the_machine(tmp_path, monkeypatch):
+    """Every attempt's command line, with the attempt's own device node and without one (mknod not
+    permitted: a socket stands in), names no path under /dev and no device outside its scratch
+    directory; a value that would is refused before anything runs."""
+    attempts = fuzz_cli.all_attempts(list(fuzz_cli.COMMANDS))
+    assert not [a for a in attempts if "/dev" in a.value]
+    for mknod_permitted in (True, False):
+        if not mknod_permitted:
+            def refused(*args, **kwargs):
+                raise PermissionError(1, "Operation not permitted")
+            monkeypatch.setattr(os, "mknod", refused)
+        scratch = tmp_path / f"scratch-{mknod_permitted}"
+        scratch.mkdir()
+        nodes, checks = fuzz_cli._make_nodes(scratch)
+        mode = os.lstat(nodes["{chardev}"]).st_mode
+        assert (stat.S_ISCHR(mode) if mknod_permitted else stat.S_ISSOCK(mode)) and checks["{chardev}"](mode)
+        assert all(path.startswith(str(scratch)) for path in nodes.values())
+        for attempt in attempts:
+            argv = fuzz_cli.argv_of(attempt, scratch, tmp_path, nodes)
+            assert not [a for a in argv if a.split("=", 1)[-1].startswith("/dev")], (attempt, argv)
+    for value in ("/dev/null", "gnn=/dev/null", "/dev/../dev/zero"):
+        with pytest.raises(RuntimeError, match="never names a device"):
+            fuzz_cli.argv_of(fuzz_cli.Attempt("benchmark", "--json", "x", value), tmp_path, tmp_path, {})
+
+
+def test_every_bounded_number_is_also_tried_at_its_bound():
+    """The values just inside each bound (10**9 for a count, 4,096 for a width, 256 workers, the last
+    seed) are attempts of their own: where the bounds that were not bounds showed."""
+    bound = {(a.command, a.option): a.value for a in fuzz_cli.at_bound_attempts(list(fuzz_cli.COMMANDS))}
+    assert bound[("benchmark", "--problems")] == str(10 ** 9)
+    assert bound[("train rl", "--candidates")] == "4096"
+    assert bound[("train sampler", "--workers")] == "256"
+    assert bound[("critical evaluate", "--seed")] == str(2 ** 32 - 1)
+    assert ("train sampler", "--eval-problems") in bound and ("critical generate-data", "--num-maps") in bound
+
+
+def test_each_attempt_runs_under_a_memory_limit(tmp_path, monkeypatch):
+    """An attempt that allocates past --memory-gib fails there (a MemoryError: a traceback, a finding),
+    instead of taking the machine's memory; one within it runs."""
+    code = "import sys; n = int(sys.argv[-1]); b = bytearray(n); print(len(b))"
+    monkeypatch.setitem(fuzz_cli.COMMANDS, "alloc", fuzz_cli.Command("alloc", ("alloc",), lambda: None, ()))
+    monkeypatch.setattr(fuzz_cli, "ENTRY", code)
+    attempts = [fuzz_cli.Attempt("alloc", "--bytes", "big", str(2 * 2 ** 30)),
+                fuzz_cli.Attempt("alloc", "--bytes", "small", str(2 ** 20))]
+    outcomes = fuzz_cli.fuzz(attempts, jobs=2, timeout=60, workdir=tmp_path, progress=False, memory_gib=1.0)
+    assert [o.traceback for o in outcomes] == [True, False], [o.last_line for o in outcomes]
+    assert "MemoryError" in outcomes[0].last_line and outcomes[1].returncode == 0

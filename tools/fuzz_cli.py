@@ -2,17 +2,25 @@
 
 Each subcommand's flags are read from its own argparse parser (``gnn-mp benchmark``, ``train
 sampler``, ``train rl``, ``critical generate-data|train|evaluate``); each flag gets values of the
-kind it takes, turned bad: numbers negative, zero, huge (10**30), NaN, inf, empty, text; paths empty,
-a directory, ``/dev/null``, a FIFO, a character device node, a symlink, a missing directory; names
-empty, unknown, NaN, huge. Every attempt is the subcommand with small budget flags (one problem, a
-few training steps) and the one bad value, run in a subprocess of its own (its own session and
-scratch directory, a timeout; at most ``--jobs`` at a time), and counted:
+kind it takes, turned bad: numbers negative, zero, huge (10**30), NaN, inf, empty, text, and the
+largest value the flag accepts (its parser's bound: 10**9 for a count, 4,096 for a width, 256
+workers, the last seed; where a bound that is not one shows); paths empty, a directory, a FIFO, a
+character device node, a symlink, a missing directory; names empty, unknown, NaN, huge. Every
+attempt is the subcommand with small budget flags (one problem, a few training steps) and the one
+bad value, run in a subprocess of its own (its own session and scratch directory, a timeout, a
+memory limit: ``--memory-gib`` of heap and private memory, ``RLIMIT_DATA``; at most ``--jobs`` at a
+time), and counted:
 
 - attempts;
 - tracebacks: ``Traceback (most recent call last)`` in stderr (a bad value must be one line);
 - hangs: attempts still running at the timeout (killed with their process group);
 - non-regular files replaced: a FIFO, character device node or symlink given as a path that is not
   one any more afterwards (looked at with ``lstat`` only: this script never opens a FIFO).
+
+The device node is the attempt's own, made in its scratch directory with ``mknod`` (the numbers of
+``/dev/null``); where ``mknod`` is not permitted (not root) a Unix socket stands in. No attempt names
+a path under ``/dev`` or any device of the machine (:func:`argv_of` refuses one): a regression of the
+commands' refusal of device nodes replaces the attempt's node, never the machine's.
 
     python -m tools.fuzz_cli                                   # the full run: a few hundred attempts
     python -m tools.fuzz_cli --commands benchmark --max-attempts 20 --json fuzz.json
@@ -43,6 +51,11 @@ ROOT = Path(__file__).resolve().parents[1]
 HUGE = "1" + "0" * 30
 #: The subprocess: the CLI's own entry point.
 ENTRY = "import sys; from train.cli import main; sys.exit(main())"
+#: The heap and private memory of each of an attempt's processes (``--memory-gib``, ``RLIMIT_DATA``:
+#: what numpy and torch allocate; not the address space, which thread stacks and libraries reserve far
+#: beyond what they use): a count that allocates beyond it is a MemoryError (a finding when it is a
+#: traceback), not a machine out of memory.
+MEMORY_GIB = 6.0
 #: Destinations that name files or directories even where the parser takes a plain string.
 PATH_DESTS = {"out", "json", "plot", "render", "ompl_log", "data", "data_dir", "checkpoints", "hyperparams",
               "prior", "init_from"}
@@ -115,6 +128,16 @@ class Flag:
     option: str
     dest: str
     kind: str          # number, path, pair, choice, text
+    #: The largest value the flag's parser accepts (``train.args.bounded``'s ``maximum``), if it has one.
+    maximum: str | None = None
+
+
+def maximum_of(action: argparse.Action) -> str | None:
+    """The largest value ``action`` accepts, as its parser states it (``parse.maximum``), as text."""
+    bound = getattr(action.type, "maximum", None)
+    if bound is None:
+        return None
+    return str(int(bound)) if float(bound).is_integer() else repr(float(bound))
 
 
 def kind_of(action: argparse.Action) -> str | None:
@@ -148,23 +171,33 @@ def flags_of(command: Command) -> list[Flag]:
             continue
         kind = kind_of(action)
         if kind is not None:
-            out.append(Flag(command.name, max(options, key=len), action.dest, kind))
+            out.append(Flag(command.name, max(options, key=len), action.dest, kind,
+                            maximum_of(action) if kind == "number" else None))
     return out
 
 
-#: label -> value (``{fifo}``, ``{chardev}``, ``{symlink}``, ``{dir}``, ``{missing}``: made per attempt)
+#: label -> value (``{fifo}``, ``{chardev}``, ``{symlink}``, ``{dir}``, ``{missing}``: made per attempt, in its
+#: scratch directory; never a device of the machine)
 VALUES: dict[str, list[tuple[str, str]]] = {
     "number": [("negative", "-1"), ("zero", "0"), ("huge", HUGE), ("nan", "nan"), ("inf", "inf"), ("empty", ""),
                ("text", "abc")],
-    "path": [("empty", ""), ("directory", "{dir}"), ("/dev/null", "/dev/null"), ("fifo", "{fifo}"),
-             ("char device", "{chardev}"), ("symlink", "{symlink}"), ("missing", "{missing}")],
-    "pair": [("empty", ""), ("no =", "abc"), ("directory", "gnn={dir}"), ("/dev/null", "gnn=/dev/null"),
-             ("fifo", "gnn={fifo}"), ("char device", "gnn={chardev}"), ("missing", "gnn={missing}")],
+    "path": [("empty", ""), ("directory", "{dir}"), ("fifo", "{fifo}"), ("char device", "{chardev}"),
+             ("symlink", "{symlink}"), ("missing", "{missing}")],
+    "pair": [("empty", ""), ("no =", "abc"), ("directory", "gnn={dir}"), ("fifo", "gnn={fifo}"),
+             ("char device", "gnn={chardev}"), ("missing", "gnn={missing}")],
     "choice": [("empty", ""), ("unknown", "no-such-value"), ("nan", "nan"), ("huge", HUGE)],
     "text": [("empty", ""), ("unknown", "no-such-value"), ("nan", "nan"), ("huge", HUGE), ("negative", "-1")],
 }
-#: Values that leave a node behind whose type is checked afterwards.
+#: Values that leave a node behind whose type is checked afterwards (a socket stands in for the device
+#: node where ``mknod`` is not permitted).
 SPECIAL = {"{fifo}": stat.S_ISFIFO, "{chardev}": stat.S_ISCHR, "{symlink}": stat.S_ISLNK}
+#: The value of a number flag at its bound (label "at bound"): the flag's own maximum.
+AT_BOUND = "at bound"
+#: Flags that set how long a run is (a time budget, a step or epoch count): at their bound the attempt
+#: runs until the timeout, as asked; that is counted apart ("budget runs"), not as a hang.
+RUN_LENGTH = {("train sampler", "--minutes"), ("train sampler", "--dagger-minutes"), ("train rl", "--minutes"),
+              ("train rl", "--total-steps"), ("critical train", "--epochs"), ("critical train", "--time-budget"),
+              ("critical train", "--max-steps")}
 
 
 @dataclass(frozen=True)
@@ -175,9 +208,19 @@ class Attempt:
     value: str
 
 
+def values_of(flag: Flag) -> list[tuple[str, str]]:
+    """The bad values of ``flag``'s kind, and for a bounded number its bound."""
+    return VALUES[flag.kind] + ([(AT_BOUND, flag.maximum)] if flag.maximum is not None else [])
+
+
 def all_attempts(commands: list[str]) -> list[Attempt]:
     return [Attempt(flag.command, flag.option, label, value)
-            for name in commands for flag in flags_of(COMMANDS[name]) for label, value in VALUES[flag.kind]]
+            for name in commands for flag in flags_of(COMMANDS[name]) for label, value in values_of(flag)]
+
+
+def at_bound_attempts(commands: list[str]) -> list[Attempt]:
+    """Every bounded number flag at its bound (``--at-bound``)."""
+    return [a for a in all_attempts(commands) if a.label == AT_BOUND]
 
 
 def choose(attempts: list[Attempt], limit: int | None, seed: int) -> list[Attempt]:
@@ -208,27 +251,53 @@ class Outcome:
     hang: bool
     replaced: list[str] = field(default_factory=list)
     last_line: str = ""
+    #: still running at the timeout, as a run-length flag at its bound asks (:data:`RUN_LENGTH`): not a hang
+    budget_run: bool = False
 
 
-def _make_nodes(scratch: Path) -> dict[str, str]:
-    """The attempt's special paths (a fresh FIFO, device node, symlink to a regular file, a directory)."""
+def _make_nodes(scratch: Path) -> tuple[dict[str, str], dict[str, Callable[[int], bool]]]:
+    """The attempt's special paths (a fresh FIFO, device node, symlink to a regular file, a directory),
+    all inside ``scratch``, and the file type each node must still have afterwards."""
     nodes = {"{dir}": str(scratch / "a-directory"), "{missing}": str(scratch / "missing" / "out.png"),
              "{fifo}": str(scratch / "fifo.png"), "{chardev}": str(scratch / "chardev.png"),
              "{symlink}": str(scratch / "symlink.png")}
+    checks = dict(SPECIAL)
     Path(nodes["{dir}"]).mkdir()
     os.mkfifo(nodes["{fifo}"])
     try:
-        os.mknod(nodes["{chardev}"], 0o666 | stat.S_IFCHR, os.makedev(1, 3))     # /dev/null's numbers
-    except (PermissionError, OSError):
-        nodes["{chardev}"] = "/dev/null"          # not root: the real one, only looked at afterwards
+        os.mknod(nodes["{chardev}"], 0o666 | stat.S_IFCHR, os.makedev(1, 3))     # /dev/null's numbers, our node
+    except OSError:           # mknod not permitted (not root, a restricted container): a socket, never /dev/*
+        import socket
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.bind(nodes["{chardev}"])
+        checks["{chardev}"] = stat.S_ISSOCK
     (scratch / "target.txt").write_text("a regular file\n")
     os.symlink(scratch / "target.txt", nodes["{symlink}"])
-    return nodes
+    return nodes, checks
 
 
-def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float) -> Outcome:
-    scratch = Path(tempfile.mkdtemp(prefix="attempt-", dir=workdir))
-    nodes = _make_nodes(scratch)
+def _names_a_device(arg: str, scratch: Path) -> bool:
+    """Does the argument (or the value after a ``KEY=``) name a path under ``/dev`` or a device node
+    outside the attempt's scratch directory?"""
+    for text in {arg, arg.split("=", 1)[-1]}:
+        if not text:
+            continue
+        path = Path(text)
+        if str(path).startswith("/dev") or str(os.path.realpath(path)).startswith("/dev"):
+            return True
+        try:
+            mode = os.stat(path).st_mode
+        except (OSError, ValueError):
+            continue
+        if (stat.S_ISCHR(mode) or stat.S_ISBLK(mode)) and not os.path.realpath(path).startswith(
+                os.path.realpath(scratch) + os.sep):
+            return True
+    return False
+
+
+def argv_of(attempt: Attempt, scratch: Path, data: Path, nodes: dict[str, str]) -> list[str]:
+    """The attempt's command line (after the entry point): the budget flags, then the bad value. A
+    ``RuntimeError`` if any argument would name a device of the machine."""
     value = attempt.value
     for key, path in nodes.items():
         value = value.replace(key, path)
@@ -236,9 +305,30 @@ def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float) -> 
     budget = [b.replace("{scratch}", str(scratch)).replace("{data}", str(data)) for b in command.budget]
     extra = list(command.pair_extra) if attempt.value.startswith("gnn=") else []
     argv = [*command.prefix, *budget, *extra, attempt.option, value]
+    named = [a for a in argv if _names_a_device(a, scratch)]
+    if named:
+        raise RuntimeError(f"the fuzzer never names a device of the machine: {named}")
+    return argv
+
+
+def limited(code: str, gib: float) -> str:
+    """``code`` run under a limit of ``gib`` GiB of heap and private memory per process (``RLIMIT_DATA``,
+    set in the child, inherited by its own processes)."""
+    if not gib:
+        return code
+    limit = int(gib * 2 ** 30)
+    return f"import resource; resource.setrlimit(resource.RLIMIT_DATA, ({limit}, {limit}))\n{code}"
+
+
+def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float,
+                memory_gib: float = MEMORY_GIB) -> Outcome:
+    scratch = Path(tempfile.mkdtemp(prefix="attempt-", dir=workdir))
+    nodes, checks = _make_nodes(scratch)
+    argv = argv_of(attempt, scratch, data, nodes)
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
     started = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", ENTRY, *argv], cwd=scratch, stdin=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-c", limited(ENTRY, memory_gib), *argv], cwd=scratch,
+                            stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
                             start_new_session=True)
     hang = False
@@ -253,17 +343,18 @@ def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float) -> 
         _, err = proc.communicate()
     seconds = time.perf_counter() - started
     replaced = []
-    for key, check in SPECIAL.items():
+    for key, check in checks.items():
         path = nodes[key]
-        if key in attempt.value and path != "/dev/null":
+        if key in attempt.value:
             try:
                 if not check(os.lstat(path).st_mode):
                     replaced.append(key.strip("{}"))
             except FileNotFoundError:
                 replaced.append(key.strip("{}") + " (removed)")
     lines = [line for line in (err or "").splitlines() if line.strip()]
+    budget_run = hang and attempt.label == AT_BOUND and (attempt.command, attempt.option) in RUN_LENGTH
     outcome = Outcome(attempt, proc.returncode, round(seconds, 1), "Traceback (most recent call last)" in (err or ""),
-                      hang, replaced, lines[-1][:200] if lines else "")
+                      hang and not budget_run, replaced, lines[-1][:200] if lines else "", budget_run)
     shutil.rmtree(scratch, ignore_errors=True)
     return outcome
 
@@ -279,7 +370,7 @@ def small_critical_data(workdir: Path) -> Path:
 
 
 def fuzz(attempts: list[Attempt], jobs: int = 2, timeout: float = 120.0, workdir: Path | None = None,
-         progress: bool = True) -> list[Outcome]:
+         progress: bool = True, memory_gib: float = MEMORY_GIB) -> list[Outcome]:
     """Run ``attempts``, ``jobs`` at a time; the outcomes in the attempts' order."""
     own = workdir is None
     workdir = Path(tempfile.mkdtemp(prefix="gnn-mp-fuzz-")) if own else Path(workdir)
@@ -289,11 +380,11 @@ def fuzz(attempts: list[Attempt], jobs: int = 2, timeout: float = 120.0, workdir
 
         def one(attempt: Attempt) -> Outcome:
             nonlocal done
-            outcome = run_attempt(attempt, workdir, data, timeout)
+            outcome = run_attempt(attempt, workdir, data, timeout, memory_gib)
             done += 1
             if progress:
                 mark = "HANG" if outcome.hang else "TRACEBACK" if outcome.traceback else \
-                    "REPLACED" if outcome.replaced else f"rc {outcome.returncode}"
+                    "REPLACED" if outcome.replaced else "budget run" if outcome.budget_run else f"rc {outcome.returncode}"
                 print(f"[{done}/{len(attempts)}] {attempt.command} {attempt.option} {attempt.label}: {mark} "
                       f"({outcome.seconds:.0f} s)", file=sys.stderr, flush=True)
             return outcome
@@ -306,9 +397,10 @@ def fuzz(attempts: list[Attempt], jobs: int = 2, timeout: float = 120.0, workdir
 
 def counts(outcomes: list[Outcome]) -> dict[str, int]:
     return {"attempts": len(outcomes), "tracebacks": sum(o.traceback for o in outcomes),
-            "hangs": sum(o.hang for o in outcomes), "non_regular_files_replaced": sum(bool(o.replaced) for o in outcomes),
+            "hangs": sum(o.hang for o in outcomes), "budget_runs": sum(o.budget_run for o in outcomes),
+            "non_regular_files_replaced": sum(bool(o.replaced) for o in outcomes),
             "exit_0": sum(o.returncode == 0 for o in outcomes), "exit_2": sum(o.returncode == 2 for o in outcomes),
-            "other_exits": sum(o.returncode not in (0, 2) and not o.hang for o in outcomes)}
+            "other_exits": sum(o.returncode not in (0, 2) and not (o.hang or o.budget_run) for o in outcomes)}
 
 
 def findings(outcomes: list[Outcome]) -> list[Outcome]:
@@ -323,6 +415,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="attempts running at a time")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per attempt before it counts as a hang")
     ap.add_argument("--seed", type=int, default=0, help="seed of the choice of attempts")
+    ap.add_argument("--memory-gib", type=float, default=MEMORY_GIB,
+                    help="heap and private memory of each of an attempt's processes, GiB (0: no limit)")
+    ap.add_argument("--at-bound", action="store_true",
+                    help="only every bounded number flag at its bound (the largest value it accepts)")
     ap.add_argument("--json", type=Path, help="also write every outcome to this file")
     ap.add_argument("--quiet", action="store_true", help="no line per attempt on stderr")
     args = ap.parse_args(argv)
@@ -330,10 +426,12 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [n for n in names if n not in COMMANDS]
     if unknown:
         ap.error(f"unknown subcommand(s) {unknown}; known: {', '.join(COMMANDS)}")
-    if args.jobs < 1 or args.timeout <= 0 or args.max_attempts < 0:
-        ap.error("--jobs must be >= 1, --timeout > 0, --max-attempts >= 0")
-    attempts = choose(all_attempts(names), args.max_attempts or None, args.seed)
-    outcomes = fuzz(attempts, jobs=args.jobs, timeout=args.timeout, progress=not args.quiet)
+    if args.jobs < 1 or not args.timeout > 0 or args.max_attempts < 0 or not args.memory_gib >= 0:
+        ap.error("--jobs must be >= 1, --timeout > 0, --max-attempts >= 0, --memory-gib >= 0")
+    pool = at_bound_attempts(names) if args.at_bound else all_attempts(names)
+    attempts = choose(pool, args.max_attempts or None, args.seed)
+    outcomes = fuzz(attempts, jobs=args.jobs, timeout=args.timeout, progress=not args.quiet,
+                    memory_gib=args.memory_gib)
     summary = counts(outcomes)
     print(", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary.items()))
     for o in findings(outcomes):

@@ -81,6 +81,7 @@ def bounded(cast: Callable[[str], float], minimum: float, strict: bool, noun: st
             raise argparse.ArgumentTypeError(f"must be at most {maximum:,}, got {text}")
         return value
     parse.__name__ = noun
+    parse.maximum = maximum     # the bound, as tools/fuzz_cli.py reads it (None: none)
     return parse
 
 
@@ -111,6 +112,29 @@ def seed_int(text: str) -> int:
     if value >= 2 ** 32:
         raise argparse.ArgumentTypeError(f"a seed must be below 2**32, got {text}")
     return value
+
+
+seed_int.maximum = 2 ** 32 - 1
+
+
+#: The share of this machine's physical memory that what one command's counts keep may fill
+#: (:func:`check_fits_in_memory`): a count beyond it is refused before any work, in one line.
+MEMORY_SHARE = 0.5
+
+
+def machine_memory() -> int:
+    """Physical memory of this machine (bytes)."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_fits_in_memory(flags: str, count: int, bytes_each: int, what: str) -> None:
+    """A one-line :class:`UsageError` naming ``flags`` when ``count`` items of at least ``bytes_each``
+    bytes (``what`` they are) would not fit in :data:`MEMORY_SHARE` of this machine's memory: a count
+    that would run for days and then fail, refused at once (``train sampler --problems 10**9``)."""
+    need, have = count * bytes_each, machine_memory()
+    if need > MEMORY_SHARE * have:
+        raise UsageError(f"{flags}: {count:,} {what} need at least {need / 2 ** 30:,.1f} GiB, more than "
+                         f"{MEMORY_SHARE:.0%} of this machine's {have / 2 ** 30:.0f} GiB")
 
 
 #: Figure formats matplotlib's Agg backend writes (``FigureCanvasBase.get_supported_filetypes``),

@@ -278,7 +278,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             return fail(f"{command}{exc}")
         if isinstance(exc, OSError):      # unreadable / unwritable files from any subcommand
             return fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc))
+        if out_of_memory(exc):            # sizes the up-front checks let through, past what this process may use
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            return fail(f"{command}out of memory ({first[:200]}): lower the sizes or counts")
         raise
+
+
+def out_of_memory(exc: BaseException) -> bool:
+    """A failed allocation: numpy's or Python's ``MemoryError``, torch's allocator's ``RuntimeError``
+    ("can't allocate memory"), or one raised while handling either."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, MemoryError) or (isinstance(exc, RuntimeError) and "can't allocate memory" in str(exc)):
+            return True
+        seen.add(id(exc))
+        exc = exc.__context__
+    return False
 
 
 def raised_by_an_interrupt(exc: BaseException) -> bool:

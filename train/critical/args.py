@@ -18,8 +18,8 @@ from typing import Any
 from agents.checkpoints import SHIPPED_DIR, shipped_checkpoint
 from agents.critical.models import MODELS, NODE_FEATURES, NODE_FEATURES_WITH_POSITION
 from gnn_mp_envs.critical.dataset import DatasetConfig
-from train.args import (MAX_SIZE, arg, figure_path, minutes_float, non_negative_float, non_negative_int, positive_float,
-                        positive_int, seed_int, size_int, worker_count)
+from train.args import (MAX_SIZE, arg, check_fits_in_memory, figure_path, minutes_float, non_negative_float,
+                        non_negative_int, positive_float, positive_int, seed_int, size_int, worker_count)
 
 #: Where cached datasets go (git-ignored).
 DEFAULT_DATA_DIR = Path("data/critical")
@@ -129,6 +129,18 @@ class DataArgs:
         return DatasetConfig(seed=self.data_seed, num_maps=self.num_maps, pairs_per_map=self.pairs_per_map,
                              eval_problems=self.eval_problems)
 
+    def check_size(self) -> None:
+        """A dataset that could not be generated and held on this machine, refused in one line before any
+        work (``--num-maps 10**9``: days of generation, then out of memory)."""
+        problems = self.num_maps * self.pairs_per_map + 2 * self.eval_problems
+        check_fits_in_memory("--num-maps x --pairs-per-map + 2 x --eval-problems", problems, PROBLEM_BYTES,
+                             "critical-sample problems")
+
+
+#: The least one critical-sample problem takes in memory: its Halton graph's node and edge validity bits
+#: (2.3 KiB), the CNN's 64 x 64 occupancy image (4 KiB), walls and labels.
+PROBLEM_BYTES = 8 * 1024
+
 
 @dataclass
 class GenerateArgs(DataArgs):
@@ -153,9 +165,9 @@ class TrainArgs(DataArgs):
     max_train_problems: int | None = arg(None, _shown("use only the first N training problems", "all"), parse=positive_int)
     lr: float | None = arg(None, _shown("learning rate", "the model's"), parse=positive_float)
     batch_size: int | None = arg(None, _shown("problems per step", "the model's"), parse=positive_int)
-    hidden: int | None = arg(None, _shown("hidden_channels", "the model's"), parse=positive_int)
+    hidden: int | None = arg(None, _shown("hidden_channels", "the model's"), parse=size_int)
     layers: int | None = arg(None, _shown("num_layers (graph filters / conv layers)", "the model's"),
-                             parse=positive_int)
+                             parse=size_int)
     readout: str | None = arg(None, _shown("graph models: the paper's max pool + FC (max) or attention over "
                                      "node positions; CNN: FC to a point (point) or a heat map over the image",
                                      "attention / heatmap"), choices=["max", "attention", "point", "heatmap"])

@@ -84,6 +84,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = from_namespace(ns.args_class, ns)
     if isinstance(args, TrainArgs) and args.model is None:
         parser.error("train: the following argument is required: --model")
+    try:
+        args.check_size()
+    except UsageError as exc:
+        parser.error(f"{ns.command}: {exc}")
     torch.set_num_threads(args.threads)
     try:
         RUN[type(args)](args)

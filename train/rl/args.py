@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from gnn_mp_envs.envs.tree_env import MAX_NODES_LIMIT
 from gnn_mp_envs.envs.wrappers import ACTIONS, RL_MAX_EPISODE_STEPS, make_rl_env
 from train.args import (arg, bounded, minutes_float, non_negative_float, non_negative_int, positive_float, positive_int,
                         seed_int, size_int, temperature_float, worker_count)
@@ -96,7 +97,8 @@ class RLArgs(RunFlags):
                            parse=worker_count)
     view_nodes: int = arg(_ENV_DEFAULTS["view_nodes"], "rows of the tree view the policy sees (roots + most recent "
                           "nodes)", parse=positive_int)
-    max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)", parse=positive_int)
+    max_nodes: int | None = arg(None, "tree node budget of the training envs (default: the task's)",
+                                parse=bounded(int, 2, False, "an integer >= 2", MAX_NODES_LIMIT))
     action: str = arg(_ENV_DEFAULTS["action"], "what the policy does: pick one of --candidates candidate states "
                       "(Discrete; features relative to the tree) or output a state (box: [-1, 1]^d, --action-frame)",
                       choices=ACTIONS)
@@ -158,7 +160,7 @@ class RLArgs(RunFlags):
     gamma: float = arg(_ENV_DEFAULTS["gamma"], "discount (and the shaping's gamma)", parse=positive_float)
     batch_size: int = arg(128, "minibatch size", parse=positive_int)
     n_steps: int = arg(256, "PPO: steps per env per rollout", parse=positive_int)
-    n_epochs: int = arg(4, "PPO: passes over each rollout", parse=positive_int)
+    n_epochs: int = arg(4, "PPO: passes over each rollout", parse=size_int)
     gae_lambda: float = arg(0.95, "PPO: GAE lambda", parse=positive_float)
     clip_range: float = arg(0.2, "PPO: clip range", parse=positive_float)
     ent_coef: float = arg(0.0, "PPO: entropy bonus", parse=non_negative_float)
@@ -241,6 +243,7 @@ def check_args(args: RLArgs) -> None:
                          f"and at least 2 more nodes")
     if not 2 <= args.view_nodes <= max_nodes:
         raise ValueError(f"--view-nodes must be in [2, {max_nodes}] (the tree's node budget), got {args.view_nodes}")
+    check_memory(args)
     for name, value in (("--gamma", args.gamma), ("--gae-lambda", args.gae_lambda), ("--uniform-mix", args.uniform_mix)):
         if value is not None and not 0.0 <= value <= 1.0:
             raise ValueError(f"{name} must be in [0, 1], got {value}")
@@ -310,6 +313,30 @@ def check_args(args: RLArgs) -> None:
         from agents.checkpoints import read_checkpoint
         args.init_from = init_from_path(args.init_from, args.task)
         read_checkpoint(args.init_from)        # a CheckpointError (a ValueError) names the file and what is wrong
+
+
+#: The least one observation row of the tree view takes (a parent index, a mask byte, float32 position and
+#: feature columns of a 2-D task), and one evaluation run's record.
+ROW_BYTES, RUN_BYTES = 8 + 1 + 4 * (2 + 5), 1024
+
+
+def check_memory(args: RLArgs) -> None:
+    """Counts whose arrays could not fit on this machine, refused in one line (a ``ValueError``) before
+    any work: a PPO rollout (``--n-steps`` x ``--n-envs`` observations of ``--view-nodes`` rows), the
+    records of an evaluation, a linear pick head (``--candidates`` scores over ``--candidates`` x
+    ``--candidate-embed`` features, with its gradients and Adam's two moments)."""
+    from train.args import UsageError, check_fits_in_memory
+    try:
+        if args.algo == "ppo":
+            check_fits_in_memory("--n-steps x --n-envs", args.n_steps * args.n_envs, args.view_nodes * ROW_BYTES,
+                                 f"rollout steps (observations of --view-nodes {args.view_nodes} rows)")
+        check_fits_in_memory("--eval-problems", args.eval_problems, RUN_BYTES, "evaluation runs")
+        if args.action == "pick" and args.pick_head == "linear":
+            check_fits_in_memory("--candidates x --candidates x --candidate-embed",
+                                 args.candidates ** 2 * args.candidate_embed, 4 * 4,
+                                 "weights of the linear pick head (float32, with gradients and Adam's moments)")
+    except UsageError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def torch_device(name: str) -> str:

@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from train.args import arg, minutes_float, non_negative_int, positive_float, positive_int, seed_int, worker_count
+from train.args import (MAX_MINUTES, UsageError, arg, check_fits_in_memory, minutes_float, non_negative_int,
+                        positive_float, positive_int, seed_int, size_int, worker_count)
 from train.run import RunFlags
 from train.tree.data import VIEWS
 
@@ -29,7 +30,7 @@ class TrainArgs(RunFlags):
     relative_inputs: bool = arg(False, "gnn (node mixture) and gnn-cvae: read no absolute position, only the "
                                 "nodes' offsets to start and goal")
     hidden: int | None = arg(None, "hidden width of the model's layers (default: the shipped architecture's: "
-                             "gnn and gnn-cvae 64, cvae 128)", parse=positive_int)
+                             "gnn and gnn-cvae 64, cvae 128)", parse=size_int)
     view: str = arg("grown", "training graphs: grown (the trees the planner grew) or prefix (the paper's "
                     "start + path prefix)", choices=VIEWS)
     minutes: float = arg(10.0, "gradient-step budget of the first training phase (minutes); planning the dataset, "
@@ -56,3 +57,21 @@ class TrainArgs(RunFlags):
     resume: bool = arg(False, "continue the first phase from the run directory's resume state (needs --out)")
 
 
+#: The least a solved training problem takes in memory (its start, goal, tree rows and path: 2.3 KiB on a
+#: 2-D task without obstacles, 35 KiB on maze2d), and an evaluation run's record (its counters).
+PROBLEM_BYTES, RUN_BYTES = 2 * 1024, 1024
+
+
+def check_counts(args: TrainArgs) -> None:
+    """Counts that could not finish on this machine, refused in one line before any work: the training
+    problems of the first phase and of every DAgger round (all kept in memory), the evaluation runs
+    (sampler and uniform), the training time of all phases (at most 30 days, as each budget)."""
+    problems = args.problems + args.dagger_rounds * args.dagger_problems
+    check_fits_in_memory("--problems + --dagger-rounds x --dagger-problems", problems, PROBLEM_BYTES,
+                         "solved training problems")
+    check_fits_in_memory("--eval-problems", 2 * args.eval_problems, RUN_BYTES, "evaluation runs (sampler and "
+                         "uniform)")
+    minutes = args.minutes + args.dagger_rounds * args.dagger_minutes
+    if minutes > MAX_MINUTES:
+        raise UsageError(f"--minutes + --dagger-rounds x --dagger-minutes: {minutes:,.0f} minutes of training, more "
+                         f"than 30 days ({MAX_MINUTES:,} minutes)")

@@ -27,6 +27,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = from_namespace(TrainArgs, parser.parse_args(argv))
     from train.args import UsageError, check_ray_address
+    from train.tree.args import check_counts
+    try:
+        check_counts(args)
+    except UsageError as exc:
+        parser.error(str(exc))
     if args.ray not in (None, "local", "auto"):
         try:
             check_ray_address(args.ray)
