@@ -178,6 +178,11 @@ def _goal_bias(low, high, task=None, seed=None, goal_bias=0.05):
     return GoalBiasSampler(low, high, seed, goal_bias)
 
 
+def _halton(low, high, task=None, seed=None):
+    from agents.samplers.baselines import HaltonSampler
+    return HaltonSampler(low, high, seed)
+
+
 def _lazy(module: str, function: str, name: str) -> Callable[..., "Sampler"]:
     """A factory that imports ``module`` (torch_geometric and friends) only when a sampler is built."""
     def factory(**kwargs):
@@ -188,6 +193,7 @@ def _lazy(module: str, function: str, name: str) -> Callable[..., "Sampler"]:
 register_sampler("uniform", _uniform, "uniform over the state bounds")
 register_sampler("goal-bias", _goal_bias, "uniform with 5% samples at the active tree's target",
                  settings=("goal_bias",))
+register_sampler("halton", _halton, "a scrambled Halton sequence over the state bounds (VAMP's default)")
 #: The checkpoint kinds of the built-in learned samplers (``agents.tree.samplers.NAME_KINDS``,
 #: ``agents.rl.sampler.RL_SAMPLERS``; written out so that listing the registry imports no torch).
 BUILTIN_KINDS: dict[str, tuple[str, ...]] = {

@@ -71,12 +71,15 @@ def plan_problem(env: Any, sampler: Plannable, index: int, seed: int, *, max_ste
     """Plan problem ``index`` of ``env``'s split with ``sampler`` under the seeding rule.
 
     ``policy`` replaces ``sampler.act`` as the step function (e.g. a wrapper that records the
-    samples); the sampler is reseeded either way.
+    samples); the sampler is reseeded either way. An env of ``samples_per_step=K > 1`` takes the
+    sampler's ``act_batch(observation, K)``.
     """
     s = problem_seed(seed, index)
     sampler.reset(s)
-    return rollout(env, sampler.act if policy is None else policy, seed=s, options={"index": int(index)},
-                   max_steps=max_steps, on_step=on_step)
+    if policy is None:
+        k = int(getattr(env, "samples_per_step", 1))
+        policy = sampler.act if k == 1 else (lambda observation: sampler.act_batch(observation, k))
+    return rollout(env, policy, seed=s, options={"index": int(index)}, max_steps=max_steps, on_step=on_step)
 
 
 def plan_problems(sampler: Plannable, env: Any, indices: Iterable[int], seed: int, *,

@@ -24,6 +24,7 @@ from typing import Any, Callable
 import gymnasium as gym
 import numpy as np
 
+from gnn_mp_envs.robots.checkers import CHECKERS
 from gnn_mp_envs.utils.imports import import_entry
 
 ENTRY_POINT = "gnn_mp_envs.envs.tree_env:TreePlanningEnv"
@@ -70,8 +71,9 @@ class TaskSpec:
     #: Out-of-distribution test scenes (``gnn-mp benchmark --suite ood``): never trained or tuned on;
     #: ``gnn-mp train sampler --scene`` refuses them.
     ood_scenes: tuple[str, ...] = ()
-    #: Collision checkers the task's problems offer (``gym.make(..., checker=...)``, ``gnn-mp benchmark
-    #: --checker``); the first is the default. Empty: the task has one checker and takes no ``checker=``.
+    #: Collision checkers the task's problems offer by name (``gym.make(..., checker=...)``, ``gnn-mp benchmark
+    #: --checker``; :data:`gnn_mp_envs.robots.checkers.CHECKERS`, the first the default). Empty: the task has one
+    #: checker and takes no ``checker=``.
     checkers: tuple[str, ...] = ()
     #: OMPL planners the isolated runner can run on this task (rows ``ompl-<planner>``).
     ompl_planners: tuple[str, ...] = ()
@@ -300,7 +302,7 @@ def _mbm_spec(name: str, task_class: str, env_id: str, path_unit: str = "rad, jo
                     max_nodes=max_nodes, time_limit_s=time_limit_s, scenes=("all", "train", "test", "table_pick", "table_under_pick", "box",
                                             "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage"),
                     benchmark_scene="all", ompl_planners=("rrtconnect", "rrt"), path_unit=path_unit,
-                    checkers=("spheres", "pybullet"), step_scale=1.0,
+                    checkers=tuple(CHECKERS), step_scale=1.0,
                     rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0})
 
 
@@ -347,7 +349,7 @@ BUILTIN_TASKS = (
              max_nodes=5000, scenes=("train-a", "train-b", "train", "test", "pillars", "tall-clutter", "shelves", "bins"),
              benchmark_scene="test", validation_scenes=("pillars",), ood_scenes=("tall-clutter", "shelves", "bins"),
              ompl_planners=("rrtconnect", "rrt"), path_unit="rad, joint-space L2", step_scale=0.4,
-             rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
+             checkers=tuple(CHECKERS), rl_reward={"node_cost": 0.0, "collision_check_cost": 1.0}),
     # MotionBenchMaker's problems of the Panda, the UR5 and the Fetch (docs/mbm.md).
     _mbm_spec("panda-mbm", "PandaMBMTask", "GNNMP/PandaMBM-v0"),
     _mbm_spec("ur5-mbm", "UR5MBMTask", "GNNMP/UR5MBM-v0"),

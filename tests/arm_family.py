@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gnn_mp_envs.tasks.arm import SCENE_FAMILIES, EndEffectorTarget, Obstacle, register_scene_family
+from gnn_mp_envs.robots.geometry import EndEffectorTarget, Obstacle
+from gnn_mp_envs.tasks.arm import SCENE_FAMILIES, register_scene_family
 
 
 def lone_wall_layout(rng: np.random.Generator, params: dict):

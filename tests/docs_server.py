@@ -95,7 +95,7 @@ def child(conn: socket.socket, request: dict, fds: list[int]) -> None:
 def main(socket_path: str) -> None:
     for module in PRELOAD:
         importlib.import_module(module)
-    from gnn_mp_envs.tasks.arm.world import import_pybullet
+    from gnn_mp_envs.robots.world import import_pybullet
     import_pybullet()
     if threading.active_count() != 1:
         raise RuntimeError(f"the preload started threads ({threading.enumerate()}); forking would not be safe")

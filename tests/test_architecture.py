@@ -1,6 +1,8 @@
 """The floors of the house, read from the sources (every import, at module level or inside a function):
 no import circle among the package's modules; ``gnn_mp_envs`` imports neither ``agents`` nor
 ``train`` nor torch; ``agents`` imports no ``train``; nothing in the packages imports ``tools``.
+Inside ``gnn_mp_envs``: the robots (``gnn_mp_envs.robots``) are a floor under the tasks and import no
+task, and no task package imports another (they meet on the floors below them).
 Inside ``agents``: every module is a method's or the shared floor's, no method imports another
 method, and the shared floor imports no method. Inside ``train`` the same by job: no job (an entry
 point's package: benchmark, tree samplers, RL, critical samples) imports another job, and ``train``'s
@@ -31,11 +33,11 @@ JOBS = ("train.benchmark", "train.tree", "train.rl", "train.critical")
 TRAIN_FLOOR = ("train", "train.args", "train.run", "train.workers")
 
 
-def modules() -> dict[str, Path]:
+def modules(root: Path = ROOT) -> dict[str, Path]:
     out = {}
     for package in PACKAGES:
-        for path in (ROOT / package).rglob("*.py"):
-            name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        for path in (root / package).rglob("*.py"):
+            name = ".".join(path.relative_to(root).with_suffix("").parts)
             out[name.removesuffix(".__init__")] = path
     return out
 
@@ -57,8 +59,8 @@ def imported_names(name: str, path: Path) -> set[str]:
     return names
 
 
-def import_graph() -> tuple[nx.DiGraph, dict[str, set[str]]]:
-    mods = modules()
+def import_graph(root: Path = ROOT) -> tuple[nx.DiGraph, dict[str, set[str]]]:
+    mods = modules(root)
     graph = nx.DiGraph()
     graph.add_nodes_from(mods)
     external: dict[str, set[str]] = {}
@@ -172,3 +174,47 @@ def test_only_the_ompl_runner_side_imports_ompl():
     graph, external = import_graph()
     assert sorted(m for m, names in external.items() if "ompl" in names) == sorted(OMPL_SIDE)
     assert sorted(a for a, b in graph.edges if b in OMPL_SIDE[1:]) == []
+
+
+# ---------------------------------------------------------------------- robots under tasks, tasks apart
+ROBOTS = "gnn_mp_envs.robots"
+TASKS = "gnn_mp_envs.tasks"
+
+
+def _task_package(name: str) -> str | None:
+    """The task package ``name`` lies in (``gnn_mp_envs.tasks.<task>``; None: not in one, e.g. the tasks'
+    shared base)."""
+    parts = name.split(".")
+    if name.startswith(TASKS + ".") and len(parts) >= 3 and (ROOT / "gnn_mp_envs" / "tasks" / parts[2]).is_dir():
+        return ".".join(parts[:3])
+    return None
+
+
+def robot_and_task_breaks(graph: nx.DiGraph) -> list[tuple[str, str]]:
+    """Edges from the robots' floor to a task, and from one task package to another."""
+    return sorted((a, b) for a, b in graph.edges
+                  if ((a == ROBOTS or a.startswith(ROBOTS + ".")) and b.startswith(TASKS))
+                  or (_task_package(a) and _task_package(b) and _task_package(a) != _task_package(b)))
+
+
+def test_the_robots_import_no_task_and_no_task_imports_another():
+    graph, _ = import_graph()
+    assert robot_and_task_breaks(graph) == []
+    assert graph.has_edge("gnn_mp_envs.tasks.mbm.task", "gnn_mp_envs.robots.catalog")   # a task on the floor: allowed
+
+
+def test_the_robot_and_task_rules_fail_on_a_planted_break(tmp_path):
+    """An oracle for the two rules: a copy of the sources with a robot module importing a task (at module
+    level) and a task importing another task (inside a function) shows exactly those two breaks."""
+    import shutil
+    for package in PACKAGES:
+        shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__", "*.npz",
+                                                                                          "*.stl", "*.STL", "*.pt"))
+    world = tmp_path / "gnn_mp_envs" / "robots" / "world.py"
+    world.write_text(world.read_text() + "\nimport gnn_mp_envs.tasks.arm.scenes  # noqa\n")
+    task = tmp_path / "gnn_mp_envs" / "tasks" / "arm" / "task.py"
+    task.write_text(task.read_text() + "\n\ndef _planted():\n    from gnn_mp_envs.tasks.mbm import data  # noqa\n")
+    graph, _ = import_graph(tmp_path)
+    assert robot_and_task_breaks(graph) == [("gnn_mp_envs.robots.world", "gnn_mp_envs.tasks.arm.scenes"),
+                                            ("gnn_mp_envs.tasks.arm.task", "gnn_mp_envs.tasks.mbm"),
+                                            ("gnn_mp_envs.tasks.arm.task", "gnn_mp_envs.tasks.mbm.data")]

@@ -9,8 +9,11 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 
 from gnn_mp_envs.core.planners import make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.tasks.arm import JOINT_HIGH, JOINT_LOW, ArmProblem, ArmTask
-from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, Obstacle, sample_scene
+from gnn_mp_envs.robots.catalog import XARM6_HIGH as JOINT_HIGH
+from gnn_mp_envs.robots.catalog import XARM6_LOW as JOINT_LOW
+from gnn_mp_envs.robots.geometry import Obstacle
+from gnn_mp_envs.tasks.arm import ArmProblem, ArmTask
+from gnn_mp_envs.tasks.arm.scenes import SCENE_FAMILIES, sample_scene
 from tests.helpers import run_uniform
 
 ENV_ID = "GNNMP/ArmBiRRT-v0"
@@ -128,7 +131,7 @@ def test_solved_path_is_collision_free_at_checker_resolution():
 
 
 def test_self_collision_is_on(task):
-    empty = ArmProblem(task.world, (), HOME, HOME)
+    empty = ArmProblem(task.world, (), HOME, HOME, task.checker)
     assert empty.is_state_valid(HOME[None])[0]
     assert not empty.is_state_valid(FOLDED[None])[0]
     contacts = task.world.contacts(FOLDED)
@@ -158,17 +161,17 @@ def test_self_collision_flag_is_what_rejects_the_folded_arm():
 
 def test_table_and_obstacles_collide(task):
     low_reach = np.array([0.0, 1.9, -0.5, 0.0, 0.0, 0.0])  # shoulder swung down into the table
-    empty = ArmProblem(task.world, (), HOME, HOME)
+    empty = ArmProblem(task.world, (), HOME, HOME, task.checker)
     assert not empty.is_state_valid(low_reach[None])[0]
     flange, _ = task.world.flange(HOME)
     block = (Obstacle("box", (0.05, 0.05, 0.05), tuple(flange)),)
-    blocked = ArmProblem(task.world, block, HOME, HOME)
+    blocked = ArmProblem(task.world, block, HOME, HOME, task.checker)
     assert not blocked.is_state_valid(HOME[None])[0]
     assert empty.is_state_valid(HOME[None])[0]  # switching back restores the empty scene
 
 
 def test_out_of_limits_is_invalid(task):
-    empty = ArmProblem(task.world, (), HOME, HOME)
+    empty = ArmProblem(task.world, (), HOME, HOME, task.checker)
     q = HOME.copy()
     q[2] = JOINT_HIGH[2] + 0.1
     assert not empty.is_state_valid(q[None])[0]
@@ -188,7 +191,7 @@ def test_check_motion_counts_like_the_base_class(task):
     """Sequentially (``bisection`` off) the fast edge check answers and counts as the base class;
     in the task's bisection order it answers the same and counts the states visited in that
     order up to the first invalid one (brute force)."""
-    from gnn_mp_envs.tasks.arm.problem import bisection_order
+    from gnn_mp_envs.robots.checkers import bisection_order
     problem = task.problem("test", 2)
     assert problem.bisection
     rng = np.random.default_rng(3)
@@ -322,7 +325,7 @@ def test_render_draws_arm_scene_and_path():
 def test_the_render_legend_covers_only_its_corner():
     """The legend of the arm render's colours is drawn into the top-left corner
     and leaves every other pixel of the TinyRenderer image as it was (same size, no resampling)."""
-    from gnn_mp_envs.tasks.arm.render import with_legend
+    from gnn_mp_envs.robots.render import with_legend
     img = np.random.default_rng(0).integers(0, 256, (360, 480, 3), dtype=np.uint8)
     out = with_legend(img)
     assert out.shape == img.shape and out.dtype == np.uint8
@@ -417,8 +420,8 @@ def test_importing_pybullet_prints_nothing_on_stdout_or_stderr():
     import subprocess
     import sys
     code = ("import sys; sys.modules.pop('pybullet', None)\n"
-            "from gnn_mp_envs.tasks.arm.world import ArmWorld\n"
-            "ArmWorld(); print('clean')\n")
+            "from gnn_mp_envs.robots import XARM6, RobotWorld\n"
+            "RobotWorld(XARM6); print('clean')\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout == "clean\n" and "build time" not in result.stderr, result.stderr
@@ -430,7 +433,7 @@ def test_a_collision_answer_does_not_depend_on_the_queries_before_it():
     side, and a grazing edge with valid ends gets the same answer in both directions (pybullet's
     persistent contacts must not leak between queries)."""
     from gnn_mp_envs.registration import make_task
-    task = make_task("arm", scene="test")
+    task = make_task("arm", scene="test", checker="pybullet")     # pybullet's contact history
     rng = np.random.default_rng(3)
     boundary = edges = 0
     for idx in range(2):
@@ -474,7 +477,7 @@ def test_grazing_edges_get_one_answer_in_both_directions_and_state_by_state():
     fresh check of it after an unrelated configuration (pybullet's contact
     cache must not leak between queries)."""
     from gnn_mp_envs.registration import make_task
-    task = make_task("arm", scene="test")
+    task = make_task("arm", scene="test", checker="pybullet")     # pybullet's contact history
     edges = states = 0
     for i in range(5):                          # the probe's 5 problems x 200 grazing edges
         p = task.problem("test", i)
@@ -585,7 +588,7 @@ def test_tool_quaternion_is_scipys_rotation():
     and goal, so every arm counter would move); scipy is its oracle here."""
     from scipy.spatial.transform import Rotation
 
-    from gnn_mp_envs.tasks.arm.world import tool_quaternion
+    from gnn_mp_envs.robots.geometry import tool_quaternion
     rng = np.random.default_rng(0)
     axes = [*rng.normal(size=(200, 3)), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0)]
     for axis in axes:

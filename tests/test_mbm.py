@@ -9,6 +9,8 @@ import warnings
 import numpy as np
 import pytest
 
+from gnn_mp_envs.robots import catalog
+from gnn_mp_envs.robots.model import model_dir
 from gnn_mp_envs.tasks.mbm import data as mbm_data
 
 READY = [0, -0.785, 0, -2.356, 0, 1.571, 0.785]
@@ -81,21 +83,21 @@ def test_moveit_primitives_become_obstacles():
 
 
 def test_the_panda_model_matches_the_urdf_joint_names():
-    from gnn_mp_envs.tasks.arm.world import import_pybullet
+    from gnn_mp_envs.robots.world import import_pybullet
     p = import_pybullet()
     import pybullet_data
     cid = p.connect(p.DIRECT)
     try:
         p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
-        robot = p.loadURDF(mbm_data.PANDA_URDF, useFixedBase=True, physicsClientId=cid)
-        names = [p.getJointInfo(robot, j, physicsClientId=cid)[1].decode() for j in mbm_data.PANDA_JOINTS]
+        robot = p.loadURDF(catalog.PANDA_URDF, useFixedBase=True, physicsClientId=cid)
+        names = [p.getJointInfo(robot, j, physicsClientId=cid)[1].decode() for j in catalog.PANDA_JOINTS]
         assert names == [f"panda_joint{k}" for k in range(1, 8)]
         assert {n: p.getJointInfo(robot, j, physicsClientId=cid)[1].decode()
-                for n, j in mbm_data.PANDA_FINGERS.items()} == {n: n for n in mbm_data.PANDA_FINGERS}
-        assert p.getJointInfo(robot, mbm_data.PANDA_HAND, physicsClientId=cid)[12].decode() == "panda_hand"
+                for n, j in catalog.PANDA_FINGERS.items()} == {n: n for n in catalog.PANDA_FINGERS}
+        assert p.getJointInfo(robot, catalog.PANDA_HAND, physicsClientId=cid)[12].decode() == "panda_hand"
     finally:
         p.disconnect(cid)
-    model = mbm_data.panda_model()
+    model = catalog.panda_model()
     assert model.low[3] == -3.1416 and model.high[3] == 0.0873     # MBM's URDF, not pybullet_data's 0.0
     assert dict(model.held_joints) == {9: 0.065, 10: 0.065}
     assert len(model.allowed_collisions) == 34 and ("panda_hand", "panda_link7") in model.allowed_collisions
@@ -176,13 +178,13 @@ def test_the_fine_path_check_catches_what_the_planners_resolution_skips(task):
     """A hand-made edge that passes through a thin wall between its two checked ends: the planner's
     check (one state per resolution step) and the path re-check at that resolution pass it, the
     independent check at 10x finer resolution does not."""
-    from gnn_mp_envs.tasks.arm.scenes import Obstacle
+    from gnn_mp_envs.robots.geometry import Obstacle
     from gnn_mp_envs.tasks.mbm import MBMProblem
     middle = np.array([0, -0.785, 0, -2.356, 0, 1.571, 0.785])
     a, b = middle.copy(), middle.copy()
     a[0], b[0] = -0.8, 0.8                                             # the hand swings past x = 0.31 m
     wall = Obstacle("box", (0.03, 0.003, 0.03), tuple(task.world.flange_pose(middle)[0]))   # 6 mm thick
-    problem = MBMProblem(task.world, (wall,), a, b, step_size=2.0, resolution=2.0)
+    problem = MBMProblem(task.world, (wall,), a, b, task.checker, step_size=2.0, resolution=2.0)
     assert problem.is_state_valid(np.stack([a, b])).all()
     assert not problem.is_state_valid(middle[None]).all()
     assert problem.check_motion(a, b)                                  # n = 1: only b is checked
@@ -195,7 +197,8 @@ def test_the_padding_is_a_margin_of_the_planner_only(task, checker, free_at):
     """A state 0.5 mm from an obstacle collides for the planner (pybullet: a 1 mm margin; spheres:
     that margin and the spheres' overshoot) but not for the exact check; farther away (pybullet:
     2.5 mm; spheres: beyond the margin plus the largest overshoot, 8 mm) it is free for both."""
-    from gnn_mp_envs.tasks.arm.scenes import Obstacle
+    from gnn_mp_envs.robots.checkers import make_checker
+    from gnn_mp_envs.robots.geometry import Obstacle
     from gnn_mp_envs.tasks.mbm import MBMProblem
     world = task.world
     q = np.array([0, -0.785, 0, -2.356, 0, 1.571, 0.785])
@@ -216,7 +219,7 @@ def test_the_padding_is_a_margin_of_the_planner_only(task, checker, free_at):
         for _ in range(40):
             z = (low + high) / 2
             low, high = (z, high) if clearance(z) > target else (low, z)
-        problem = MBMProblem(world, (slab(low),), q, q + 0.1, checker=checker)
+        problem = MBMProblem(world, (slab(low),), q, q + 0.1, make_checker(checker, world))
         assert abs(clearance(low) - target) < 1e-4
         assert problem.is_state_valid(q[None]).all() == planner_free
         assert problem.is_state_valid_exact(q[None]).all()
@@ -237,7 +240,7 @@ def test_the_environment_follows_the_arm_envs_interface():
         with warnings.catch_warnings():      # the checker's generic advice on unbounded boxes and [-1, 1] actions
             warnings.simplefilter("ignore", UserWarning)
             check_env(base, skip_render_check=True)
-        model = mbm_data.panda_model()
+        model = catalog.panda_model()
         np.testing.assert_allclose(env.action_space.low, np.float32(model.low))
         np.testing.assert_allclose(env.action_space.high, np.float32(model.high))
         assert env.observation_space["obstacles"].shape == (21, 1 + 13)     # presence flag + 13 features
@@ -296,7 +299,7 @@ def test_edges_are_checked_in_bisection_order_with_the_same_verdict(task):
     """MBM edges are checked as OMPL's DiscreteMotionValidator does (far end, then bisection): the
     verdict equals the state-by-state check of every interpolated state, and the count is the
     number of states visited in that order up to the first invalid one (brute force)."""
-    from gnn_mp_envs.tasks.arm.problem import bisection_order
+    from gnn_mp_envs.robots.checkers import bisection_order
     for n in range(1, 40):
         order = bisection_order(n)
         assert order[0] == n and sorted(order) == list(range(1, n + 1))

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gnn_mp_envs.robots import catalog
+from gnn_mp_envs.robots.model import model_dir
 from gnn_mp_envs.tasks.mbm import data as mbm_data
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,9 +110,10 @@ def test_the_data_files_ship_and_name_their_source(robot):
             assert all(len(pose) == 7 for pose in p["poses"])
     import tomllib
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    patterns = set(pyproject["tool"]["setuptools"]["package-data"]["gnn_mp_envs.tasks.mbm"])
-    assert {"dataset/*.json", "robots/*/*.urdf", "robots/*/*.md", "robots/*/meshes/**/*.stl",
-            "robots/*/meshes/**/*.STL"} <= patterns
+    data = pyproject["tool"]["setuptools"]["package-data"]
+    assert {"dataset/*.json"} <= set(data["gnn_mp_envs.tasks.mbm"])
+    assert {"models/*/*.urdf", "models/*/*.md", "models/*/*.json", "models/*/*.npz", "models/*/meshes/**/*.stl",
+            "models/*/meshes/**/*.STL"} <= set(data["gnn_mp_envs.robots"])
 
 
 def test_the_robots_facts():
@@ -125,7 +128,7 @@ def test_the_robots_facts():
     assert list(fetch["held_joints"].items()) == [
         ("l_wheel_joint", 0.0), ("r_wheel_joint", 0.0), ("bellows_joint", 0.05), ("head_pan_joint", 0.0),
         ("head_tilt_joint", 0.0), ("l_gripper_finger_joint", 0.05), ("r_gripper_finger_joint", 0.05)]
-    assert ur5["held_joints"] == mbm_data.UR5_HELD and fetch["held_joints"] == mbm_data.FETCH_HELD
+    assert ur5["held_joints"] == catalog.UR5_HELD and fetch["held_joints"] == catalog.FETCH_HELD
     assert len(ur5["allowed_collisions"]) == 90 and ["base_link", "box_link"] in ur5["allowed_collisions"]
     assert len(fetch["allowed_collisions"]) == 134
     assert ["shoulder_pan_link", "torso_lift_link"] in fetch["allowed_collisions"]
@@ -193,16 +196,16 @@ def test_the_converter_reproduces_the_shipped_files(args):
 
 @pytest.mark.parametrize("robot", ["ur5", "fetch"])
 def test_the_robot_files_ship_collision_meshes_only(robot):
-    folder = mbm_data.ROBOTS_DIR / robot
+    folder = model_dir(robot)
     urdf = folder / f"{robot}.urdf"
-    assert urdf == (mbm_data.UR5_URDF if robot == "ur5" else mbm_data.FETCH_URDF)
+    assert urdf == (catalog.UR5_URDF if robot == "ur5" else catalog.FETCH_URDF)
     tree = ET.parse(urdf).getroot()
     assert tree.find(".//visual") is None
     assert all(link.find("inertial") is not None for link in tree.iter("link"))   # pybullet loads it silently
     meshes = {m.get("filename").removeprefix("package://") for m in tree.iter("mesh")}
     assert meshes and all((folder / m).is_file() for m in meshes)
     shipped = {str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file()}
-    assert shipped == meshes | {f"{robot}.urdf", "README.md", "LICENSES.md"}      # nothing else, no visual mesh
+    assert shipped == meshes | {f"{robot}.urdf", "README.md", "LICENSES.md", "robot.json", f"{robot}.npz"}  # no visual mesh
     concave = [link.get("name") for link in tree.iter("link") if link.find("collision[@concave]") is not None]
     assert concave == (["forearm_link"] if robot == "ur5" else [])
     assert f"{COMMIT[:12]}" in urdf.read_text().split("\n", 3)[1 if robot == "ur5" else 0]
@@ -220,7 +223,7 @@ def test_the_robot_files_ship_collision_meshes_only(robot):
 
 
 def _pybullet_names(urdf):
-    from gnn_mp_envs.tasks.arm.world import import_pybullet
+    from gnn_mp_envs.robots.world import import_pybullet
     p = import_pybullet()
     cid = p.connect(p.DIRECT)
     try:
@@ -237,7 +240,7 @@ def _pybullet_names(urdf):
 @pytest.mark.parametrize("robot", ["ur5", "fetch"])
 def test_the_models_indices_name_the_planned_joints(robot):
     import pybullet
-    model = mbm_data.ur5_model() if robot == "ur5" else mbm_data.fetch_model()
+    model = catalog.ur5_model() if robot == "ur5" else catalog.fetch_model()
     root, joints, shapes = _pybullet_names(model.urdf)
     assert Path(model.urdf).is_absolute() and Path(model.urdf).exists()
     assert root == ("offset_link" if robot == "ur5" else "base_link")
@@ -252,29 +255,29 @@ def test_the_models_indices_name_the_planned_joints(robot):
     held = _doc(robot)["robot"]["held_joints"]
     left_out = {"l_wheel_joint", "r_wheel_joint"} if robot == "fetch" else set()
     assert set(held) - left_out <= fixed
-    assert model.padding == mbm_data.PANDA_PADDING and model.table is False
+    assert model.padding == catalog.PANDA_PADDING and model.table is None
 
 
 def test_the_models_limits_and_allowed_pairs():
-    ur5, fetch = mbm_data.ur5_model(), mbm_data.fetch_model()
+    ur5, fetch = catalog.ur5_model(), catalog.fetch_model()
     assert ur5.low == tuple(_doc("ur5")["robot"]["lower"]) and ur5.high == tuple(_doc("ur5")["robot"]["upper"])
     assert fetch.low == (0.0, -1.6056, -1.221, -math.pi, -2.251, -math.pi, -2.16, -math.pi)
     assert fetch.high == (0.38615, 1.6056, 1.518, math.pi, 2.251, math.pi, 2.16, math.pi)
     assert len(ur5.allowed_collisions) == 88 and not any("box_link" in p for p in ur5.allowed_collisions)
-    links = set(mbm_data.urdf_links(mbm_data.FETCH_URDF))
+    links = set(catalog.urdf_links(catalog.FETCH_URDF))
     assert len(fetch.allowed_collisions) == 72 and all(set(p) <= links for p in fetch.allowed_collisions)
     assert ("shoulder_pan_link", "torso_lift_link_collision_2") in fetch.allowed_collisions
     assert {p for p in fetch.allowed_collisions if "torso_lift_link_collision_2" in p} == {
         tuple(sorted((other, "torso_lift_link_collision_2"))) for a, b in fetch.allowed_collisions
         if "torso_lift_link" in (a, b) for other in {a, b} - {"torso_lift_link"}}
-    assert mbm_data.ur5_model() is ur5                                    # built once
+    assert catalog.ur5_model() is ur5                                    # built once
 
 
 def test_loading_the_robots_prints_nothing(capfd):
-    from gnn_mp_envs.tasks.arm.world import ArmWorld
+    from gnn_mp_envs.robots.world import RobotWorld
     capfd.readouterr()
-    for model in (mbm_data.ur5_model(), mbm_data.fetch_model()):
-        ArmWorld(model).close()
+    for model in (catalog.ur5_model(), catalog.fetch_model()):
+        RobotWorld(model).close()
     out, err = capfd.readouterr()
     assert out == "" and err == ""
 
@@ -301,9 +304,9 @@ def test_the_loader_api():
 def test_every_start_and_goal_is_valid_except_the_listed(robot):
     """Within the model's limits and no contact within the 1 mm padding, for every problem except
     exactly those of ``INVALID_PROBLEMS`` (at least 95 % valid)."""
-    from gnn_mp_envs.tasks.arm.world import ArmWorld
-    model = mbm_data.ur5_model() if robot == "ur5" else mbm_data.fetch_model()
-    world = ArmWorld(model)
+    from gnn_mp_envs.robots.world import RobotWorld
+    model = catalog.ur5_model() if robot == "ur5" else catalog.fetch_model()
+    world = RobotWorld(model)
     invalid = set()
     try:
         for scene in mbm_data.robot_scenes(robot):

@@ -10,23 +10,37 @@ import math
 import numpy as np
 import pytest
 
-from gnn_mp_envs.tasks.arm.problem import bisection_order
-from gnn_mp_envs.tasks.arm.scenes import Obstacle
-from gnn_mp_envs.tasks.arm.spheres import load_sphere_model
-from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, COVER_TOLERANCE, coverage_gaps, max_overshoot
-from gnn_mp_envs.tasks.arm.urdf import read_urdf
-from gnn_mp_envs.tasks.arm.world import CONTACT_DISTANCE, ArmWorld, sphere_model_path, urdf_file
-from gnn_mp_envs.tasks.mbm.data import fetch_model, panda_model, ur5_model
+from gnn_mp_envs.robots.checkers import bisection_order
+from gnn_mp_envs.robots.geometry import Obstacle
+from gnn_mp_envs.robots.catalog import fetch_model, panda_model, ur5_model, xarm6_model
+from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
+from gnn_mp_envs.robots.spheres.build import BULLET_MARGIN, COVER_TOLERANCE, coverage_gaps, max_overshoot
+from gnn_mp_envs.robots.spheres.checker import SphereCollisionChecker
+from gnn_mp_envs.robots.spheres.model import load_sphere_model
+from gnn_mp_envs.robots.urdf import read_urdf
+from gnn_mp_envs.robots.world import CONTACT_DISTANCE, RobotWorld
 
-#: Robot models with a shipped sphere model, and the MBM task that plans each.
+#: The MotionBenchMaker robot models with a shipped sphere model, and the MBM task that plans each.
 ROBOTS = {"panda": (panda_model, "panda-mbm"), "ur5": (ur5_model, "ur5-mbm"), "fetch": (fetch_model, "fetch-mbm")}
+#: Every robot model with a shipped sphere model (the xArm6 of the arm task too), and the task that plans it.
+SPHERE_ROBOTS = {**ROBOTS, "xarm6": (xarm6_model, "arm")}
 
 
-@pytest.fixture(scope="module", params=sorted(ROBOTS))
+@pytest.fixture(scope="module", params=sorted(SPHERE_ROBOTS))
 def world(request):
-    w = ArmWorld(ROBOTS[request.param][0]())
+    w = RobotWorld(SPHERE_ROBOTS[request.param][0]())
     yield w
     w.close()
+
+
+_CHECKERS: dict[int, SphereCollisionChecker] = {}
+
+
+def sphere_checker(world, scene):
+    """The world's robot's :class:`SphereChecker` with ``scene`` loaded (one checker object per world)."""
+    if id(world) not in _CHECKERS:
+        _CHECKERS[id(world)] = SphereCollisionChecker(world)
+    return _CHECKERS[id(world)].kernel(scene)
 
 
 def _names(world):
@@ -47,7 +61,7 @@ def test_the_shipped_model_exists_and_matches_the_robot(world):
 
 
 def test_forward_kinematics_matches_pybullet(world):
-    checker = world.sphere_checker(())
+    checker = sphere_checker(world, ())
     names = _names(world)
     rng = np.random.default_rng(0)
     p, cid = world.p, world.client
@@ -64,7 +78,7 @@ def test_forward_kinematics_matches_pybullet(world):
 
 def test_every_inner_node_contains_the_leaves_below_it(world):
     """What the walk relies on: a sphere that misses a node misses every leaf under it."""
-    model = world.sphere_checker(()).model
+    model = sphere_checker(world, ()).model
     for i in np.flatnonzero(model.child_count > 0):
         below, stack = [], [int(i)]
         while stack:
@@ -121,8 +135,8 @@ def test_spheres_say_collision_wherever_pybullet_does(world):
     """Random and grazing configurations of the first test problems: every configuration pybullet
     calls a collision, exactly or with the robot's padding, is a collision for the spheres."""
     from gnn_mp_envs.registration import make_task
-    name = next(k for k, v in ROBOTS.items() if v[0]().urdf == world.robot_model.urdf)
-    task = make_task(ROBOTS[name][1], checker="pybullet")
+    name = next(k for k, v in SPHERE_ROBOTS.items() if v[0]().urdf == world.robot_model.urdf)
+    task = make_task(SPHERE_ROBOTS[name][1], checker="pybullet")
     model_padding = load_sphere_model(sphere_model_path(world.robot_model.spheres)).meta["padding"]
     rng = np.random.default_rng(1)
     pybullet_hits = 0
@@ -134,7 +148,7 @@ def test_spheres_say_collision_wherever_pybullet_does(world):
             world.load(problem.obstacles)
             exact = np.array([world.collides(q.tolist(), CONTACT_DISTANCE) for q in states])
             padded = np.array([world.collides(q.tolist()) for q in states])
-            spheres = ~world.sphere_checker(problem.obstacles).valid(states)
+            spheres = ~sphere_checker(world, problem.obstacles).valid(states)
             assert not (exact & ~spheres).any(), states[exact & ~spheres][:3]
             if model_padding >= world.robot_model.padding:      # the Panda's spheres keep the padding too
                 assert not (padded & ~spheres).any(), states[padded & ~spheres][:3]
@@ -154,16 +168,16 @@ def _brute_force_collides(checker, leaves, self_leaves, q):
         if link in leaves:
             world_leaves[link] = np.c_[leaves[link][:, :3] @ rot[i].T + trans[i], leaves[link][:, 3]]
             world_self[link] = np.c_[self_leaves[link][:, :3] @ rot[i].T + trans[i], self_leaves[link][:, 3]]
-    for o in range(len(checker._ob_kind)):
+    for o in range(len(checker.obstacles.kind)):
         for link, lv in world_leaves.items():
-            if checker._exempt[o, checker.links.index(link)]:
+            if checker.obstacles.exempt[o, checker.links.index(link)]:
                 continue
-            d = lv[:, :3] - checker._ob_centre[o]
-            local = d @ checker._ob_rot[o]
-            size = checker._ob_size[o]
-            if checker._ob_kind[o] == 0:
+            d = lv[:, :3] - checker.obstacles.centre[o]
+            local = d @ checker.obstacles.rot[o]
+            size = checker.obstacles.size[o]
+            if checker.obstacles.kind[o] == 0:
                 gap = np.linalg.norm(np.maximum(np.abs(local) - size, 0.0), axis=1)
-            elif checker._ob_kind[o] == 1:
+            elif checker.obstacles.kind[o] == 1:
                 er = np.maximum(np.linalg.norm(local[:, :2], axis=1) - size[0], 0.0)
                 ez = np.maximum(np.abs(local[:, 2]) - size[1], 0.0)
                 gap = np.hypot(er, ez)
@@ -181,7 +195,7 @@ def _brute_force_collides(checker, leaves, self_leaves, q):
 def _around(world, offset):
     """A point ``offset`` away from the middle of the robot's links at its middle configuration (so
     that hand-made obstacles sit where every robot reaches)."""
-    _, trans = world.sphere_checker(()).link_frames((world.low + world.high) / 2)
+    _, trans = sphere_checker(world, ()).link_frames((world.low + world.high) / 2)
     return tuple(float(v) for v in trans.mean(axis=0) + np.asarray(offset))
 
 
@@ -189,7 +203,7 @@ def test_the_tree_walk_equals_brute_force(world):
     obstacles = (Obstacle("box", (0.1, 0.3, 0.02), _around(world, (0.25, 0.0, 0.0)), yaw=0.3),
                  Obstacle("cylinder", (0.05, 0.5), _around(world, (0.1, -0.3, -0.1))),
                  Obstacle("sphere", (0.08,), _around(world, (0.0, 0.35, 0.2))))
-    checker = world.sphere_checker(obstacles)
+    checker = sphere_checker(world, obstacles)
     rng = np.random.default_rng(3)
     states = rng.uniform(world.low, world.high, (60, len(world.low)))
     leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
@@ -209,7 +223,7 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
                  Obstacle("box", (0.2, 0.4, 0.01), _around(world, (0.35, 0.0, -0.38))),
                  Obstacle("cylinder", (0.03, 0.4), _around(world, (0.15, 0.3, 0.0))),
                  Obstacle("sphere", (0.06,), _around(world, (0.1, -0.35, 0.1))))
-    checker = world.sphere_checker(obstacles)
+    checker = sphere_checker(world, obstacles)
     rng = np.random.default_rng(4)
     outcomes = {True: 0, False: 0}
     for _ in range(3000):
@@ -258,7 +272,7 @@ def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_sa
              Obstacle("sphere", (0.06,), _around(world, (0.1, -0.35, 0.1))))
     rng = np.random.default_rng(6)
     low, high, step, resolution = world.low, world.high, 0.5, 0.01
-    checker = world.sphere_checker(first)
+    checker = sphere_checker(world, first)
     nodes = [q for q in rng.uniform(low, high, (200, len(low))) if checker.valid(q[None])[0]][:2]
     outcomes = {True: 0, False: 0}
 
@@ -281,7 +295,8 @@ def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_sa
     root = nodes[0]
     grow(checker, [root], 5)            # the root's clearances are fresh in the checker's memory
     rot, trans = checker.link_frames(root)
-    links = [i for i, link in enumerate(checker.links) if link in checker.model.roots]
+    # links the planned joints move (a ball by the xArm6's base, which stands still, no edge meets)
+    links = [i for i, link in enumerate(checker.links) if link in checker.model.roots and checker.spheres.reach[i].any()]
     for _ in range(200):                # a ball 2 mm from a leaf at the root, touching nothing there
         i = links[int(rng.integers(len(links)))]
         leaves = checker.model.leaves(checker.links[i])
@@ -289,7 +304,7 @@ def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_sa
         centre, r = leaf[:3] @ rot[i].T + trans[i], leaf[3]
         u = rng.normal(size=3)
         at = centre + (r + 0.002 + 0.03) * u / np.linalg.norm(u)
-        checker = world.sphere_checker(first + (Obstacle("sphere", (0.03,), tuple(float(v) for v in at)),))
+        checker = sphere_checker(world, first + (Obstacle("sphere", (0.03,), tuple(float(v) for v in at)),))
         if checker.valid(root[None])[0]:
             break
     before = dict(outcomes)
@@ -306,13 +321,13 @@ def test_the_environment_takes_a_checker_and_refuses_unknown_ones():
     env = gym.make("GNNMP/PandaMBM-v0", split="test")
     assert env.unwrapped.checker == "spheres"
     env.reset(options={"index": 0})
-    assert env.unwrapped.problem.checker == "spheres"
+    assert env.unwrapped.problem.checker.name == "spheres"
     env.close()
     env = gym.make("GNNMP/PandaMBM-v0", split="test", checker="pybullet")
     env.reset(options={"index": 0})
-    assert env.unwrapped.problem.checker == "pybullet"
+    assert env.unwrapped.problem.checker.name == "pybullet"
     env.close()
-    with pytest.raises(ValueError, match="unknown checker 'fcl'"):
+    with pytest.raises(ValueError, match="unknown collision checker 'fcl'"):
         gym.make("GNNMP/PandaMBM-v0", checker="fcl")
     with pytest.raises(ValueError, match="one collision checker"):
         gym.make("GNNMP/Maze2DRRT-v0", checker="spheres")
@@ -335,9 +350,9 @@ def test_both_checkers_plan_the_same_problem_and_the_paths_pass_the_re_check():
 
 def test_the_benchmark_refuses_a_checker_the_task_lacks():
     from train.benchmark.args import BenchmarkArgs, BenchmarkError, validate_args
-    with pytest.raises(BenchmarkError, match="--checker 'spheres': maze2d offers one checker only"):
+    with pytest.raises(BenchmarkError, match="--checker 'spheres': maze2d has one checker only"):
         validate_args(BenchmarkArgs(task="maze2d", checker="spheres"))
-    with pytest.raises(BenchmarkError, match="panda-mbm offers spheres, pybullet"):
+    with pytest.raises(BenchmarkError, match="unknown collision checker .fcl.; known: spheres, pybullet"):
         validate_args(BenchmarkArgs(task="panda-mbm", checker="fcl"))
     args = BenchmarkArgs(task="panda-mbm")
     validate_args(args)
@@ -376,7 +391,7 @@ def test_the_motion_bounds_hold_along_edges(world):
     of a link moves at most ``s delta`` and at most ``s rate + s^2 curve / 2`` (``rate`` measured at
     state ``k``), and a link below another moves at most the pair's bounds in that link's frame. The
     oracle: the leaves' positions from forward kinematics at both states."""
-    checker = world.sphere_checker(())
+    checker = sphere_checker(world, ())
     rng = np.random.default_rng(5)
     tighter = []
     for _ in range(40):
@@ -404,7 +419,7 @@ def test_the_motion_bounds_hold_along_edges(world):
                     if moved > 1e-6:
                         tighter.append(min(curved, s * bounds["delta"][i]) / (s * bounds["delta"][i]))
                 frames_there = checker.link_frames(a + (j / n) * (b - a))
-                for p, ((la, lb), m) in enumerate(zip(checker._pairs, checker._pair_moving)):
+                for p, ((la, lb), m) in enumerate(zip(checker.spheres.pairs, checker.spheres.pair_moving)):
                     if m < 0:
                         continue
                     f = la + lb - m
@@ -434,8 +449,8 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
     """A self pair's joint-space table lets the edge check skip the pair's walk: wherever it says a
     cell is free, the pair's leaves (brute force, no tree) touch nowhere in the cell, at its border
     with cells that are not free above all."""
-    checker = world.sphere_checker(())
-    at, joint, low, step, dim, table = checker._tables
+    checker = sphere_checker(world, ())
+    at, joint, low, step, dim, table = checker.tables
     tabled = np.flatnonzero(at >= 0)
     assert len(tabled) >= 2
     rng = np.random.default_rng(6)
@@ -470,24 +485,26 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
 
 def test_the_kernel_views_each_array_of_its_table_as_the_array_it_names(world):
     """The kernel reads its arrays through a table of addresses and shapes (no reference counts), so a
-    row read as another dtype or shape would read foreign memory: every view the kernel takes must be
-    the row of the same name, dtype and dimensions in ``_FIELDS``, and the table must hold each array's
-    own address and shape; an array of another dtype is refused when the table is built."""
-    import inspect
-    import re
+    field read as another dtype or shape would read foreign memory: every group the compiled code views
+    must hold the checker's own arrays (same address, shape, dtype), and an array of another dtype is
+    refused when the table is built."""
+    from gnn_mp_envs.robots.spheres import kernel
+    from gnn_mp_envs.utils.compiled import jit
 
-    from gnn_mp_envs.tasks.arm import spheres
-    source = inspect.getsource(spheres._run)
-    views = re.findall(r"^    (\w+) = _view(\d)\(arrays, (\d+), np\.(\w+)\)$", source, flags=re.M)
-    declared = [(name, np.dtype(dtype).name, ndim) for name, dtype, ndim in spheres._FIELDS]
-    assert [(name, np.dtype(dtype).name, int(ndim)) for name, ndim, _, dtype in views] == declared
-    assert [int(row) for _, _, row, _ in views] == list(range(len(spheres._FIELDS)))
-    checker = world.sphere_checker(())
-    for (name, _, ndim), array, row in zip(spheres._FIELDS, checker._packed_arrays, checker._packed):
-        assert row[0] == array.ctypes.data and tuple(row[1:1 + ndim]) == array.shape, name
-    kept = checker._q
-    checker._q = kept.astype(np.float32)
-    with pytest.raises(TypeError, match="'q' must be a C-contiguous 1-D float64 array"):
+    checker = sphere_checker(world, ())
+    viewers = (kernel.view_kinematics, kernel.view_spheres, kernel.view_tables, kernel.view_obstacles,
+               kernel.view_scratch, kernel.view_memo)
+    assert [type(g) for g in checker._packed_groups] == list(kernel.GROUPS)
+    for view, group in zip(viewers, checker._packed_groups, strict=True):
+        seen = jit(view.py_func)(checker._packed)              # the view, compiled as the kernel compiles it
+        assert type(seen) is type(group)
+        for (name, dtype, ndim), mine, theirs in zip(type(group).spec, group, seen, strict=True):
+            assert theirs.__array_interface__["data"][0] == mine.ctypes.data, name
+            assert theirs.shape == mine.shape and theirs.dtype == mine.dtype == dtype and mine.ndim == ndim, name
+            np.testing.assert_array_equal(theirs, mine)
+    kept = checker.scratch
+    checker.scratch = kept._replace(q=kept.q.astype(np.float32))
+    with pytest.raises(TypeError, match="Scratch.q must be a C-contiguous 1-D float64 array"):
         checker._pack()
-    checker._q = kept
+    checker.scratch = kept
     checker._pack()

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gnn_mp_envs.core.problem import InvalidProblemError
-from gnn_mp_envs.tasks.arm.scenes import Obstacle
+from gnn_mp_envs.robots.geometry import Obstacle
 from gnn_mp_envs.tasks.maze2d import Maze2DTask, MazeMap
 
 SETTINGS = settings(max_examples=60, deadline=None)

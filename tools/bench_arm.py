@@ -1,8 +1,8 @@
-"""Arm benchmark: checker speed, env overhead, and uniform BiRRT vs OMPL RRTConnect.
+"""Arm benchmark with pybullet's checker: checker speed, env overhead, and uniform BiRRT vs OMPL RRTConnect.
 
 Run: ``.venv/bin/python -m tools.bench_arm`` from the repository root (``--help`` for options). It reports
 
-1. raw collision checks per second of the checker alone (``ArmWorld.collides`` on
+1. raw collision checks per second of the checker alone (``RobotWorld.collides`` on
    uniformly drawn configurations in held-out scenes);
 2. ``env.step`` calls per second of ``GNNMP/ArmBiRRT-v0`` driven by uniform samples, and
    the fraction of step time that is environment overhead, i.e. not spent inside the
@@ -36,14 +36,18 @@ from gnn_mp_envs.registration import task_spec
 from gnn_mp_envs.rollout import run_steps
 from gnn_mp_envs.tasks.arm import ArmTask
 from gnn_mp_envs.utils.io import atomic_write_text
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
+from train.args import (OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int,
+                        seed_int)
 
 ENV_ID = task_spec("arm").env_id
+#: The checker measured: pybullet's (the arm's default is the sphere model; ``gnn-mp benchmark --task arm
+#: --checker pybullet`` plans as this tool does).
+CHECKER = "pybullet"
 
 
 def raw_checks_per_second(scene: str, num_checks: int, num_scenes: int = 5, seed: int = 0) -> dict[str, float]:
-    """Checks/s of ``ArmWorld.collides`` alone on uniform configurations in ``num_scenes`` scenes."""
-    task = ArmTask(scene)
+    """Checks/s of ``RobotWorld.collides`` alone on uniform configurations in ``num_scenes`` scenes."""
+    task = ArmTask(scene, checker=CHECKER)
     try:
         low, high = task.state_bounds()
         rng = np.random.default_rng(seed)
@@ -66,7 +70,7 @@ def raw_checks_per_second(scene: str, num_checks: int, num_scenes: int = 5, seed
 
 
 class _CheckTimer:
-    """Wraps ``ArmWorld.collides`` to accumulate the time spent inside collision checks."""
+    """Wraps ``RobotWorld.collides`` to accumulate the time spent inside collision checks."""
 
     def __init__(self, world: Any) -> None:
         self.world = world
@@ -89,7 +93,7 @@ class _CheckTimer:
 def uniform_birrt(scene: str, split: str, problems: int, max_nodes: int, seed: int) -> dict[str, Any]:
     """The uniform sampler's BiRRT on problems ``0..problems-1`` of ``split`` (the benchmark's env and
     seeding rule), with the time inside the collision checks measured."""
-    env = evaluation_env("arm", split, scene=scene, max_nodes=max_nodes)
+    env = evaluation_env("arm", split, scene=scene, max_nodes=max_nodes, checker=CHECKER)
     base = env.unwrapped
     sampler = load_sampler("uniform", task="arm", seed=0)
     timer = _CheckTimer(base.task.world)
@@ -131,7 +135,7 @@ def step_throughput(scene: str, window: int, seed: int, copy_observations: bool)
     """Steps/s and overhead over ``window`` uniform steps on held-out problems, the goal test
     kept on (episodes restart on the next problem when they end). The env keeps its registered
     ``max_nodes``: the padded observation it copies each step is part of its overhead."""
-    env = gym.make(ENV_ID, split="test", task_kwargs={"scene": scene},
+    env = gym.make(ENV_ID, split="test", task_kwargs={"scene": scene}, checker=CHECKER,
                    copy_observations=copy_observations, disable_env_checker=not copy_observations)
     base = env.unwrapped
     timer = _CheckTimer(base.task.world)
@@ -168,7 +172,7 @@ class Args:
     window: int = arg(3000, "env steps for the throughput measurement", parse=positive_int)
     time_limit: float = arg(10.0, "OMPL time limit per problem (s)", parse=positive_float)
     ompl: bool = arg(True, "skip OMPL RRTConnect")
-    seed: int = arg(0, "seed of the uniform samples")
+    seed: int = arg(0, "seed of the uniform samples", parse=seed_int)
     json: str | None = arg(None, "write all figures and records here")
     ompl_log: str | None = arg(None, "write both planners' runs as an OMPL benchmark log")
 
@@ -208,7 +212,7 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
         from gnn_mp_envs.baselines.ompl_runner import OMPLUnavailableError, run_ompl
         try:
             ompl_results = run_ompl("arm", list(range(args.problems)), split=args.split,
-                                    task_kwargs={"scene": args.scene}, planner="rrtconnect",
+                                    task_kwargs={"scene": args.scene, "checker": CHECKER}, planner="rrtconnect",
                                     time_limit=args.time_limit, seed=args.seed)
         except OMPLUnavailableError as e:
             print(f"OMPL RRTConnect skipped: {e}")

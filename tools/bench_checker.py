@@ -34,12 +34,13 @@ def _time(fn, repeat: int = 3) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.args import seed_int
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", default="panda-mbm")
     ap.add_argument("--problems", type=int, default=10)
     ap.add_argument("--states", type=int, default=2000, help="uniform configurations per problem")
     ap.add_argument("--edges", type=int, default=200, help="edges per problem")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_int, default=0)
     args = ap.parse_args(argv)
     for name, value in (("--problems", args.problems), ("--states", args.states), ("--edges", args.edges)):
         if not 1 <= value <= 1_000_000:
@@ -79,20 +80,20 @@ def main(argv: list[str] | None = None) -> int:
                     prob.check_motion(a, b)
             per_edge[c] += _time(edges, repeat=1)
             checks[c] += prob.collision_checks
-        checker = p.world.sphere_checker(p.scene)
-        obstacles = p.obstacles
-        pairs, pair_reach = checker._pairs, checker._pair_reach
+        checker = p.checker.kernel(p.scene)
+        spheres = checker.spheres
         try:
             parts["whole"] += _time(lambda: checker.valid(states))
-            checker._pairs, checker._pair_reach = pairs[:0], pair_reach[:0]
+            checker.spheres = spheres._replace(pairs=spheres.pairs[:0], pair_moving=spheres.pair_moving[:0],
+                                               pair_reach=spheres.pair_reach[:0])
             checker._pack()
             parts["obstacles"] += _time(lambda: checker.valid(states))
             checker.set_obstacles(())
             parts["fk"] += _time(lambda: checker.valid(states))
         finally:
-            checker._pairs, checker._pair_reach = pairs, pair_reach
-            p.world._sphere_scene = None          # the world reloads the scene at its next use
-            checker.set_obstacles(obstacles)
+            checker.spheres = spheres
+            p.checker.prepare(())             # the checker reloads the problem's scene at its next use
+            checker._pack()
         n_states += len(states)
         n_edges += len(starts)
     for t in tasks.values():

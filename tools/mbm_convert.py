@@ -17,7 +17,7 @@ It reads, at the pinned commit :data:`VAMP_COMMIT` (``git show``, so a bare mirr
 * ``resources/ROBOT/ROBOT.urdf``: the joint limits of the robot MotionBenchMaker plans for.
 
 and writes ``gnn_mp_envs/tasks/mbm/dataset/ROBOT_problems.json`` (see that directory's README for the
-layout). With ``--robot-files`` (UR5, Fetch) it writes instead ``gnn_mp_envs/tasks/mbm/robots/ROBOT/``:
+layout). With ``--robot-files`` (UR5, Fetch) it writes instead ``gnn_mp_envs/robots/models/ROBOT/``:
 VAMP's ``ROBOT.urdf`` without its visual elements (see :func:`collision_urdf`) and, byte for byte,
 the collision meshes that URDF references (see that folder's README). The output depends only on
 the input bytes: running it again gives the same files byte for byte (``--check`` compares instead
@@ -48,7 +48,7 @@ URDF_PATH = "resources/panda/panda.urdf"
 DATASET = Path(__file__).resolve().parents[1] / "gnn_mp_envs" / "tasks" / "mbm" / "dataset"
 OUTPUT = DATASET / "panda_problems.json"
 #: Where ``--robot-files`` writes a robot's collision model (``<robot>/<robot>.urdf`` and its meshes).
-ROBOT_FILES = DATASET.parent / "robots"
+ROBOT_FILES = DATASET.parents[2] / "robots" / "models"
 #: The seven scenes, in MotionBenchMaker's order (the tarball's folders are ``<scene>_<robot>``); the
 #: same seven for the Panda, the UR5 and the Fetch.
 SCENES = ("table_pick", "table_under_pick", "box", "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage")
@@ -437,7 +437,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--check", action="store_true", help="compare with --out instead of writing it (exit 1 if it differs)")
     ap.add_argument("--robot-files", action="store_true",
                     help="write (or --check) the robot's URDF and collision meshes under "
-                         "gnn_mp_envs/tasks/mbm/robots/ROBOT/ instead of the problems (ur5 and fetch; the "
+                         "gnn_mp_envs/robots/models/ROBOT/ instead of the problems (ur5 and fetch; the "
                          "Panda is pybullet_data's)")
     args = ap.parse_args(argv)
     spec = ROBOTS[args.robot]

@@ -2,10 +2,10 @@
 hulls pybullet collides, grown by its collision margin and the robot's padding), grouped into a
 tree per link. Run from the repository root::
 
-    python -m tools.spherize --robot panda            # writes gnn_mp_envs/tasks/arm/sphere_models/panda.npz
+    python -m tools.spherize --robot panda            # writes gnn_mp_envs/robots/models/panda/panda.npz
     python -m tools.spherize --robot panda --check    # coverage and overshoot of the shipped file
 
-Method and guarantees: :mod:`gnn_mp_envs.tasks.arm.spherize`. The margin is pybullet's collision
+Method and guarantees: :mod:`gnn_mp_envs.robots.spheres.build`. The margin is pybullet's collision
 margin plus the robot model's padding, so a configuration the pybullet checker calls a collision
 (with or without the padding) is one for the spheres too; the overshoot (how much farther the
 spheres may reach) is chosen per link below, from the clearance of the dataset's starts and goals
@@ -24,44 +24,50 @@ from typing import Any
 
 import numpy as np
 
-from gnn_mp_envs.tasks.arm.spheres import SphereModel, build_tree, load_sphere_model
-from gnn_mp_envs.tasks.arm.spherize import BULLET_MARGIN, coverage_gaps, max_overshoot, spherize_link
-from gnn_mp_envs.tasks.arm.urdf import read_urdf
-from gnn_mp_envs.tasks.arm.world import sphere_model_path, urdf_file
+from gnn_mp_envs.robots.catalog import robot_model
+from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
+from gnn_mp_envs.robots.spheres.build import BULLET_MARGIN, build_tree, coverage_gaps, max_overshoot, spherize_link
+from gnn_mp_envs.robots.spheres.model import SphereModel, load_sphere_model
+from gnn_mp_envs.robots.urdf import read_urdf
 
-#: Robot -> how its model is made: ``model`` names the RobotModel factory (``module:function``);
-#: ``overshoot`` (m) per link, ``"*"`` for the others. The tightest links are the ones whose
+#: Robot (a name of :data:`gnn_mp_envs.robots.catalog.ROBOTS`) -> how its model is made: ``overshoot`` (m)
+#: per link, ``"*"`` for the others. The tightest links are the ones whose
 #: start/goal clearance is smallest (``--clearance``).
 SETTINGS: dict[str, dict[str, Any]] = {
-    "panda": {"model": "gnn_mp_envs.tasks.mbm.data:panda_model",
-              "overshoot": {"*": 0.005, "panda_link5": 0.0007, "panda_hand": 0.0012, "panda_link6": 0.002,
+    "panda": {"overshoot": {"*": 0.005, "panda_link5": 0.0007, "panda_hand": 0.0012, "panda_link6": 0.002,
                             "panda_leftfinger": 0.002, "panda_rightfinger": 0.002},
               "self_overshoot": {"*": 0.006}},
     # The UR5's and the Fetch's starts and goals come within 1.1 mm (pybullet distance) of obstacles
     # and of their own links: a quarter millimetre of padding, half a millimetre of overshoot on the
     # links that come that close, 0.3 mm on the self pairs that do.
-    "ur5": {"model": "gnn_mp_envs.tasks.mbm.data:ur5_model", "padding": 0.00025,
+    "ur5": {"padding": 0.00025,
             "overshoot": {"*": 0.002, "robotiq_85_left_finger_tip_link": 0.0005,
                           "robotiq_85_right_finger_tip_link": 0.0005, "robotiq_85_left_finger_link": 0.001,
                           "robotiq_85_right_finger_link": 0.001},
             "self_overshoot": {"*": 0.004, "forearm_link": 0.0003, "wrist_2_link": 0.0003, "wrist_3_link": 0.0003,
                                "fts_robotside": 0.001}},
-    "fetch": {"model": "gnn_mp_envs.tasks.mbm.data:fetch_model", "padding": 0.00025,
+    "fetch": {"padding": 0.00025,
               "overshoot": {"*": 0.002, "forearm_roll_link": 0.0005, "wrist_flex_link": 0.0005,
                             "r_gripper_finger_link": 0.0005, "l_gripper_finger_link": 0.0005,
                             "upperarm_roll_link": 0.0005, "gripper_link": 0.0005},
               "self_overshoot": {"*": 0.003, "base_link": 0.001, "wrist_flex_link": 0.0003,
                                  "upperarm_roll_link": 0.0003, "forearm_roll_link": 0.0005,
                                  "shoulder_lift_link": 0.0005}},
+    # The xArm6 of the arm task (pybullet_data's V-HACD meshes: 21 convex parts over 7 links) stands on the
+    # table (its base link is exempt from the table). Its problem generator accepts a start or goal when pybullet
+    # puts every link more than the robot's 1 mm padding from the obstacles; but pybullet rounds the boxes' and
+    # cylinders' edges by its 1 mm margin (a link 1 mm from an edge in pybullet is 0.59 mm from the box, 0.27 mm
+    # from a corner) and the spheres test the shapes as they are: on the sharp shapes, 3,000 starts and goals
+    # (train, val, test; python -m tools.arm_clearance) come within 0.39 mm (one train goal), 0.63 to 0.9 mm
+    # (link2 to link5, 30 problems) and 2.05 mm (link6). A quarter millimetre of padding and 0.4 mm of overshoot
+    # on link2 to link5 (0.65 mm in all) keep every val and test start and goal valid, 1 mm on link6; link_base
+    # and link1 never came within 10 mm of an obstacle (2 mm), nor any self pair within 13.8 mm (3 mm). Eight
+    # polishing samples close the self trees' last dips under the cover's tolerance.
+    "xarm6": {"padding": 0.00025, "overshoot": {"*": 0.0004, "link_base": 0.002, "link1": 0.002, "link6": 0.001},
+              "self_overshoot": {"*": 0.003}, "polish_seeds": 8},
 }
 #: Boundary sample spacing of the cover (m).
 SPACING = 0.001
-
-
-def robot_model(robot: str):
-    module, _, func = SETTINGS[robot]["model"].partition(":")
-    import importlib
-    return getattr(importlib.import_module(module), func)()
 
 
 def overshoot_of(robot: str, link: str, key: str = "overshoot") -> float:
@@ -122,7 +128,7 @@ def polish(robot: str, path: Path, spacing: float = 0.001, seeds: int = 2,
     apart; the strips over edges and the caps over vertices, where narrow dips hide, at each of
     ``edge_spacings``), a sphere added over each point still out (radius: the link's union depth there
     plus the margin and the overshoot, as every sphere), and the trees rebuilt."""
-    from gnn_mp_envs.tasks.arm.spherize import (
+    from gnn_mp_envs.robots.spheres.build import (
         COVER_TOLERANCE,
         boundary_samples,
         inside_union,
@@ -191,20 +197,21 @@ def check(robot: str, path: Path) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.args import seed_int
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robot", choices=sorted(SETTINGS), required=True)
     ap.add_argument("--out", type=Path, default=None, help="output file (default: the package's)")
     ap.add_argument("--check", action="store_true", help="check the file's coverage instead of writing it")
     ap.add_argument("--polish", action="store_true", help="close remaining dips of the existing file (also the last "
                     "step of writing one)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_int, default=0)
     args = ap.parse_args(argv)
     out = args.out or sphere_model_path(args.robot)
     if args.check:
         return check(args.robot, out)
     if not args.polish:
         make(args.robot, out, args.seed)
-    polish(args.robot, out)
+    polish(args.robot, out, seeds=int(SETTINGS[args.robot].get("polish_seeds", 2)))
     return 0
 
 

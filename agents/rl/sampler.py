@@ -34,7 +34,6 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 import torch
-from numba import njit
 from torch import nn
 
 from agents.checkpoints import check_trained_for, load_checkpoint, resolve_checkpoint, save_checkpoint
@@ -47,6 +46,7 @@ from agents.samplers.streams import TorchCompatibleStream
 from gnn_mp_envs.envs.candidates import CandidateSet, wrap_into_box
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
 from gnn_mp_envs.registration import same_bounds
+from gnn_mp_envs.utils.compiled import jit
 
 #: sampler name -> the checkpoint kinds it loads (continuous actions; candidate selection)
 RL_SAMPLERS: dict[str, tuple[str, ...]] = {"rl-ppo": ("rl/sb3-ppo", "rl/sb3-ppo-pick"), "rl-sac": ("rl/sb3-sac",),
@@ -143,7 +143,7 @@ class RLSampler(ModelSampler):
 _ACTION_LOW32, _ACTION_HIGH32 = np.float32(ACTION_LOW), np.float32(ACTION_HIGH)
 
 
-@njit(cache=True)
+@jit
 def _clipped_target_map(loc, scale, noise, target, span, low, high, periodic, action_low, action_high):
     """:meth:`RLSampler.model_sample`'s state for a clipped policy in the target frame, in one
     compiled call instead of about a dozen numpy operations on ``(d,)`` float32 vectors (~15 us of a
@@ -240,7 +240,7 @@ def numpy_tree_params(twin: Mapping[str, Any], view: Mapping[str, np.ndarray]) -
     return numpy_mlp(twin["body"], embed), twin["scale"]
 
 
-@njit(cache=True)
+@jit
 def _shared_head_logits(h, x, score, bias, slot_bias, prior_scale, has_prior):
     """:class:`~agents.rl.pick.SharedCandidateHead` over the candidates' embeddings ``h (K, E)``,
     compiled: ``logit_k = score . [h_k, mean h, max h] + bias + slot_bias_k (+ prior_scale x_k,-1)``

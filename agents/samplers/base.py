@@ -91,6 +91,17 @@ def active_target(obs: Mapping) -> np.ndarray:
     return obs["start"] if int(np.asarray(obs["active_tree"]).reshape(-1)[0]) == 1 else obs["goal"]
 
 
+def batch_active_trees(obs: Mapping, k: int) -> np.ndarray:
+    """The tree each of the next ``k`` samples extends, from one observation: BiRRT (the goal tree's
+    root is node 1) swaps trees after every sample, RRT extends tree 0. The one place this rule is
+    written (``gym.make(id, samples_per_step=K)`` consumes a batch this way)."""
+    active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
+    features, n = np.asarray(obs["node_features"]), int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
+    if n >= 2 and features[1, -1] == 1:
+        return (active + np.arange(k)) % 2
+    return np.zeros(k, dtype=np.int64)
+
+
 _TWO_PI = 2 * np.pi
 #: Below this many values numpy's float modulo is cheaper than :func:`wrap_pi`'s extra passes.
 _WRAP_BY_PASSES = 64
@@ -139,6 +150,9 @@ class Sampler:
     #: The TensorDict keys of :meth:`as_module`.
     in_keys: tuple[str, ...] = SAMPLER_IN_KEYS
     out_keys: tuple[str, ...] = SAMPLER_OUT_KEYS
+    #: Samples per environment step the benchmark plans this sampler with (``gym.make(id,
+    #: samples_per_step=K)``, :meth:`act_batch`): samplers that do not read the tree draw a batch at once.
+    samples_per_step: int = 1
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
         low64, high64 = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
@@ -149,6 +163,14 @@ class Sampler:
         self.state_dim = int(low64.shape[0])
         self.low32, self.high32 = low64.astype(np.float32), high64.astype(np.float32)
         self.span32 = self.high32 - self.low32
+        # a subclass that overrides act below a class's own act_batch: its batches must call its act (one
+        # sample at a time, and the benchmark plans it so)
+        mro = type(self).__mro__
+        act_at = next(c for c in mro if "act" in vars(c))
+        batch_at = next(c for c in mro if "act_batch" in vars(c))
+        if batch_at is not Sampler and act_at is not batch_at and issubclass(act_at, batch_at):
+            self.act_batch = lambda obs, k: Sampler.act_batch(self, obs, k)
+            self.samples_per_step = 1
         self.reset(seed)
 
     def make_stream(self, seed: int | None) -> np.random.Generator:
@@ -170,6 +192,20 @@ class Sampler:
     def act(self, obs: Mapping) -> np.ndarray:
         """Next sample ``(d,)`` float32 for one (unbatched) numpy observation."""
         raise NotImplementedError
+
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        """The next ``k`` samples ``(k, d)`` float32 for one observation, to be consumed in order (an
+        env with ``samples_per_step=k``): what ``k`` calls of :meth:`act` would draw if the tree did not
+        change in between, each for the tree it extends (:func:`batch_active_trees`). A sampler that does
+        not read the tree draws exactly the samples of ``k`` steps; one that does sees the tree as it
+        stood before the batch."""
+        trees = batch_active_trees(obs, k)
+        view = dict(obs)
+        out = np.empty((k, self.state_dim), dtype=np.float32)
+        for j in range(k):
+            view["active_tree"] = trees[j:j + 1]
+            out[j] = self.act(view)
+        return out
 
     def propose(self, obs: Mapping) -> np.ndarray:
         """Next samples ``(*batch, d)`` float32 for observations with leading batch shape ``batch``

@@ -13,7 +13,7 @@ from typing import Mapping
 
 import numpy as np
 
-from agents.samplers.base import Sampler, active_target, as_arrays
+from agents.samplers.base import Sampler, active_target, as_arrays, batch_active_trees
 from agents.samplers.streams import _UNIT24, TorchCompatibleStream
 
 class _TorchCompatible(Sampler):
@@ -39,10 +39,21 @@ class _TorchCompatible(Sampler):
         return tuple(shape[:-1])
 
 
+#: The batch the classical samplers ask the benchmark to plan with: one compiled call per 64 samples.
+CLASSICAL_BATCH = 64
+
+
 class UniformSampler(_TorchCompatible):
     """Uniform over the sampling bounds: the RRT/BiRRT default."""
 
     reads = ("start",)
+    samples_per_step = CLASSICAL_BATCH
+
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        """``k`` uniform states in one draw: the values of ``k`` calls of :meth:`act`."""
+        x = self.rng.low24(k * self.state_dim).reshape(k, self.state_dim) * self._scale32
+        x += self.low32
+        return x
 
     def act(self, obs: Mapping) -> np.ndarray:
         if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without the reshapes
@@ -65,6 +76,7 @@ class GoalBiasSampler(_TorchCompatible):
 
     reads = ("start", "goal", "active_tree")
     settings = ("goal_bias",)
+    samples_per_step = CLASSICAL_BATCH
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None,
                  goal_bias: float = 0.05) -> None:
@@ -85,6 +97,19 @@ class GoalBiasSampler(_TorchCompatible):
             return np.array(active_target(obs), dtype=np.float32)   # a copy: obs may be live views
         return self.low32 + low24[:-1] * self._scale32
 
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        """The ``k`` samples of ``k`` calls of :meth:`act` (the state's draws, then the choice's, per
+        sample), each aimed at the target of the tree it extends."""
+        d = self.state_dim
+        draws = self.rng.low24(k * (d + 1)).reshape(k, d + 1)
+        out = self.low32 + draws[:, :d] * self._scale32
+        pick = draws[:, d] * _UNIT24 < self._goal_bias32
+        if pick.any():
+            trees = batch_active_trees(obs, k)[pick]
+            out[pick] = np.where(trees[:, None] == 1, np.asarray(obs["start"], np.float32),
+                                 np.asarray(obs["goal"], np.float32))
+        return out
+
     def propose(self, obs: Mapping) -> np.ndarray:
         """All uniform states of the batch first, then all the choices (one ``unit`` call each)."""
         shape = self.batch_shape(obs)
@@ -94,3 +119,24 @@ class GoalBiasSampler(_TorchCompatible):
                           arrays["goal"].astype(np.float32))
         pick = self.rng.unit(int(np.prod(shape, dtype=np.int64))).reshape(*shape, 1) < self._goal_bias32
         return np.where(pick, target, sample).astype(np.float32)
+
+
+class HaltonSampler(Sampler):
+    """A scrambled Halton sequence over the sampling bounds (scipy's ``qmc.Halton``), restarted from the
+    seed at every :meth:`reset`: low-discrepancy samples, the default of VAMP's planners. It does not read
+    the tree, so a batch is the sequence's next points."""
+
+    reads = ("start",)
+    samples_per_step = CLASSICAL_BATCH
+
+    def make_stream(self, seed: int | None):
+        from scipy.stats import qmc
+        return qmc.Halton(d=len(self.low), scramble=True, seed=None if seed is None else int(seed))
+
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        if np.shape(obs["start"])[-1] != self.state_dim:
+            self.check_observation(obs)
+        return (self.low + self.rng.random(k) * (self.high - self.low)).astype(np.float32)
+
+    def act(self, obs: Mapping) -> np.ndarray:
+        return self.act_batch(obs, 1)[0]

@@ -25,9 +25,11 @@ import math
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, types
+from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
+
+from gnn_mp_envs.utils.compiled import jit
 
 _SQRT_HALF = 1.0 / math.sqrt(2.0)
 #: The one-line refusal of a tree id the model has no slot for (unchecked, it would write past the caches).
@@ -87,7 +89,7 @@ def _erf4_inplace(typingctx, a, i):
     return types.void(a, i), codegen
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _gelu_with(v, u):
     """``v = GELU(v)`` for a 1-D contiguous array, with ``u`` as scratch (at least ``len(v)`` rounded
     up to 4 values; its contents are overwritten): the ``erf``s four at a time
@@ -105,14 +107,14 @@ def _gelu_with(v, u):
         v[i] = 0.5 * v[i] * (1.0 + u[i])
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _gelu_into(v):
     """``v = GELU(v)`` for a 1-D contiguous array (:func:`_gelu_with` with its own scratch)."""
     n = v.shape[0]
     _gelu_with(v, np.empty(n + (-n) % 4))
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _wrapped(v: float, periodic: bool) -> float:
     """``wrap_periodic`` of one difference: ``(v + pi) % (2 pi) - pi`` (Python's floored modulo, as
     numpy's ``%``), by one exact step where ``v + pi`` lies in ``[-2 pi, 4 pi)`` (the case of two
@@ -133,7 +135,7 @@ def _wrapped(v: float, periodic: bool) -> float:
     return a - math.pi
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _matvec_add(out, v, w, n_in, offset):
     """``out += v[:n_in] @ w[offset:offset + n_in]`` row by row (contiguous, vectorisable inner loop)."""
     H = out.shape[0]
@@ -143,7 +145,7 @@ def _matvec_add(out, v, w, n_in, offset):
             out[c] += vq * w[offset + q, c]
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
     """A message MLP's first layer for the edge ``j -> i`` (before its GELU): the sender's cached
     ``W_h h_j``, the bias, and ``wrap(x_j - x_i)`` times ``W_x / step`` (``rel``: scratch)."""
@@ -154,7 +156,7 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
     _matvec_add(pre, rel, w_rel, rel.shape[0], 0)
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric):
     """Each row's ``knn`` nearest earlier nodes of its own tree (row ``r`` is node ``i0 + r``; the
     batch's own earlier rows included), nearest first, the earlier node first on ties (a stable
@@ -242,7 +244,7 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
     return near, found
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _residual_layer_norm(upd, h, g, b, eps):
     """``h = LayerNorm(h + upd)`` row by row, in place (``upd`` is overwritten)."""
     B, H = h.shape
@@ -261,13 +263,13 @@ def _residual_layer_norm(upd, h, g, b, eps):
             h[r, c] = upd[r, c] * inv_std * g[c] + b[c]
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _gelu_rows(a):
     """GELU of a C-contiguous 2-D array, in place."""
     _gelu_into(a.reshape(a.size))
 
 
-@njit(cache=True)
+@jit
 def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets, log_sigma, sums, counts,
                periodic, step, center, scale, feature_scale, relative_inputs, knn, use_parent, heads, iw1, ib1, iw2,
                ib2, w_sender, wpx, bp1, wpu, bpu, wkx, bk1, wku, bku, uw1, ub1, uw2, ub2, norm_g, norm_b, norm_eps,
@@ -366,7 +368,7 @@ def embed_rows(i0, x, feats, tid, parent, states, tree_id, sender, keys, offsets
         counts[t] += 1.0
 
 
-@njit(cache=True)
+@jit
 def tree_context(ends, active, sums, counts, use_context, qw1, qb1, qw2, qb2):
     """The tree context ``q`` ``(H,)``: the query MLP on ``[ends, one-hot of the active tree, each
     tree's mean embedding (zeros without ``use_context``), log1p(node counts) / 5]`` (``ends``: the
@@ -388,7 +390,7 @@ def tree_context(ends, active, sums, counts, use_context, qw1, qb1, qw2, qb2):
     return np.dot(hid, qw2) + qb2
 
 
-@njit(cache=True)
+@jit
 def node_mixture(keys, q, active, inv_temperature, shift_w, shift_b, step):
     """The GNN's node mixture at the ingested tree (``keys``: its rows): node probabilities
     ``softmax(keys . q / sqrt(H) / temperature)``, their running sums, and the active tree's
@@ -462,31 +464,31 @@ def pack_weights(arrays: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(parts), np.asarray(layout, dtype=np.int64)
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _w1(flat, layout, i):
     o = layout[i, 0]
     return flat[o:o + layout[i, 1]]
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _w2(flat, layout, i):
     o, a, b = layout[i, 0], layout[i, 1], layout[i, 2]
     return flat[o:o + a * b].reshape((a, b))
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _w3(flat, layout, i):
     o, a, b, c = layout[i, 0], layout[i, 1], layout[i, 2], layout[i, 3]
     return flat[o:o + a * b * c].reshape((a, b, c))
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _w4(flat, layout, i):
     o, a, b, c, e = layout[i, 0], layout[i, 1], layout[i, 2], layout[i, 3], layout[i, 4]
     return flat[o:o + a * b * c * e].reshape((a, b, c, e))
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _embed_new_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
                     counts, periodic, flags, flat, layout):
     """:func:`embed_rows` of the observation's rows ``i0..n-1``, read from its arrays as they are
@@ -520,7 +522,7 @@ def _embed_new_rows(i0, n, nodes, node_features, parents, states, tree_id, sende
                _w2(flat, layout, 24), _w1(flat, layout, 25), _w2(flat, layout, 26), _w1(flat, layout, 27))
 
 
-@njit(cache=True)
+@jit
 def context_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
                        counts, periodic, flags, flat, layout, ends, active):
     """The GNN-CVAE's forward up to its decoder in one compiled call: embed the observation's rows
@@ -533,7 +535,7 @@ def context_after_rows(i0, n, nodes, node_features, parents, states, tree_id, se
                         _w2(flat, layout, 30), _w1(flat, layout, 31))
 
 
-@njit(cache=True)
+@jit
 def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
                        counts, periodic, flags, flat, layout, ends, active, inv_temperature):
     """One GNN sampler step in one compiled call: :func:`context_after_rows`, then the node mixture
@@ -544,7 +546,7 @@ def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, se
                         _w1(flat, layout, 0))
 
 # ---------------------------------------------------------------------------- the pendulum's scorer
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _sin_cos_into(out, r, o, v, cols):
     """``out[r, o:o+A]`` = ``sin(v[cols])`` and ``out[r, o+A:o+2A]`` = ``cos(v[cols])``: the angle features."""
     A = cols.shape[0]
@@ -553,7 +555,7 @@ def _sin_cos_into(out, r, o, v, cols):
         out[r, o + A + a] = math.cos(v[cols[a]])
 
 
-@njit(cache=True, inline="always")
+@jit(inline=True)
 def _mlp2(x, w1, b1, w2, b2):
     """``Linear -> GELU -> Linear`` on rows ``x`` (``agents.nn.twins.mlp`` of two layers)."""
     hid = np.dot(x, w1) + b1
@@ -561,7 +563,7 @@ def _mlp2(x, w1, b1, w2, b2):
     return np.dot(hid, w2) + b2
 
 
-@njit(cache=True)
+@jit
 def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h, front, periodic, metric, angle_cols,
                       center, scale, feature_scale, step, depth_scale, knn, in_w1, in_b1, in_w2, in_b2, pc_w1, pc_b1,
                       pc_w2, pc_b2, kc_w1, kc_b1, kc_w2, kc_b2, up_w1, up_b1, up_w2, up_b2, norm_g, norm_b, norm_eps,
@@ -698,7 +700,7 @@ def scorer_embed_rows(i0, x, feats, tid, parent, goal, states, tree_id, depth, h
 
 
 
-@njit(cache=True)
+@jit
 def scorer_candidate_logits(cands, n, active, multi_tree, states, tree_id, h_last, front, goal, periodic, weights,
                             unit, scale, center, angle_cols, w1, b1, w2, b2, w3, b3):
     """The pendulum scorer's candidate head in one compiled call (:meth:`IncrementalTreeScorer.nearest`

@@ -1,19 +1,39 @@
 """RRT and BiRRT that advance one external sample at a time.
 
-The sampler is not part of the planner: :meth:`step` takes the sample, so an
+The sampler is not part of the planner: :meth:`~TreePlanner.step` takes the sample, so an
 environment step is exactly one planner iteration (as OMPL's ``RRT::solve`` loop body:
 sample -> nearest -> steer -> check -> add -> goal test), and any sampler (uniform,
-learned, an RL policy) can drive the same planner.
+learned, an RL policy) can drive the same planner. :meth:`~TreePlanner.run` takes a batch of
+samples and consumes them in order as that many steps would, in one compiled call where the problem
+offers compiled steering and checks (:mod:`gnn_mp_envs.core.loop`), else step after step; ``step``
+stays the reference the compiled loop is tested against.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, MEET_A, MEET_B, RRT_LOOP, SOLVED,
+                                   IndexArrays, LoopArrays, TreeArrays, compiled_loop)
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore
+
+
+#: The problem methods the compiled loop stands for: a subclass that overrides one of them in Python (a
+#: goal test switched off, a steer of its own) is planned by the Python planner, which calls them.
+LOOP_METHODS = ("steer", "check_motion", "in_goal", "goal_connection", "distance", "nearest_row", "is_state_valid")
+
+
+@functools.lru_cache(maxsize=None)
+def loop_serves(cls: type) -> bool:
+    """Whether the compiled loop may stand for ``cls``'s methods: none of :data:`LOOP_METHODS` is defined
+    below the class that gives its ``compiled_kernel``."""
+    mro = cls.__mro__
+    below = mro[:mro.index(next(c for c in mro if "compiled_kernel" in vars(c)))]
+    return not any(name in vars(c) for c in below for name in LOOP_METHODS)
 
 
 @dataclass
@@ -22,6 +42,8 @@ class StepResult:
 
     added: list[int] = field(default_factory=list)
     solved: bool = False
+    #: Samples consumed (iterations): 1 for :meth:`TreePlanner.step`.
+    consumed: int = 1
 
 
 @dataclass
@@ -47,10 +69,13 @@ class TreePlanner:
     def __init__(self, problem: Problem, max_nodes: int) -> None:
         self.problem = problem
         self.max_nodes = int(max_nodes)
-        self.tree = TreeStore(self.max_nodes, problem.state_dim, problem.control_dim, self.num_trees)
+        self.tree = TreeStore(self.max_nodes, problem.state_dim, problem.control_dim, self.num_trees,
+                              getattr(problem, "nearest_metric", None))
         self.active_tree = 0
         self.solution: Solution | None = None
         self.iterations = 0
+        self._table: np.ndarray | None = None      # the compiled loop's table of this planner's arrays
+        self._kernel = self._loop = None
 
     @property
     def solved(self) -> bool:
@@ -81,6 +106,78 @@ class TreePlanner:
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    #: The compiled loop's planner (:mod:`gnn_mp_envs.core.loop`).
+    loop_kind = RRT_LOOP
+
+    @property
+    def compiled(self) -> bool:
+        """Whether :meth:`run` consumes samples in the compiled loop: the problem offers a compiled kernel
+        (``compiled_kernel()`` not None) and names its metric (the tree's exact k-d index)."""
+        return (self.tree.index is not None and loop_serves(type(self.problem))
+                and self.problem.compiled_kernel() is not None)
+
+    def run(self, samples: np.ndarray, budget: int | None = None) -> StepResult:
+        """Consume ``samples`` (``(K, d)``) in order as ``K`` calls of :meth:`step` would, at most ``budget``
+        of them, stopping after the one that solves the problem or fills the tree: the nodes added (in
+        order), whether it solved, and how many samples were consumed."""
+        if not (type(samples) is np.ndarray and samples.dtype == np.float64 and samples.ndim == 2
+                and samples.flags.c_contiguous):
+            samples = np.ascontiguousarray(samples, dtype=np.float64).reshape(-1, self.problem.state_dim)
+        budget = len(samples) if budget is None else max(0, min(int(budget), len(samples)))
+        kernel = (self.problem.compiled_kernel() if self.tree.index is not None and loop_serves(type(self.problem))
+                  else None)
+        if kernel is None or self.solution is not None:
+            return self._run_steps(samples, budget)
+        if kernel is not self._kernel:              # a kernel object serves its problem until its context changes
+            self._kernel, self._loop = kernel, compiled_loop(kernel)
+            if self._table is None:
+                self._pack()
+        tree, problem, counters, result = self.tree, self.problem, self._counters, self._result
+        first = int(tree._size[0])
+        counters[0] = counters[1] = 0
+        self.active_tree = self._loop(samples, self.loop_kind, self.active_tree, budget, problem.step_size,
+                                      problem.goal_tolerance, self._table, kernel.context)
+        problem.edges_checked += int(counters[EDGES])
+        problem.collision_checks += int(counters[CHECKS])
+        consumed, solved = int(result[CONSUMED]), bool(result[SOLVED])
+        self.iterations += consumed
+        if solved:
+            self._solve(int(result[MEET_A]), int(result[MEET_B]), 1 - self.active_tree)
+        return StepResult(list(range(first, int(tree._size[0]))), solved, consumed)
+
+    def __getstate__(self) -> dict:
+        """Pickled (and deep-copied) without the compiled loop's table: it holds the addresses of this
+        planner's arrays, not of the copy's (rebuilt on the copy's first :meth:`run`)."""
+        return {**self.__dict__, "_table": None, "_groups": None, "_kernel": None, "_loop": None}
+
+    def _pack(self) -> None:
+        """The table of this planner's arrays the compiled loop reads (they live as long as the planner)."""
+        t, ix, d = self.tree, self.tree.index, self.problem.state_dim
+        self._counters, self._result = np.zeros(2, dtype=np.int64), np.zeros(4, dtype=np.int64)
+        self._groups = (TreeArrays(t.states, t.parent, t.cost, t.tree_id, t._size, t._tree_size),
+                        IndexArrays(ix.weights, ix.periodic, ix.left, ix.right, ix.split, ix.root, ix.stack, ix.bounds,
+                                    ix.offsets),
+                        LoopArrays(np.ascontiguousarray(self.problem.goal, dtype=np.float64), np.zeros(d), np.zeros(1),
+                                   self._counters, self._result))
+        self._table = LAYOUT.pack(self._groups)
+
+    def _run_steps(self, samples: np.ndarray, budget: int) -> StepResult:
+        """:meth:`run` as :meth:`step` after :meth:`step`."""
+        out = StepResult(consumed=0)
+        for sample in samples[:budget]:
+            if out.consumed and self.tree.full:
+                break
+            result = self.step(sample)
+            out.added.extend(result.added)
+            out.consumed += 1
+            if result.solved:
+                out.solved = True
+                break
+        return out
+
+    def _solve(self, i: int, j: int, tree: int) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
 
 class RRT(TreePlanner):
     """Rapidly-exploring random tree (LaValle 1998) from the start state."""
@@ -106,9 +203,13 @@ class RRT(TreePlanner):
                 return result
             i = self.tree.add(link.state, i, 0, link.cost, link.control)
             result.added.append(i)
-        self.solution = self._path(self.tree.path_to_root(i))
+        self._solve(i, -1, 0)
         result.solved = True
         return result
+
+    def _solve(self, i: int, j: int, tree: int) -> None:
+        """The solution ends at node ``i`` (in the goal)."""
+        self.solution = self._path(self.tree.path_to_root(i))
 
 
 class BiRRT(TreePlanner):
@@ -120,6 +221,7 @@ class BiRRT(TreePlanner):
     """
 
     num_trees = 2
+    loop_kind = BIRRT_LOOP
 
     def __init__(self, problem: Problem, max_nodes: int) -> None:
         if not problem.geometric:
@@ -156,19 +258,23 @@ class BiRRT(TreePlanner):
         if i is not None:
             j = self._connect(b, self.tree.states[i], result.added)    # a node's row never changes
             if j is not None:
-                from_start, from_goal = (i, j) if a == 0 else (j, i)
-                head = self._path(self.tree.path_to_root(from_start))
-                # The goal tree is walked from the meeting node toward its root; the meeting
-                # node itself duplicates the last state of ``head`` and is dropped.
-                tail = self.tree.path_to_root(from_goal)[::-1][1:]
-                self.solution = Solution(
-                    np.vstack([head.states, self.tree.states[tail]]),
-                    np.vstack([head.controls, self.tree.controls[tail]]),
-                    head.length + float(self.tree.cost[from_goal]),
-                    np.concatenate([head.nodes, np.asarray(tail, dtype=np.int64)]))
+                self._solve(i, j, a)
                 result.solved = True
         self.active_tree = b
         return result
+
+    def _solve(self, i: int, j: int, tree: int) -> None:
+        """The trees meet: node ``i`` of ``tree`` (just extended) and node ``j`` of the other."""
+        from_start, from_goal = (i, j) if tree == 0 else (j, i)
+        head = self._path(self.tree.path_to_root(from_start))
+        # The goal tree is walked from the meeting node toward its root; the meeting
+        # node itself duplicates the last state of ``head`` and is dropped.
+        tail = self.tree.path_to_root(from_goal)[::-1][1:]
+        self.solution = Solution(
+            np.vstack([head.states, self.tree.states[tail]]),
+            np.vstack([head.controls, self.tree.controls[tail]]),
+            head.length + float(self.tree.cost[from_goal]),
+            np.concatenate([head.nodes, np.asarray(tail, dtype=np.int64)]))
 
 
 PLANNERS: dict[str, type[TreePlanner]] = {"rrt": RRT, "birrt": BiRRT}

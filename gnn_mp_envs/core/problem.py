@@ -85,27 +85,12 @@ def _nearest_node_loop(states: np.ndarray, k: int, x: np.ndarray, weights: np.nd
                        index: np.ndarray) -> int:
     """``index[j]`` of the row ``j`` of ``states[:k]`` nearest ``x`` (:func:`_nearest_row_loop`): a small
     tree's nearest node in one compiled call, without the slice and the lookup in Python."""
-    return index[_nearest_row(states[:k], x, weights, periodic)[0]]
+    return index[_nearest_row_loop(states[:k], x, weights, periodic)[0]]
 
 
-#: The scan :func:`_nearest_node_loop` calls: the loop itself, the compiled one once compiled.
-_nearest_row = _nearest_row_loop
-_NEAREST_NODE: list = []
-
-
-def compiled_nearest_node():
-    """:func:`_nearest_node_loop` compiled (numba, calling the compiled :func:`_nearest_row_loop`; built
-    on first use, cached on disk), or None without numba."""
-    global _nearest_row
-    if not _NEAREST_NODE:
-        loop = compiled_nearest_row()
-        if loop is None:
-            _NEAREST_NODE.append(None)
-        else:
-            from numba import njit
-            _nearest_row = loop
-            _NEAREST_NODE.append(njit(cache=True)(_nearest_node_loop))
-    return _NEAREST_NODE[0]
+#: :func:`_nearest_node_loop` compiled (numba, calling the compiled :func:`_nearest_row_loop`), or None
+#: without numba.
+compiled_nearest_node = lazy_njit(_nearest_node_loop, calls={"_nearest_row_loop": compiled_nearest_row})
 
 
 class InvalidProblemError(ValueError):
@@ -177,6 +162,12 @@ class Problem:
         d = self.distance(states, x)
         j = int(d.argmin())
         return j, float(d[j])
+
+    def compiled_kernel(self) -> Any:
+        """The compiled steering and checks the planner's compiled loop runs (a
+        :class:`~gnn_mp_envs.core.loop.CompiledKernel`, current for this problem), or None: the Python
+        planner (the default; a problem whose steer and checks are compiled overrides this)."""
+        return None
 
     #: Periodic box sizes of the ``nn_embed`` coordinates for the k-d tree (None: none periodic).
     nn_boxsize: np.ndarray | None = None

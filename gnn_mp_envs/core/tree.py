@@ -3,14 +3,16 @@
 All trees of a planner share one node store (global indices are what the observation
 shows), and each tree keeps a contiguous copy of its own states.
 
-Nearest-neighbour queries are a hybrid: small trees are scanned in one pass (the problem's
-``nearest_row``: a compiled loop where the problem names its metric, else numpy); once a tree
-has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its older nodes and only the nodes
-added since the last rebuild are scanned. The k-d tree is rebuilt when that recent buffer
-outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is amortised and a query
-stays roughly flat as the tree grows (measured by ``python -m tools.bench_env``). The k-d tree
-works in the problem's ``nn_embed`` coordinates, where Euclidean distance (with ``nn_boxsize``
-periodic axes) equals ``problem.distance``.
+Nearest-neighbour queries: where the problem names its metric (``nearest_metric``: weights and
+periodic coordinates, every built-in task), a compiled incremental k-d tree per search tree
+(:class:`~gnn_mp_envs.core.nearest.NearestIndex`) answers exactly what a scan would (the first node at
+the least distance), at any size; the compiled planning loop (:mod:`gnn_mp_envs.core.loop`) queries
+and grows the same index. Otherwise (a user's own metric) small trees are scanned in one pass (the
+problem's ``nearest_row``); once a tree has ``KD_MIN_NODES`` nodes, a scipy ``cKDTree`` indexes its
+older nodes and only the nodes added since the last rebuild are scanned. That k-d tree is rebuilt
+when the recent buffer outgrows ``max(KD_MIN_BUFFER, indexed / 8)``, so the rebuild cost is
+amortised, and works in the problem's ``nn_embed`` coordinates, where Euclidean distance (with
+``nn_boxsize`` periodic axes) equals ``problem.distance``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial import cKDTree
 
+from gnn_mp_envs.core.nearest import NearestIndex
 from gnn_mp_envs.core.problem import compiled_nearest_node
 
 KD_MIN_NODES = 1024
@@ -38,7 +41,8 @@ class Metric(Protocol):
 class TreeStore:
     """Nodes of one or two trees: state, parent, cost-to-come, tree id and edge control."""
 
-    def __init__(self, capacity: int, state_dim: int, control_dim: int = 0, num_trees: int = 1):
+    def __init__(self, capacity: int, state_dim: int, control_dim: int = 0, num_trees: int = 1,
+                 nearest_metric: tuple[np.ndarray, np.ndarray] | None = None):
         if capacity < num_trees:
             raise ValueError(f"capacity must hold at least the {num_trees} root(s), got {capacity}")
         self.capacity = int(capacity)
@@ -52,11 +56,18 @@ class TreeStore:
         # Per-tree contiguous copies for nearest-neighbour queries.
         self._tree_states = [np.zeros((capacity, state_dim)) for _ in range(num_trees)]
         self._tree_index = [np.zeros(capacity, dtype=np.int64) for _ in range(num_trees)]
-        self._tree_size = [0] * num_trees
+        self._tree_size = np.zeros(num_trees, dtype=np.int64)   # an array: the compiled loop updates it
         self._kd: list[cKDTree | None] = [None] * num_trees
         self._kd_count = [0] * num_trees
         self._scan = compiled_nearest_node()
-        self.size = 0
+        #: The exact k-d trees of a named metric (None: the generic scan and cKDTree).
+        self.index = NearestIndex(capacity, num_trees, *nearest_metric) if nearest_metric is not None else None
+        #: The node count as a one-element array, which the compiled loop updates in place.
+        self._size = np.zeros(1, dtype=np.int64)
+
+    @property
+    def size(self) -> int:
+        return int(self._size[0])
 
     def __len__(self) -> int:
         return self.size
@@ -66,7 +77,7 @@ class TreeStore:
         return self.size >= self.capacity
 
     def tree_size(self, tree: int) -> int:
-        return self._tree_size[tree]
+        return int(self._tree_size[tree])
 
     def add(self, state: np.ndarray, parent: int, tree: int, cost: float = 0.0,
             control: np.ndarray | None = None) -> int:
@@ -80,15 +91,21 @@ class TreeStore:
         self.tree_id[i] = tree
         if control is not None and control.size:
             self.controls[i] = control
+        self._size[0] = i + 1
+        if self.index is not None:
+            self._tree_size[tree] += 1
+            self.index.insert(i, tree, self.states)
+            return i
         k = self._tree_size[tree]
         self._tree_states[tree][k] = state
         self._tree_index[tree][k] = i
         self._tree_size[tree] = k + 1
-        self.size = i + 1
         return i
 
     def nearest(self, x: np.ndarray, tree: int, metric: Metric) -> int:
         """Global index of the node of ``tree`` closest to ``x`` under ``metric.distance``."""
+        if self.index is not None:
+            return int(self.index.nearest(x, tree, self.states)[0])
         k = self._tree_size[tree]
         states = self._tree_states[tree]
         if k < KD_MIN_NODES:            # a small tree: one scan (one compiled call where the problem names its metric)

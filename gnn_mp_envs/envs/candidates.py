@@ -59,7 +59,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from numba import njit
+from gnn_mp_envs.utils.compiled import jit
 
 #: The kind of each candidate row: row 0 target, 1 near the target, 2 newest, 3 greedy, the rest uniform.
 CANDIDATE_KINDS = ("target", "near-target", "newest", "greedy", "uniform")
@@ -73,7 +73,7 @@ DEFAULT_TARGET_SCALE = 0.1
 SCALAR_FEATURES = len(CANDIDATE_KINDS) + 8
 
 
-@njit(cache=True)
+@jit
 def _nearest_node(p, states, m, periodic, span, weights):
     """Row of ``states[:m]`` nearest ``p`` under the planner's metric and the distance, in the order
     of :meth:`CandidateSet._nearest`'s numpy operations (coordinate by coordinate), so bit for bit
@@ -94,7 +94,7 @@ def _nearest_node(p, states, m, periodic, span, weights):
     return j, np.sqrt(best)
 
 
-@njit(cache=True)
+@jit
 def _difference(a, b, i, periodic, half, span):
     """``wrap(a - b)`` of coordinate ``i``: numpy's floored modulo, as :meth:`CandidateSet._difference`."""
     diff = a - b
@@ -103,7 +103,7 @@ def _difference(a, b, i, periodic, half, span):
     return diff
 
 
-@njit(cache=True)
+@jit
 def _ingest_rows(first, parent, tree, states, targets, children, rows0, rows1, states0, states1, columns0,
                  columns1, to_target0, to_target1, size, best_dist, best_row, periodic, half, span, weights):
     """The tree statistics of new observation rows ``first..``: children counts, each node in its
@@ -136,7 +136,7 @@ def _ingest_rows(first, parent, tree, states, targets, children, rows0, rows1, s
             best_dist[t], best_row[t] = dist, first + r
 
 
-@njit(cache=True)
+@jit
 def _assemble(target, noise, uniform, newest, greedy, target_std, local_std, low, span, high, periodic, wraps):
     """The step's candidates from its draws, as :meth:`CandidateSet.propose` states them in numpy:
     rows target, near-target, newest + step, greedy + step, uniform; periodic coordinates wrapped
@@ -164,7 +164,7 @@ def _assemble(target, noise, uniform, newest, greedy, target_std, local_std, low
     return cands
 
 
-@njit(cache=True)
+@jit
 def _features(cands, kinds, states, rows, to_target, m, other_states, other_m, target, n, best_dist, scale,
               step, children, failures, periodic, span, half, center, weights, out, near):
     """:meth:`CandidateSet.features` without the prior's column, compiled: ``out (K, F)`` float64 and

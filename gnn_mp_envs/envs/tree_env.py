@@ -24,6 +24,8 @@ RESET_OPTIONS = frozenset({"problem", "index"})
 #: Largest node budget accepted: the padded observation and tree arrays of 2 million 6-D
 #: nodes already take ~0.5 GB; larger budgets are almost certainly a typo.
 MAX_NODES_LIMIT = 2_000_000
+#: Largest ``samples_per_step``: a batch beyond this is a typo (its action alone would be megabytes).
+MAX_SAMPLES_PER_STEP = 65_536
 
 
 def _clip_finite(action: np.ndarray, low: np.ndarray, high: np.ndarray, out: np.ndarray) -> bool:
@@ -78,13 +80,18 @@ class TreePlanningEnv(gym.Env):
     nearest node -> steer toward the sample -> counted validity checks -> add node
     (BiRRT: greedily connect the other tree to the new node, then swap trees) -> goal
     test. Any sampler, uniform, learned or an RL policy, drives the same planner.
+    With ``samples_per_step=K`` an action is ``K`` samples, consumed in order as ``K`` steps would
+    (BiRRT alternating trees), in one compiled call where the problem's steer and checks are
+    compiled (:mod:`gnn_mp_envs.core.loop`), until a solution, a full tree or the iteration
+    budget; the observation and info come after the batch (``info["samples_consumed"]``).
 
     ## Action space
     ``Box(low, high, (d,), float32)``: a state in the task's sampling bounds, not
-    normalised (wrap with ``gymnasium.wrappers.RescaleAction`` for [-1, 1] policies).
+    normalised (wrap with ``gymnasium.wrappers.RescaleAction`` for [-1, 1] policies); with
+    ``samples_per_step=K > 1``, ``(K, d)``: ``K`` such states.
     Out-of-bounds actions are clipped to the bounds; a NaN/inf action or one of the wrong
     shape raises ``ValueError``. For BiRRT the action extends the tree named by the
-    observation's ``active_tree``.
+    observation's ``active_tree`` (sample ``k`` of a batch: the tree ``k`` swaps later).
 
     ## Observation space
     The tree as a graph padded to ``max_nodes`` (see :mod:`gnn_mp_envs.envs.observation`):
@@ -94,8 +101,9 @@ class TreePlanningEnv(gym.Env):
     place as nodes are added; by default each step returns a copy.
 
     ## Rewards
-    ``-step_penalty`` every step, ``-node_cost`` per node the step added, ``-collision_check_cost``
-    per validity check the step made, and ``+success_reward`` on the step that finds a path.
+    ``-step_penalty`` every step (every sample consumed), ``-node_cost`` per node the step added,
+    ``-collision_check_cost`` per validity check the step made, and ``+success_reward`` on the step that
+    finds a path.
 
     ## Starting state
     A tree holding only its root(s). ``reset(seed=s)`` reproduces the problem and tree;
@@ -104,8 +112,8 @@ class TreePlanningEnv(gym.Env):
     plans the i-th problem of the env's ``split`` (``"test"``: the held-out problems); other
     option keys are refused. Tasks with scene families (the arm) take ``scene=``; without
     one, ``split="test"`` plans the held-out family and the other splits the training ones.
-    Tasks with several collision checkers (the MotionBenchMaker robots) take ``checker=``
-    (``"spheres"`` or ``"pybullet"``; default: the task's first, ``TaskSpec.checkers``).
+    Tasks with several collision checkers (the robots) take ``checker=`` (``"spheres"`` or ``"pybullet"``,
+    :data:`gnn_mp_envs.robots.checkers.CHECKERS`; default: the task's, ``TaskSpec.checkers[0]``).
 
     ## Episode end
     ``terminated`` when a start-to-goal path is found. ``truncated`` when the tree holds
@@ -127,7 +135,7 @@ class TreePlanningEnv(gym.Env):
                  task_kwargs: dict[str, Any] | None = None, render_mode: str | None = None,
                  step_penalty: float = 1.0, success_reward: float = 10.0,
                  collision_check_cost: float = 0.0, copy_observations: bool = True, node_cost: float = 0.0,
-                 checker: str | None = None) -> None:
+                 checker: str | None = None, samples_per_step: int = 1) -> None:
         spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
@@ -137,6 +145,8 @@ class TreePlanningEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.max_nodes = spec.max_nodes if max_nodes is None else integer("max_nodes", max_nodes, 2, MAX_NODES_LIMIT)
         self.max_steps = 4 * self.max_nodes if max_steps is None else integer("max_steps", max_steps, 1)
+        #: Samples an action holds (1: one state per step).
+        self.samples_per_step = integer("samples_per_step", samples_per_step, 1, MAX_SAMPLES_PER_STEP)
         self.step_penalty = real("step_penalty", step_penalty)
         self.success_reward = real("success_reward", success_reward)
         self.collision_check_cost = real("collision_check_cost", collision_check_cost)
@@ -153,19 +163,16 @@ class TreePlanningEnv(gym.Env):
                                  f"known: {', '.join(spec.scenes)}")
         elif scene is not None:
             raise ValueError(f"task {task!r} has no scenes (scene={scene!r})")
-        if checker is not None or spec.checkers:
-            if not spec.checkers:
-                raise ValueError(f"task {task!r} has one collision checker (checker={checker!r})")
-            if checker is not None and task_kwargs.get("checker", checker) != checker:
+        if checker is not None and not spec.checkers:
+            raise ValueError(f"task {task!r} has one collision checker (checker={checker!r})")
+        if checker is not None:
+            if task_kwargs.get("checker", checker) != checker:
                 raise ValueError(f"checker={checker!r} and task_kwargs['checker']={task_kwargs['checker']!r} disagree")
-            task_kwargs.setdefault("checker", checker or spec.checkers[0])
-            if task_kwargs["checker"] not in spec.checkers:
-                raise ValueError(f"unknown checker {task_kwargs['checker']!r} for task {task!r}; "
-                                 f"known: {', '.join(spec.checkers)}")
+            task_kwargs["checker"] = checker
         self.scene = task_kwargs.get("scene")
-        #: The collision checker of the planner's checks (None: the task has only one).
-        self.checker = task_kwargs.get("checker")
         self.task = make_task(task, **task_kwargs)
+        #: The name of the planner's collision checker (None: the task has only one).
+        self.checker = self.task.checker.name if spec.checkers else None
         if planner not in self.task.planners:
             self.task.close()
             raise ValueError(f"task {task!r} supports planners {self.task.planners}, not {planner!r}")
@@ -180,8 +187,14 @@ class TreePlanningEnv(gym.Env):
         self.state_dim = int(low.shape[0])
         self._low = np.asarray(low, dtype=np.float32)
         self._high = np.asarray(high, dtype=np.float32)
-        self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
-        self._action_shape = (self.state_dim,)
+        k = self.samples_per_step
+        if k == 1:
+            self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
+            self._action_shape = (self.state_dim,)
+        else:
+            self.action_space = spaces.Box(np.tile(self._low, (k, 1)), np.tile(self._high, (k, 1)), dtype=np.float32)
+            self._action_shape = (k, self.state_dim)
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None    # the problem's bounds, one row per sample
         self._clip = compiled_clip_finite()
         obstacles = obstacle_shape(self.task.max_obstacles, self.task.obstacle_width)
         self.observation_space = observation_space(self._low, self._high, self.max_nodes, obstacles)
@@ -220,6 +233,9 @@ class TreePlanningEnv(gym.Env):
         problem.reset_counters()
         self.problem = problem
         self.planner = make_planner(self.planner_name, problem, self.max_nodes)
+        k = self.samples_per_step
+        self._bounds = ((problem.low, problem.high) if k == 1 else
+                        (np.tile(problem.low, k), np.tile(problem.high, k)))
         self._obs.reset(problem, self.planner.tree, self.task.obstacle_rows(problem))
         return self._observation(), self._info()
 
@@ -229,22 +245,25 @@ class TreePlanningEnv(gym.Env):
         planner = self.planner
         if planner is None:
             raise RuntimeError("call reset() before step()")
-        sample = self._check_action(action)
+        samples = self._check_action(action)
         problem, obs = self.problem, self._obs
         checks_before = problem.collision_checks
-        result = planner.step(sample)
+        result = planner.run(samples if samples.ndim == 2 else samples[None], self.max_steps - planner.iterations)
         if result.added:
             tree = planner.tree
             for i in result.added:
                 obs.add(tree, i)
         obs.active_tree[0] = planner.active_tree
-        reward = (-self.step_penalty
+        reward = (-self.step_penalty * result.consumed
                   - self.collision_check_cost * (problem.collision_checks - checks_before)
                   - (self.node_cost * len(result.added) if self.node_cost else 0.0)
                   + (self.success_reward if result.solved else 0.0))
         terminated = planner.solution is not None
         truncated = (not terminated) and (planner.tree.full or planner.iterations >= self.max_steps)
-        return obs.as_dict(copy=self.copy_observations), reward, terminated, truncated, self._info()
+        info = self._info()
+        if self.samples_per_step > 1:
+            info["samples_consumed"] = result.consumed
+        return obs.as_dict(copy=self.copy_observations), reward, terminated, truncated, info
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -292,26 +311,27 @@ class TreePlanningEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _check_action(self, action) -> np.ndarray:
+        low, high = self._bounds
+        shape = self._action_shape
         if type(action) is np.ndarray and action.dtype.kind == "f":     # a sampler's float array: the common case
-            if self._clip is not None and action.shape == self._action_shape:    # compiled: check and clip in one pass
-                out = np.empty(self._action_shape)
-                if self._clip(action, self.problem.low, self.problem.high, out):
+            if self._clip is not None and action.shape == shape:    # compiled: check and clip in one pass
+                out = np.empty(shape)
+                if self._clip(action.reshape(-1), low, high, out.reshape(-1)):
                     return out
             a = action.astype(np.float64, copy=False)
         else:
             if np.iscomplexobj(action):
-                raise ValueError(f"action must be real (shape ({self.state_dim},)); got a complex "
-                                 f"{type(action).__name__}")
+                raise ValueError(f"action must be real (shape {shape}); got a complex {type(action).__name__}")
             a = np.asarray(action, dtype=np.float64)
-        if a.shape != self._action_shape:
-            raise ValueError(f"action must have shape ({self.state_dim},) within bounds "
+        if a.shape != shape:
+            raise ValueError(f"action must have shape {shape} within bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}; got shape {a.shape}")
         # A finite sum means finite entries (NaN and inf propagate); an overflowing sum of finite
         # entries takes the exact test. One reduction instead of two.
-        if not _isfinite(_add_reduce(a)) and not (a.min() > -math.inf and a.max() < math.inf):
-            raise ValueError(f"action must be finite (shape ({self.state_dim},), bounds "
+        if not _isfinite(_add_reduce(a.reshape(-1))) and not (a.min() > -math.inf and a.max() < math.inf):
+            raise ValueError(f"action must be finite (shape {shape}, bounds "
                              f"low={self._low.tolist()} high={self._high.tolist()}); got {a.tolist()}")
-        return _minimum(_maximum(a, self.problem.low), self.problem.high)   # np.clip, without its overhead
+        return _minimum(_maximum(a.reshape(-1), low), high).reshape(shape)   # np.clip, without its overhead
 
     def _observation(self) -> dict:
         return self._obs.as_dict(copy=self.copy_observations)

@@ -9,6 +9,7 @@ from typing import Any
 
 from gnn_mp_envs.evaluation import MAX_SEED
 from gnn_mp_envs.registration import BUILTIN_TASKS
+from gnn_mp_envs.robots.checkers import checker_name
 from train.args import import_modules as import_plugins
 from train.args import (UsageError, arg, check_output_path, check_ray_address, figure_path, name_list, non_negative_int,
                         positive_float, positive_int, seed_int, worker_count)
@@ -221,11 +222,13 @@ def validate_args(args: BenchmarkArgs) -> None:
         raise BenchmarkError(f"unknown scene {args.scene!r} for {args.task}; known: {', '.join(spec.scenes)}")
     if args.scene is None:
         args.scene = spec.benchmark_scene   # the held-out family, for both splits
-    if args.checker is not None and args.checker not in spec.checkers:
-        raise BenchmarkError(f"--checker {args.checker!r}: {args.task} offers "
-                             + (", ".join(spec.checkers) if spec.checkers else "one checker only, named by no flag"))
-    if args.checker is None and spec.checkers:
-        args.checker = spec.checkers[0]
+    if args.checker is not None and not spec.checkers:
+        raise BenchmarkError(f"--checker {args.checker!r}: {args.task} has one checker only, named by no flag")
+    if spec.checkers:
+        try:
+            args.checker = checker_name(args.checker or spec.checkers[0])
+        except ValueError as exc:
+            raise BenchmarkError(f"--checker: {exc}") from None
     if not 1 <= args.problems <= MAX_PROBLEMS:
         raise BenchmarkError(f"--problems must be in [1, {MAX_PROBLEMS:,}], got {args.problems}")
     if not 0 <= args.seed < MAX_SEED:

@@ -71,6 +71,9 @@ def run_episode(task: str, env_kwargs: dict[str, Any], sampler_name: str, index:
     snapshots_at = set(snapshot_iterations)
     env = cached_env(task, env_kwargs, render=bool(snapshots_at))
     sampler = cached_sampler(sampler_name, task, checkpoint, env, settings)
+    batch = int(getattr(sampler, "samples_per_step", 1))
+    if batch > 1 and not snapshots_at:       # the batch the sampler asks for (images need every iteration)
+        env = cached_env(task, {**env_kwargs, "samples_per_step": batch})
     snapshots: list[tuple[int, int, np.ndarray]] = []
 
     def snapshot(_obs: Any, info: dict[str, Any], done: bool) -> None:

@@ -1,7 +1,7 @@
 """Tabletop scene families of the arm task, as data plus one small generator per layout.
 
-A scene is a list of :class:`Obstacle` (boxes and cylinders standing on or above the
-table) and two end-effector targets: where the goal configuration reaches (inside a
+A scene is a list of :class:`~gnn_mp_envs.robots.geometry.Obstacle` (boxes and cylinders standing on or
+above the table) and two end-effector targets: where the goal configuration reaches (inside a
 crevice, under a shelf, into a cubby) and where the start configuration is (elsewhere
 around the robot). :data:`SCENE_FAMILIES` holds the parameter ranges of each family; a
 family's ``layout`` names the generator in :data:`LAYOUTS` that turns the ranges and an
@@ -18,103 +18,14 @@ obstacle types (cylinders, a thin wall, a closed cubby) and counts. Beyond them:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
-from gnn_mp_envs.core.problem import InvalidProblemError
+from gnn_mp_envs.robots.geometry import EndEffectorTarget, Obstacle, Scene
 
-#: Table top: a box whose upper face is z = 0; [xmin, ymin, xmax, ymax] and thickness.
-TABLE_EXTENT = (-0.55, -0.8, 0.9, 0.8)
-TABLE_THICKNESS = 0.04
 #: Obstacles keep this distance from the robot's base axis (the base link is ~0.1 wide).
 BASE_CLEARANCE = 0.22
-
-
-def _floats(name: str, value: Any) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        raise InvalidProblemError(f"obstacle {name} must be a sequence of numbers, got {value!r}") from None
-
-
-@dataclass(frozen=True)
-class Obstacle:
-    """A static collision shape: ``box`` (``size`` = half extents x, y, z), ``cylinder``
-    (``size`` = radius, height; axis along its z) or ``sphere`` (``size`` = radius), centred at
-    ``position`` and rotated by ``yaw`` about z, or by ``orientation``, a unit quaternion
-    (x, y, z, w), for shapes that are not upright (then ``yaw`` stays 0)."""
-
-    kind: str
-    size: tuple[float, ...]
-    position: tuple[float, float, float]
-    yaw: float = 0.0
-    orientation: tuple[float, float, float, float] | None = None
-
-    def __post_init__(self) -> None:
-        """Refuse shapes pybullet would silently accept or misreport (one message naming the field)."""
-        widths = {"box": 3, "cylinder": 2, "sphere": 1}
-        if self.kind not in widths:
-            raise InvalidProblemError(f"obstacle kind must be 'box', 'cylinder' or 'sphere', got {self.kind!r}")
-        size = _floats("size", self.size)
-        if len(size) != widths[self.kind]:
-            what = {"box": "half extents (x, y, z)", "cylinder": "(radius, height)", "sphere": "(radius,)"}[self.kind]
-            raise InvalidProblemError(f"a {self.kind} obstacle's size is {what}: {widths[self.kind]} numbers, "
-                                      f"got {len(size)}")
-        if not all(math.isfinite(v) and v > 0 for v in size):
-            raise InvalidProblemError(f"obstacle size must be finite and > 0, got {list(size)}")
-        position = _floats("position", self.position)
-        if len(position) != 3 or not all(math.isfinite(v) for v in position):
-            raise InvalidProblemError(f"obstacle position must be 3 finite numbers, got {list(position)}")
-        if not math.isfinite(float(self.yaw)):
-            raise InvalidProblemError(f"obstacle yaw must be finite, got {self.yaw}")
-        if self.orientation is not None:
-            q = _floats("orientation", self.orientation)
-            if len(q) != 4 or not all(math.isfinite(v) for v in q) or abs(math.hypot(*q) - 1.0) > 1e-6:
-                raise InvalidProblemError(f"obstacle orientation must be a unit quaternion (x, y, z, w), got {list(q)}")
-            if float(self.yaw) != 0.0:
-                raise InvalidProblemError("give an obstacle's rotation as yaw or as orientation, not both")
-            object.__setattr__(self, "orientation", q)
-        object.__setattr__(self, "size", size)
-        object.__setattr__(self, "position", position)
-        object.__setattr__(self, "yaw", float(self.yaw))
-
-    def quaternion(self) -> tuple[float, float, float, float]:
-        """The rotation as a quaternion (x, y, z, w)."""
-        if self.orientation is not None:
-            return self.orientation
-        return (0.0, 0.0, float(np.sin(self.yaw / 2)), float(np.cos(self.yaw / 2)))
-
-    def key(self) -> tuple:
-        """Shape identity: bodies with the same key can be moved instead of rebuilt."""
-        return (self.kind,) + tuple(round(float(s), 4) for s in self.size)
-
-
-@dataclass(frozen=True)
-class EndEffectorTarget:
-    """Where a configuration puts the tool: flange position, tool axis (unit vector) and
-    the range of roll about that axis that inverse kinematics may use."""
-
-    position: tuple[float, float, float]
-    axis: tuple[float, float, float]
-    roll: tuple[float, float] = (-np.pi, np.pi)
-
-
-@dataclass(frozen=True)
-class Scene:
-    """One concrete scene: its family, obstacles and the goal tool target.
-
-    ``azimuth`` is the direction of the goal structure and ``start_side`` (+1/-1/0) the
-    side of it where start targets are drawn (0: either side, per draw).
-    """
-
-    family: str
-    obstacles: tuple[Obstacle, ...]
-    goal: EndEffectorTarget
-    azimuth: float
-    start_side: float = 0.0
-    meta: dict = field(default_factory=dict, compare=False)
 
 
 #: Family name -> layout and parameter ranges ``(low, high)`` (lengths in m, angles in rad).

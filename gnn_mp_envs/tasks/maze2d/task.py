@@ -20,9 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from gnn_mp_envs.core.loop import CompiledKernel
 from gnn_mp_envs.core.problem import ZERO_LENGTH, Edge, InvalidProblemError, Problem
-from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 from gnn_mp_envs.tasks.base import Task, check_keys
+from gnn_mp_envs.utils.compiled import jit
+from gnn_mp_envs.utils.render import draw_tree, figure, to_rgb
 
 #: Extension length of RRT/BiRRT in the unit square.
 STEP_SIZE = 0.05
@@ -236,6 +238,71 @@ def _slab_hit(px: float, dx: float, x0: float, x1: float, py: float, dy: float, 
     return t_enter <= t_exit and t_exit >= 0.0 and t_enter <= 1.0
 
 
+# ---------------------------------------------------------------------- compiled, for the planning loop
+@jit(inline=True)
+def _slab_compiled(p, d, lo, hi):
+    """:func:`_slab`, compiled (the same operations)."""
+    if d == 0.0:
+        if p >= lo and p <= hi:
+            return -math.inf, math.inf
+        return math.inf, -math.inf
+    t1, t2 = (lo - p) / d, (hi - p) / d
+    return (t1, t2) if t1 <= t2 else (t2, t1)
+
+
+@jit
+def segment_free_walls(px, py, qx, qy, rows):
+    """:meth:`MazeMap.segment_free_xy` of a map of walls only, compiled: ``rows`` are the walls'
+    ``_wall_row`` tuples ``(k, 8)``; the same operations in the same order, so the same answers."""
+    if not (0.0 <= px <= 1.0 and 0.0 <= py <= 1.0 and 0.0 <= qx <= 1.0 and 0.0 <= qy <= 1.0):
+        return False
+    dx, dy = qx - px, qy - py
+    lox, hix = (px, qx) if px <= qx else (qx, px)
+    loy, hiy = (py, qy) if py <= qy else (qy, py)
+    for w in range(rows.shape[0]):
+        if hix < rows[w, 4] or lox > rows[w, 6] or hiy < rows[w, 5] or loy > rows[w, 7]:
+            continue
+        tx0, tx1 = _slab_compiled(px, dx, rows[w, 0], rows[w, 2])
+        ty0, ty1 = _slab_compiled(py, dy, rows[w, 1], rows[w, 3])
+        t_enter = tx0 if tx0 >= ty0 else ty0
+        t_exit = tx1 if tx1 <= ty1 else ty1
+        if t_enter <= t_exit and t_exit >= 0.0 and t_enter <= 1.0:
+            return False
+    return True
+
+
+@jit
+def maze_steer(a, target, step, rows, x_new, distance):
+    """:meth:`Maze2DProblem.steer` for the planning loop (:mod:`gnn_mp_envs.core.loop`): 1 or -1 (one
+    collision check per edge)."""
+    fx, fy, tx, ty = a[0], a[1], target[0], target[1]
+    dx, dy = tx - fx, ty - fy
+    d = math.sqrt(dx * dx + dy * dy)
+    distance[0] = d
+    if d < ZERO_LENGTH:
+        return 1
+    if d <= step:
+        nx, ny = tx, ty
+    else:
+        t = step / d
+        nx, ny = fx + t * dx, fy + t * dy
+    x_new[0], x_new[1] = nx, ny
+    return 1 if segment_free_walls(fx, fy, nx, ny, rows) else -1
+
+
+@jit
+def maze_motion(a, b, rows):
+    """:meth:`Maze2DProblem.check_motion` for the planning loop: 1 or -1."""
+    return 1 if segment_free_walls(a[0], a[1], b[0], b[1], rows) else -1
+
+
+@jit
+def maze_goal_distance(a, b):
+    """:meth:`Maze2DProblem.pair_distance`, compiled."""
+    dx, dy = a[0] - b[0], a[1] - b[1]
+    return math.sqrt(dx * dx + dy * dy)
+
+
 def random_maze(rng: np.random.Generator, num_walls: tuple[int, int] = (1, 3),
                 num_blobs: int = 0) -> tuple[MazeMap, int]:
     """Random walls with narrow gaps; returns the map and the wall axis (0: walls at fixed x).
@@ -307,6 +374,21 @@ class Maze2DProblem(Problem):
         super().__init__(start, goal, low=np.zeros(2), high=np.ones(2),
                          step_size=step_size, resolution=step_size)
         self.maze = maze
+        # distance's metric (plain Euclidean: the scan's floats are distance's), for the exact k-d index
+        self.nearest_metric = (np.ones(2), np.zeros(2, dtype=np.bool_))
+        self._kernel: CompiledKernel | None = None
+
+    def compiled_kernel(self) -> CompiledKernel | None:
+        """The planning loop's kernel of a map of walls only (blobs and oriented boxes: None, the Python
+        planner)."""
+        if self._kernel is None and not (len(self.maze.blobs) or len(self.maze.boxes)):
+            rows = np.array(self.maze._wall_rows, dtype=np.float64).reshape(-1, 8)
+            self._kernel = CompiledKernel("maze2d-walls", maze_steer, maze_motion, maze_goal_distance, rows)
+        return self._kernel
+
+    def __getstate__(self) -> dict:
+        """Pickled without the compiled kernel (rebuilt on first use)."""
+        return {**self.__dict__, "_kernel": None}
 
     def is_state_valid(self, states: np.ndarray) -> np.ndarray:
         return self.maze.is_free(states)

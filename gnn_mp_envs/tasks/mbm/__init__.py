@@ -5,14 +5,15 @@ Seven scenes of 100 problems each (``table_pick``, ``table_under_pick``, ``box``
 ``bookshelf_small``, ``bookshelf_tall``, ``bookshelf_thin``, ``cage``), shipped as
 ``dataset/panda_problems.json`` (source, commit, licences and the regenerate command in
 ``dataset/README.md``). The robot is pybullet_data's Panda with MotionBenchMaker's facts: its URDF's
-joint limits, fingers held at 6.5 cm, and the allowed-collision matrix of the scenes; checks run in
-the arm task's pybullet world (:mod:`gnn_mp_envs.tasks.arm.world`). See docs/mbm.md.
+joint limits, fingers held at 6.5 cm, and the allowed-collision matrix of the scenes; the UR5 and the
+Fetch (``ur5-mbm``, ``fetch-mbm``) likewise. The robots, their world and checkers are
+:mod:`gnn_mp_envs.robots`'. See docs/mbm.md.
 
-Modules: :mod:`~gnn_mp_envs.tasks.mbm.data` (the shipped problems and the robot model),
+Modules: :mod:`~gnn_mp_envs.tasks.mbm.data` (the shipped problems),
 :mod:`~gnn_mp_envs.tasks.mbm.task` (scenes, splits, perturbed training problems).
 """
 
-from gnn_mp_envs.tasks.mbm.data import SCENES, MBMRecord, panda_model, scene_records
+from gnn_mp_envs.tasks.mbm.data import SCENES, MBMRecord, scene_records
 from gnn_mp_envs.tasks.mbm.task import (
     EXCLUDED,
     HELD_OUT_SCENES,
@@ -30,4 +31,4 @@ from gnn_mp_envs.tasks.mbm.task import (
 
 __all__ = ["EXCLUDED", "HELD_OUT_SCENES", "RESOLUTION", "SCENES", "SCENE_SETS", "SPLIT_POSITIONS", "STEP_SIZE",
            "TRAIN_SCENES", "FetchMBMTask", "MBMProblem", "MBMRecord", "MBMTask", "PandaMBMTask", "UR5MBMTask",
-           "panda_model", "scene_records"]
+           "scene_records"]

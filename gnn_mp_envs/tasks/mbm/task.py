@@ -9,22 +9,14 @@ from typing import Any
 import numpy as np
 
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
-from gnn_mp_envs.tasks.arm.problem import CHECKERS, ArmProblem
-from gnn_mp_envs.tasks.arm.render import render_arm
-from gnn_mp_envs.tasks.arm.scenes import Obstacle
-from gnn_mp_envs.tasks.arm.world import ArmWorld
+from gnn_mp_envs.robots.catalog import robot_model
+from gnn_mp_envs.robots.checkers import Checker, checker_name, make_checker
+from gnn_mp_envs.robots.geometry import Obstacle, quat_mul, yaw_quaternion
+from gnn_mp_envs.robots.problem import JointSpaceProblem
+from gnn_mp_envs.robots.render import check_camera, render_robot
+from gnn_mp_envs.robots.world import RobotWorld
 from gnn_mp_envs.tasks.base import SPLIT_SEEDS, Task, check_keys
-from gnn_mp_envs.tasks.arm.world import RobotModel
-from gnn_mp_envs.tasks.mbm.data import (
-    INVALID_PROBLEMS,
-    SCENES,
-    SPHERE_INVALID_PROBLEMS,
-    MBMRecord,
-    fetch_model,
-    panda_model,
-    scene_records,
-    ur5_model,
-)
+from gnn_mp_envs.tasks.mbm.data import INVALID_PROBLEMS, SCENES, SPHERE_INVALID_PROBLEMS, MBMRecord, scene_records
 
 #: BiRRT extension length (rad, joint-space L2 over the seven joints).
 STEP_SIZE = 1.0
@@ -52,42 +44,24 @@ CAMERA_EYE = (-0.8, -0.75, 1.35)
 CAMERA_TARGET = (0.6, 0.0, 0.3)
 
 
-class MBMProblem(ArmProblem):
+class MBMProblem(JointSpaceProblem):
     """A problem in one MotionBenchMaker scene (``family``: the scene's name; ``mbm_file``:
     the problem's file number in MBM, 0 for perturbed copies and problems given by hand)."""
 
     task = "panda-mbm"
-    bisection = True
 
-    def __init__(self, world: ArmWorld, obstacles: tuple[Obstacle, ...], start: Any, goal: Any,
+    def __init__(self, world: RobotWorld, obstacles: tuple[Obstacle, ...], start: Any, goal: Any, checker: Checker,
                  step_size: float = STEP_SIZE, resolution: float = RESOLUTION, family: str | None = None,
-                 mbm_file: int = 0, checker: str = "spheres", task: str = "panda-mbm") -> None:
-        super().__init__(world, obstacles, start, goal, step_size, resolution, checker)
-        self.task = task
-        self._family = family
+                 mbm_file: int = 0, task: str = "panda-mbm") -> None:
+        super().__init__(world, obstacles, start, goal, step_size, checker, resolution, task=task, family=family)
         self.mbm_file = int(mbm_file)
-
-    @property
-    def family(self) -> str | None:
-        return self._family
-
-
-def _yaw_quaternion(angle: float) -> np.ndarray:
-    return np.array([0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)])
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
 
 
 class MBMTask(Task):
     """MotionBenchMaker's problems of one robot (:attr:`robot`) in ``scene`` (one of :data:`SCENES`,
     ``"all"``, ``"train"``: the five training scenes, ``"test"``: the held-out ``bookshelf_thin``
-    and ``cage``), checked by ``checker`` (``"spheres"`` or ``"pybullet"``, see
-    :data:`~gnn_mp_envs.tasks.arm.problem.CHECKERS`).
+    and ``cage``), checked by ``checker`` (a name of :data:`~gnn_mp_envs.robots.checkers.CHECKERS`; None: the
+    default, the sphere checker).
 
     ``problem(split, i)`` walks the scenes round-robin: problem ``i`` is the ``i // n``-th problem
     of the split in scene ``i % n`` (n scenes), so any prefix covers every scene. Splits take
@@ -107,24 +81,22 @@ class MBMTask(Task):
     planners = ("birrt", "rrt")
 
     def __init__(self, scene: str = "all", step_size: float = STEP_SIZE, resolution: float = RESOLUTION,
-                 render_size: tuple[int, int] = (480, 360), checker: str = "spheres") -> None:
+                 render_size: tuple[int, int] = (480, 360), checker: str | None = None,
+                 camera: tuple | None = None) -> None:
         if scene not in SCENE_SETS:
             raise ValueError(f"unknown {self.name} scene {scene!r}; known: {', '.join(SCENE_SETS)}")
-        if checker not in CHECKERS:
-            raise ValueError(f"checker must be one of {CHECKERS}, got {checker!r}")
-        self.checker = checker
         self.scene = scene
         self.scenes = SCENE_SETS[scene]
         self.step_size = float(step_size)
         self.resolution = float(resolution)
         self.render_size = (int(render_size[0]), int(render_size[1]))
-        self.world = ArmWorld(self.robot_model())
+        #: The images' camera (eye, target, up; None: over the robot's shoulder into each scene, :meth:`view`).
+        self.camera = None if camera is None else check_camera(camera)
+        checker = checker_name(checker)           # refused before the simulator starts
+        self.world = RobotWorld(robot_model(self.robot))
+        #: The planner's collision checker (:mod:`gnn_mp_envs.robots.checkers`).
+        self.checker = make_checker(checker, self.world)
         self._order: dict[str, list[MBMRecord]] = {}
-
-    @staticmethod
-    def robot_model() -> RobotModel:
-        """The robot as MotionBenchMaker plans it (:mod:`gnn_mp_envs.tasks.mbm.data`)."""
-        return panda_model()
 
     def excluded(self) -> dict[tuple[str, int], str]:
         """Problems left out, ``(scene, file) -> why``: those whose start or goal is invalid under the
@@ -169,9 +141,8 @@ class MBMTask(Task):
         return self.perturbed(records[int(rng.integers(len(records)))], rng)
 
     def _mbm_problem(self, record: MBMRecord) -> MBMProblem:
-        return MBMProblem(self.world, record.obstacles, record.start, record.goal, self.step_size, self.resolution,
-                          family=record.scene, mbm_file=record.file, checker=self.checker,
-                          task=self.name)
+        return MBMProblem(self.world, record.obstacles, record.start, record.goal, self.checker, self.step_size,
+                          self.resolution, family=record.scene, mbm_file=record.file, task=self.name)
 
     def perturbed(self, record: MBMRecord, rng: np.random.Generator) -> MBMProblem:
         """``record``'s scene rotated about the robot's base axis by up to :data:`PERTURB_YAW` and
@@ -190,7 +161,7 @@ class MBMTask(Task):
                 shift[:] = 0.0
             c, s = math.cos(yaw), math.sin(yaw)
             rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-            turn = _yaw_quaternion(yaw)
+            turn = yaw_quaternion(yaw)
 
             def moved(q: tuple[float, ...]) -> np.ndarray | None:
                 turned = np.array(q, dtype=np.float64)
@@ -198,17 +169,17 @@ class MBMTask(Task):
                 if not shift.any():
                     return turned if world.low[0] <= turned[0] <= world.high[0] else None
                 position, orientation = world.flange_pose(np.asarray(q))
-                return world.pose_ik(rot @ position + shift, _quat_mul(turn, orientation), turned)
+                return world.pose_ik(rot @ position + shift, quat_mul(turn, orientation), turned)
 
             goal = moved(record.goal)
             start = np.array(record.start) if fixed_start else moved(record.start)
             if goal is None or start is None:
                 continue
             obstacles = tuple(Obstacle(o.kind, o.size, tuple(rot @ np.asarray(o.position) + shift),
-                                       orientation=tuple(_quat_mul(turn, np.asarray(o.quaternion()))))
+                                       orientation=tuple(quat_mul(turn, np.asarray(o.quaternion()))))
                               for o in record.obstacles)
-            problem = MBMProblem(world, obstacles, start, goal, self.step_size, self.resolution,
-                                 family=record.scene, checker=self.checker, task=self.name)
+            problem = MBMProblem(world, obstacles, start, goal, self.checker, self.step_size, self.resolution,
+                                 family=record.scene, task=self.name)
             if problem.is_state_valid(np.stack([problem.start, problem.goal])).all():
                 return problem
         return self._mbm_problem(record)
@@ -234,9 +205,9 @@ class MBMTask(Task):
                 obstacles.append(o)
             if "start" not in spec or "goal" not in spec:
                 raise InvalidProblemError(f"a {self.name} problem dict needs 'start' and 'goal'")
-            spec = MBMProblem(self.world, tuple(obstacles), spec["start"], spec["goal"], self.step_size,
-                              self.resolution, checker=self.checker, task=self.name)
-        elif isinstance(spec, ArmProblem) and spec.world is not self.world:
+            spec = MBMProblem(self.world, tuple(obstacles), spec["start"], spec["goal"], self.checker, self.step_size,
+                              self.resolution, task=self.name)
+        elif isinstance(spec, JointSpaceProblem) and spec.world is not self.world:
             raise InvalidProblemError(f"the {self.name} problem belongs to another {type(self).__name__} "
                                       "(pybullet client)")
         if isinstance(spec, Problem) and len(self.obstacle_rows(spec)) > self.max_obstacles:
@@ -255,12 +226,13 @@ class MBMTask(Task):
     def render_rgb(self, problem: Problem, tree: Any, path: np.ndarray | None) -> np.ndarray:
         """TinyRenderer image: the robot at the start (and, faded, at the goal), the scene, hand
         positions of (up to 2000) tree nodes and, on success, the hand's trace along the path."""
-        if not isinstance(problem, ArmProblem):
+        if not isinstance(problem, JointSpaceProblem):
             raise TypeError(f"expected a {self.name} problem, got {type(problem).__name__}")
-        return render_arm(self.world, problem, tree, path, *self.render_size, camera=self.camera(problem))
+        return render_robot(self.world, problem, tree, path, *self.render_size,
+                            camera=self.camera or self.view(problem))
 
     @staticmethod
-    def camera(problem: ArmProblem) -> tuple:
+    def view(problem: JointSpaceProblem) -> tuple:
         """Eye, target and up of the problem's image: :data:`CAMERA_EYE` / :data:`CAMERA_TARGET`
         turned about the base axis toward the centre of the obstacles."""
         centre = np.mean([o.position for o in problem.obstacles], axis=0) if problem.obstacles else np.ones(3)
@@ -286,17 +258,9 @@ class UR5MBMTask(MBMTask):
     name = "ur5-mbm"
     robot = "ur5"
 
-    @staticmethod
-    def robot_model() -> RobotModel:
-        return ur5_model()
-
 
 class FetchMBMTask(MBMTask):
     """MotionBenchMaker's Fetch problems (the torso's lift and seven arm joints; base fixed)."""
 
     name = "fetch-mbm"
     robot = "fetch"
-
-    @staticmethod
-    def robot_model() -> RobotModel:
-        return fetch_model()

@@ -1,6 +1,6 @@
 """A robot's kinematic tree and collision geometry, read from its URDF: what the compiled sphere
-checker (:mod:`gnn_mp_envs.tasks.arm.spheres`) needs for forward kinematics, and what the sphere
-generator (:mod:`gnn_mp_envs.tasks.arm.spherize`) covers.
+checker (:mod:`gnn_mp_envs.robots.spheres`) needs for forward kinematics, and what the sphere
+builder (:mod:`gnn_mp_envs.robots.spheres.build`) covers.
 
 Only what the checkers use is read: links, their ``<collision>`` elements (mesh, box, cylinder,
 sphere; origin and mesh scale) and joints (fixed, revolute, continuous, prismatic; origin, axis,
@@ -109,7 +109,8 @@ def read_urdf(path: str | Path) -> URDFRobot:
     path = Path(path)
     root = ET.parse(path).getroot()
     collisions: dict[str, tuple[Collision, ...]] = {}
-    for link in root.iter("link"):
+    # the robot's own elements only: a <transmission> names its joints in <joint> elements too
+    for link in root.findall("link"):
         items = []
         for col in link.findall("collision"):
             rot, trans = _origin(col.find("origin"))
@@ -133,7 +134,7 @@ def read_urdf(path: str | Path) -> URDFRobot:
                                  f"geometry <{shape.tag}>")
         collisions[link.get("name")] = tuple(items)
     joints: dict[str, Joint] = {}
-    for j in root.iter("joint"):
+    for j in root.findall("joint"):
         kind = j.get("type")
         if kind not in _JOINT_KINDS:
             raise ValueError(f"{path.name}: joint {j.get('name')!r} has unsupported type {kind!r}")

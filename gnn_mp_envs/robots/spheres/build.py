@@ -17,10 +17,10 @@ polytope). A greedy set cover picks spheres until every point is covered (the po
 beyond the margin, so that the union's dips between them stay outside it); a
 denser independent sample then checks the union and adds spheres where a point is still out, until
 none is. Each link's spheres are then grouped (k-means of their centres) under bounding spheres,
-and those under one bounding sphere of the link: the coarse levels the checker tests first.
+and those under one bounding sphere of the link (:func:`build_tree`): the coarse levels the checker tests first.
 
-``python -m tools.spherize`` writes the shipped models; ``tests/test_spheres.py`` re-checks their
-coverage from the mesh files with :func:`coverage_gaps`.
+``python -m tools.spherize`` writes the shipped models (:mod:`gnn_mp_envs.robots.spheres.model`);
+``tests/test_spheres.py`` re-checks their coverage from the mesh files with :func:`coverage_gaps`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 from scipy.spatial import ConvexHull, cKDTree
 
-from gnn_mp_envs.tasks.arm.urdf import Collision, URDFRobot, mesh_parts
+from gnn_mp_envs.robots.urdf import Collision, URDFRobot, mesh_parts, mesh_triangles
 
 #: pybullet's collision margin of a URDF mesh's convex hull (m): its contacts report the hull's
 #: distance minus this (measured on the Panda's links against spheres and boxes).
@@ -119,7 +119,6 @@ def hulls_of(collision: Collision) -> list[Hull]:
     sides around it, so containing it; concave meshes: slab hulls that together contain the solid,
     :func:`concave_hulls`; spheres are handled apart by the caller)."""
     if collision.concave:
-        from gnn_mp_envs.tasks.arm.urdf import mesh_triangles
         return concave_hulls(mesh_triangles(collision))
     if collision.kind == "cylinder":
         radius, length = collision.size
@@ -389,6 +388,53 @@ def group_spheres(spheres: np.ndarray, size: int = 12, seed: int = 0) -> tuple[n
     members = [np.flatnonzero(label == g) for g in range(k)]
     members = [m for m in members if len(m)]
     return np.stack([bounding_sphere(spheres[m]) for m in members]), members
+
+
+# ---------------------------------------------------------------------- trees
+def build_tree(leaves: np.ndarray, coarse: np.ndarray | None = None, branching: int = 8, leaf_size: int = 8,
+               seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A sphere tree over ``leaves`` ``(k, 4)``: nodes in breadth-first order (root first, each
+    node's children consecutive), every inner node a sphere containing the leaves below it.
+
+    With ``coarse`` (a few spheres covering the same shape more loosely), the root's children are
+    one node per coarse sphere: its centre, grown to contain the leaves assigned to it (each leaf
+    to the coarse sphere it sticks out of least), so that the second level is a coarse cover of the
+    link; below, groups of about ``branching`` by k-means of the centres down to ``leaf_size``.
+    Returns ``nodes``, ``first_child``, ``child_count``."""
+    nodes: list[np.ndarray] = []
+    first: list[int] = []
+    count: list[int] = []
+    queue: list[tuple[np.ndarray, np.ndarray | None]] = [(np.arange(len(leaves)), None)]   # (leaf rows, sphere)
+    for k, (members, sphere) in enumerate(queue):
+        if len(members) == 1 and sphere is None:   # a leaf: the fine sphere itself
+            nodes.append(leaves[members[0]])
+            first.append(0)
+            count.append(0)
+            continue
+        nodes.append(bounding_sphere(leaves[members]) if sphere is None else sphere)
+        if k == 0 and coarse is not None and len(coarse) > 1:
+            out = (np.linalg.norm(leaves[:, None, :3] - coarse[None, :, :3], axis=2) + leaves[:, None, 3]
+                   - coarse[None, :, 3])
+            owner = out.argmin(axis=1)
+            groups = []
+            for g in range(len(coarse)):
+                rows = np.flatnonzero(owner == g)
+                if len(rows):
+                    reach = float((np.linalg.norm(leaves[rows, :3] - coarse[g, :3], axis=1) + leaves[rows, 3]).max())
+                    groups.append((rows, np.r_[coarse[g, :3], max(reach, coarse[g, 3]) * (1 + 1e-9)]))
+        elif len(members) <= leaf_size:
+            groups = [(members[i:i + 1], None) for i in range(len(members))]
+        else:
+            _, parts = group_spheres(leaves[members], size=max(1, len(members) // branching), seed=seed)
+            groups = [(members[p], None) for p in parts]
+            if len(groups) == 1:              # k-means could not split: halves along the longest axis
+                axis = int(np.argmax(np.ptp(leaves[members, :3], axis=0)))
+                order = members[np.argsort(leaves[members, axis], kind="stable")]
+                groups = [(order[: len(order) // 2], None), (order[len(order) // 2:], None)]
+        first.append(len(queue))
+        count.append(len(groups))
+        queue.extend(groups)
+    return np.array(nodes, dtype=np.float64), np.array(first, dtype=np.int64), np.array(count, dtype=np.int64)
 
 
 # ---------------------------------------------------------------------- robots

@@ -1,6 +1,7 @@
-"""The arm simulator: one pybullet ``DIRECT`` client with a robot (:class:`RobotModel`: the
-xArm6 of the arm task, the Panda of the MotionBenchMaker task), optionally the table, and a
-pool of obstacle bodies; and the collision check that is the arm tasks' hot path.
+"""The robot simulator: one pybullet ``DIRECT`` client with a robot (a
+:class:`~gnn_mp_envs.robots.model.RobotModel`: the xArm6, the Panda, the UR5, the Fetch), the box it
+stands on if any, and a pool of obstacle bodies; and the exact collision check (the pybullet
+checker's, and the re-check of every returned path).
 
 Validity of a configuration: within the joint limits, no contact between a robot link
 and the table or an obstacle, and no self-collision. Self-collision is loaded with
@@ -15,82 +16,13 @@ faster than per-pair ``getClosestPoints`` queries (~35 us for two bodies alone, 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
-
 import numpy as np
 
-from gnn_mp_envs.tasks.arm.scenes import TABLE_EXTENT, TABLE_THICKNESS, EndEffectorTarget, Obstacle, Scene
-
-URDF = "xarm/xarm6_robot.urdf"
-#: pybullet joint indices of the six revolute joints (index 0 is the fixed world joint).
-JOINTS = (1, 2, 3, 4, 5, 6)
-#: The link whose frame is the tool flange.
-EE_LINK = 6
-#: Planning limits: the URDF limits, with the +-2 pi joints 1, 4 and 6 cut to one turn
-#: (every orientation once; the configuration space stays a box). Joint 4 spans
-#: [-pi/2, 3 pi/2] so that both wrist postures (joint 4 near 0 and near pi, which IK
-#: returns about equally often) lie inside the box rather than on its boundary.
-JOINT_LOW = np.array([-np.pi, -2.059, -3.927, -0.5 * np.pi, -1.69297, -np.pi])
-JOINT_HIGH = np.array([np.pi, 2.0944, 0.19198, 1.5 * np.pi, np.pi, np.pi])
-#: Typical reaching postures (joint 1 relative to the target's azimuth, joint 6 free):
-#: tool down / tool horizontal, wrist unflipped / flipped. Half the IK seeds start near one.
-POSTURES = np.array([[0.0, 0.8, -1.45, np.pi, -0.65, 0.0],
-                     [0.0, 0.5, -0.85, 0.0, 0.35, 0.0],
-                     [0.0, 0.4, -0.75, np.pi, 1.2, 0.0],
-                     [0.0, 0.9, -0.95, 0.0, -1.55, 0.0]])
-
-
-@dataclass(frozen=True)
-class RobotModel:
-    """What the simulator needs to know about a robot: its URDF (a ``pybullet_data`` path), the
-    pybullet joint indices planned (in state order) and their limits, the flange link, joints held
-    at a fixed position (the Panda's fingers), link-name pairs whose contact is not a collision,
-    a safety margin of the planner's checks, and whether it stands on the task's table (whose contact
-    with ``base_links`` is then ignored)."""
-
-    urdf: str
-    joints: tuple[int, ...]
-    low: tuple[float, ...]
-    high: tuple[float, ...]
-    ee_link: int
-    held_joints: tuple[tuple[int, float], ...] = ()
-    allowed_collisions: tuple[tuple[str, str], ...] = ()
-    #: Safety margin of the planner's checks (m): a contact closer than this is a collision (the
-    #: independent re-check of returned paths, ``ArmWorld.collides(q, CONTACT_DISTANCE)``, uses none).
-    padding: float = 0.0
-    table: bool = True
-    base_links: tuple[int, ...] = (-1, 0)
-    #: Name of the robot's shipped sphere model (``sphere_models/<name>.npz``, made by
-    #: ``python -m tools.spherize``), for the compiled checker; None: pybullet only.
-    spheres: str | None = None
-
-
-#: Where the shipped sphere models live.
-SPHERE_MODELS = Path(__file__).resolve().parent / "sphere_models"
-
-
-def sphere_model_path(name: str) -> Path:
-    """The shipped sphere model file of robot ``name``."""
-    return SPHERE_MODELS / f"{name}.npz"
-
-
-def urdf_file(urdf: str) -> Path:
-    """A RobotModel's URDF as a file: absolute paths as they are, others inside ``pybullet_data``."""
-    path = Path(urdf)
-    if path.is_absolute():
-        return path
-    import pybullet_data
-    return Path(pybullet_data.getDataPath()) / path
-
-
-#: The arm task's xArm6 on the table.
-XARM6 = RobotModel(URDF, JOINTS, tuple(JOINT_LOW.tolist()), tuple(JOINT_HIGH.tolist()), EE_LINK, padding=0.001)
+from gnn_mp_envs.robots.geometry import Obstacle, Scene
+from gnn_mp_envs.robots.model import RobotModel
 
 #: A contact at or below this signed distance (m) is a collision.
 CONTACT_DISTANCE = 0.0
-#: IK seeds tried per target.
-IK_TRIES = 20
 
 #: Unused obstacle bodies wait below the table, their top at least this far down (m).
 PARK_DEPTH = 50.0
@@ -111,35 +43,6 @@ _POOL_LIMIT = 64
 REBUILD_AFTER_BODIES = 200
 _COLORS = {"box": (0.55, 0.45, 0.35, 1.0), "cylinder": (0.35, 0.45, 0.6, 1.0),
            "table": (0.82, 0.78, 0.7, 1.0)}
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (x, y, z, w) quaternions."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz])
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    axis = np.asarray(axis, dtype=np.float64)
-    axis = axis / np.linalg.norm(axis)
-    return np.append(np.sin(angle / 2) * axis, np.cos(angle / 2))
-
-
-def tool_quaternion(axis: tuple[float, float, float], roll: float) -> np.ndarray:
-    """Flange orientation whose z axis (the tool axis) is ``axis``, rolled by ``roll``."""
-    z = np.array([0.0, 0.0, 1.0])
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    cross = np.cross(z, a)
-    if np.linalg.norm(cross) < 1e-9:
-        align = np.array([0.0, 0.0, 0.0, 1.0]) if a[2] > 0 else _axis_angle([1.0, 0.0, 0.0], np.pi)
-    else:
-        align = _axis_angle(cross, float(np.arccos(np.clip(z @ a, -1.0, 1.0))))
-    return _quat_mul(align, _axis_angle(z, roll))
 
 
 def import_pybullet():
@@ -167,11 +70,10 @@ def import_pybullet():
     return pybullet
 
 
-class ArmWorld:
-    """One pybullet client with the robot (default: the xArm6), the table (if the robot stands on
-    one) and a pool of obstacle bodies."""
+class RobotWorld:
+    """One pybullet client with the robot, the box it stands on (if any) and a pool of obstacle bodies."""
 
-    def __init__(self, robot: RobotModel = XARM6) -> None:
+    def __init__(self, robot: RobotModel) -> None:
         p = import_pybullet()
         self.p = p
         self.robot_model = robot
@@ -186,8 +88,6 @@ class ArmWorld:
         self._closest = p.getClosestPoints
         self.bodies_created = 0
         self.rebuilds = 0
-        self._sphere_checker = None
-        self._sphere_scene: object = None
         self._connect()
 
     def _connect(self) -> None:
@@ -210,13 +110,12 @@ class ArmWorld:
             for a, b in model.allowed_collisions:
                 p.setCollisionFilterPair(self.robot, self.robot, links[a], links[b], 0, physicsClientId=cid)
         self.table = None
-        if model.table:
-            x0, y0, x1, y1 = TABLE_EXTENT
-            half = [(x1 - x0) / 2, (y1 - y0) / 2, TABLE_THICKNESS / 2]
+        if model.table is not None:
+            half = list(model.table.size)
             self.table = p.createMultiBody(
                 0, p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid),
                 p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=_COLORS["table"], physicsClientId=cid),
-                basePosition=[(x0 + x1) / 2, (y0 + y1) / 2, -TABLE_THICKNESS / 2], physicsClientId=cid)
+                basePosition=list(model.table.position), physicsClientId=cid)
             # The base link stands on the table: that contact is not a collision.
             for link in model.base_links:
                 p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
@@ -239,7 +138,7 @@ class ArmWorld:
         return {"scene": self.scene, "connected": self._connected, "robot": self.robot_model}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state.get("robot", XARM6))
+        self.__init__(state["robot"])
         if state["scene"] is not None:
             self.load(state["scene"])
         if not state["connected"]:
@@ -303,38 +202,6 @@ class ArmWorld:
                 del self._pool[key]
             self._pooled -= 1
         self.scene = scene
-
-    # ------------------------------------------------------------------ the sphere checker
-    def sphere_checker(self, scene: Scene | tuple[Obstacle, ...]):
-        """The robot's compiled :class:`~gnn_mp_envs.tasks.arm.spheres.SphereChecker` with ``scene``
-        loaded (and the table, which the robot's base links may touch). Built on first use from the
-        robot's URDF, its shipped sphere model and this client's joint names."""
-        if self._sphere_checker is None:
-            from gnn_mp_envs.tasks.arm.spheres import SphereChecker, load_sphere_model
-            model = self.robot_model
-            if model.spheres is None:
-                raise ValueError(f"robot {model.urdf!r} has no sphere model; use checker='pybullet'")
-            self._require()
-            p, cid = self.p, self.client
-            name = lambda j: p.getJointInfo(self.robot, j, physicsClientId=cid)[1].decode()  # noqa: E731
-            link = lambda j: (p.getBodyInfo(self.robot, physicsClientId=cid)[0].decode() if j < 0   # noqa: E731
-                              else p.getJointInfo(self.robot, j, physicsClientId=cid)[12].decode())
-            self._sphere_checker = SphereChecker(
-                urdf_file(model.urdf), load_sphere_model(sphere_model_path(model.spheres)),
-                [name(j) for j in model.joints], {name(j): v for j, v in model.held_joints},
-                model.allowed_collisions)
-            self._base_link_names = [link(j) for j in model.base_links]
-        if scene is not self._sphere_scene:
-            obstacles = list(scene.obstacles if isinstance(scene, Scene) else scene)
-            exempt = {}
-            if self.robot_model.table:
-                x0, y0, x1, y1 = TABLE_EXTENT
-                exempt[len(obstacles)] = self._base_link_names
-                obstacles.append(Obstacle("box", ((x1 - x0) / 2, (y1 - y0) / 2, TABLE_THICKNESS / 2),
-                                          ((x0 + x1) / 2, (y0 + y1) / 2, -TABLE_THICKNESS / 2)))
-            self._sphere_checker.set_obstacles(obstacles, exempt)
-            self._sphere_scene = scene
-        return self._sphere_checker
 
     @property
     def obstacle_bodies(self) -> list[int]:
@@ -427,47 +294,10 @@ class ArmWorld:
         """Flange positions (N, 3) of configurations ``qs`` (N, dof)."""
         return np.array([self.flange(q)[0] for q in np.asarray(qs).reshape(-1, len(self._joints))]).reshape(-1, 3)
 
-    def ik(self, target: EndEffectorTarget, rng: np.random.Generator, tries: int = IK_TRIES,
-           pos_tol: float = 0.01, axis_tol: float = 0.15) -> np.ndarray | None:
-        """A collision-free configuration reaching ``target``, from random IK seeds; or None.
-        (The xArm6's: seeds around its reaching postures, its continuous joints wrapped.)"""
-        if self.robot_model != XARM6:
-            raise NotImplementedError("ArmWorld.ik seeds and wraps the xArm6's joints; use pose_ik for other robots")
-        p, cid = self.p, self.client
-        lo, hi = JOINT_LOW.tolist(), JOINT_HIGH.tolist()
-        ranges = (JOINT_HIGH - JOINT_LOW).tolist()
-        pos = np.asarray(target.position)
-        axis = np.asarray(target.axis) / np.linalg.norm(target.axis)
-        azimuth = float(np.arctan2(pos[1], pos[0]))
-        for k in range(tries):
-            if k % 2 == 0:
-                seed = POSTURES[int(rng.integers(len(POSTURES)))] + rng.normal(0.0, 0.25, 6)
-                seed[0] += azimuth
-                seed[5] = rng.uniform(-np.pi, np.pi)
-                seed = np.clip(seed, JOINT_LOW, JOINT_HIGH)
-            else:
-                seed = rng.uniform(JOINT_LOW, JOINT_HIGH)
-            orn = tool_quaternion(target.axis, float(rng.uniform(*target.roll)))
-            self.set_config(seed)
-            q = np.array(p.calculateInverseKinematics(
-                self.robot, self.robot_model.ee_link, pos.tolist(), orn.tolist(), lowerLimits=lo, upperLimits=hi,
-                jointRanges=ranges, restPoses=seed.tolist(), maxNumIterations=200,
-                residualThreshold=1e-5, physicsClientId=cid))
-            for j in (0, 3, 5):  # wrap the continuous joints into their one-turn range
-                q[j] = (q[j] - JOINT_LOW[j]) % (2 * np.pi) + JOINT_LOW[j]
-            if np.any(q < JOINT_LOW) or np.any(q > JOINT_HIGH):
-                continue
-            x, z = self.flange(q)
-            if np.linalg.norm(x - pos) > pos_tol or float(z @ axis) < np.cos(axis_tol):
-                continue
-            if not self.collides(q):
-                return q
-        return None
-
     # ------------------------------------------------------------------ lifecycle
     def _require(self) -> None:
         if not self._connected:
-            raise RuntimeError("the arm task's pybullet client is closed")
+            raise RuntimeError("the robot's pybullet client is closed")
 
     @property
     def connected(self) -> bool:

@@ -1,0 +1,457 @@
+"""The sphere checker: :class:`SphereChecker` holds one robot's kinematics, sphere trees, self pairs,
+joint-space tables and one scene as the compiled kernel reads them (:mod:`~gnn_mp_envs.robots.spheres.kernel`),
+and :class:`SphereCollisionChecker` is the :class:`~gnn_mp_envs.robots.checkers.Checker` of a
+:class:`~gnn_mp_envs.robots.world.RobotWorld` that plans with it.
+
+States of an edge are skipped only where certified bounds vouch for them: how far and how fast each
+link can move along the edge, and, for self pairs that only the wrist's one or two joints move, a
+joint-space table of where they are free. Each state the kernel looks at is one collision check, as
+with the pybullet checker.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from gnn_mp_envs.core.loop import CompiledKernel
+from gnn_mp_envs.core.problem import ZERO_LENGTH
+from gnn_mp_envs.robots.geometry import Obstacle, Scene
+from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
+from gnn_mp_envs.robots.spheres import kernel, kinematics
+from gnn_mp_envs.robots.spheres.kernel import (KINDS, Kinematics, Memo, Obstacles, Scratch, Spheres, Tables,
+                                               check_edge, check_states, free_cells, goal_distance, planner_motion,
+                                               planner_steer, steer_edge, table_room)
+from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, load_sphere_model
+from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, URDFRobot, read_urdf
+
+#: Joint-space tables of the wrist's self pairs (:meth:`SphereChecker._joint_tables`): a cell is free
+#: when the pair's leaves are more than this apart at its centre (m); smaller: finer tables.
+TABLE_FLOOR = 0.003
+#: At most this many cells per pair's table (a coarser grid, with a higher floor, past it).
+TABLE_CELLS = 1 << 17
+#: How many tested edge ends (free far ends and starts) the checker remembers, with the clearances their
+#: walks found, so that an edge starting at one (the tree's nodes are the far ends of the edges that
+#: made them) need not walk again.
+MEMO_STATES = 128
+_TABLES: dict[tuple, Tables] = {}
+
+
+def _quaternion_matrix(q: Sequence[float]) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _tree_depth(model: SphereModel) -> int:
+    """Levels of the deepest tree of the model."""
+    depth = np.zeros(len(model.nodes), dtype=np.int64)
+    for i in range(len(model.nodes)):           # breadth-first rows: parents before children
+        if model.child_count[i]:
+            depth[model.first_child[i]:model.first_child[i] + model.child_count[i]] = depth[i] + 1
+    return int(depth.max()) + 1
+
+
+class SphereChecker:
+    """Collision checks of one robot against one scene with the robot's sphere model.
+
+    ``joints``: the planned joints' names, in state order; ``held``: joint name -> fixed value of
+    other movable joints (0 where not named); ``allowed``: link-name pairs whose contact is not a
+    collision (parent-child pairs never are). :meth:`set_obstacles` loads a scene."""
+
+    def __init__(self, urdf: str | Path, model: SphereModel, joints: Sequence[str],
+                 held: dict[str, float] | None = None, allowed: Sequence[tuple[str, str]] = ()) -> None:
+        robot: URDFRobot = read_urdf(str(urdf))
+        self.robot = robot
+        self.model = model
+        self.links = robot.links
+        index = {name: i for i, name in enumerate(robot.links)}
+        held = dict(held or {})
+        names = {j.name for j in robot.joints.values()}
+        unknown = sorted(set(joints) - names) + sorted(set(held) - names)
+        if unknown:
+            raise ValueError(f"robot {robot.name!r} has no joint(s) {unknown}")
+        n = len(robot.links)
+        self.dof = len(joints)
+        parent = np.full(n, -1, dtype=np.int64)
+        origin_r, origin_t, axis = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        kind = np.zeros(n, dtype=np.int64)
+        q_index = np.full(n, -1, dtype=np.int64)
+        q_fixed = np.zeros(n)
+        position = {name: k for k, name in enumerate(joints)}
+        for link, j in robot.joints.items():
+            i = index[link]
+            parent[i] = index[j.parent]
+            origin_r[i], origin_t[i], axis[i] = j.rotation, j.translation, j.axis
+            kind[i] = j.kind
+            if j.name in position:
+                if j.kind == FIXED:
+                    raise ValueError(f"joint {j.name!r} is fixed and cannot be planned")
+                q_index[i] = position[j.name]
+            else:
+                q_fixed[i] = float(held.get(j.name, 0.0))
+        #: The robot's kinematic tree as the kernel reads it.
+        self.kinematics = Kinematics(parent, origin_r, origin_t, kind, axis, q_index, q_fixed)
+        link_root = np.array([model.roots.get(name, -1) for name in robot.links], dtype=np.int64)
+        self_root = np.array([model.self_roots.get(name, -1) for name in robot.links], dtype=np.int64)
+        skip = {frozenset(p) for p in allowed} | robot.parent_child_pairs()
+        with_spheres = [name for name in robot.links if name in model.roots]
+        pairs = np.array([(index[a], index[b]) for k, a in enumerate(with_spheres) for b in with_spheres[k + 1:]
+                          if frozenset((a, b)) not in skip], dtype=np.int64).reshape(-1, 2)
+        #: The checked self pairs, by link name.
+        self.self_pairs = [(self.links[a], self.links[b]) for a, b in pairs]
+        reach = self._joint_reach(robot, index, held, link_root, self_root)
+        # a self pair moves relative to itself only through the joints that move one link and not the other
+        ra, rb = reach[pairs[:, 0]], reach[pairs[:, 1]]
+        pair_reach = np.where(rb == 0, ra, 0.0) + np.where(ra == 0, rb, 0.0)
+        # per self pair, the link that moves in the other's frame when one is below the other (-1: neither)
+        pair_moving = np.array([self._below(b_, a_) if self._below(b_, a_) >= 0 else self._below(a_, b_)
+                                for a_, b_ in pairs], dtype=np.int64)
+        #: The sphere trees, the self pairs and the joints' levers.
+        self.spheres = Spheres(link_root, self_root, model.nodes, model.first_child, model.child_count, pairs,
+                               pair_moving, reach, pair_reach)
+        # depth-first stacks: at most (children per node) entries per level of the deepest tree
+        # (two trees for pairs)
+        depth = _tree_depth(model)
+        width = int(model.child_count.max()) + 1
+        k = len(pairs)
+        empty = np.zeros(0)
+        self.scratch = Scratch(np.zeros(self.dof), np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
+                               np.zeros((n, 3)), np.zeros(width * depth + 1, dtype=np.int64),
+                               np.zeros((width * 2 * depth + 1, 2), dtype=np.int64), empty.reshape(0, n + k),
+                               np.zeros(0, dtype=np.bool_), np.zeros((0, 2), dtype=np.int64), np.zeros(n),
+                               np.zeros(k), np.zeros(n), np.zeros(k), np.zeros(k))
+        self.memo = Memo(np.full((MEMO_STATES, self.dof), np.nan), np.zeros((MEMO_STATES, n + k)),
+                         np.zeros(2, dtype=np.int64))
+        self.obstacles = Obstacles(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                   np.zeros((0, 3)), np.zeros((0, n), dtype=np.bool_))
+        self.tables = self._joint_tables(robot, joints, held)
+        self._distance = np.zeros(1)          # where the steer kernel writes the distance it measured
+        self.set_obstacles(())
+
+    # ------------------------------------------------------------------ construction
+    def _joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
+        """Joint-space tables of the self pairs whose relative pose only one or two joints change
+        (the wrist's): over a grid of those joints, how many cells around each cell are free of
+        contact between the pair. A cell is free when the pair's leaves are more than
+        ``TABLE_FLOOR`` apart at its centre; within the cell they come at most that much nearer.
+        Built once per robot and pair set (a few hundred milliseconds)."""
+        key = (robot.name, id(self.model), tuple(joints), tuple(sorted(held.items())), self.spheres.pairs.tobytes())
+        if key not in _TABLES:
+            _TABLES[key] = self._build_joint_tables(robot, joints, held)
+        return _TABLES[key]
+
+    def _build_joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
+        from scipy.ndimage import distance_transform_cdt
+        limits = {j.name: (j.lower, j.upper) for j in robot.joints.values()}
+        pairs, pair_reach = self.spheres.pairs, self.spheres.pair_reach
+        n_pairs = len(pairs)
+        at = np.full(n_pairs, -1, dtype=np.int64)
+        joint = np.full((n_pairs, 2), -1, dtype=np.int64)
+        low_ = np.zeros((n_pairs, 2))
+        step_ = np.ones((n_pairs, 2))
+        dim_ = np.ones((n_pairs, 2), dtype=np.int64)
+        chunks: list[np.ndarray] = []
+        size = 0
+        q = np.array([float(held.get(name, 0.0)) for name in joints])
+        kin, spheres, scratch = self.kinematics, self.spheres, self.scratch
+        for p in range(n_pairs):
+            moving = np.flatnonzero(pair_reach[p] > 0)
+            if not 1 <= len(moving) <= 2:
+                continue
+            low, high = (np.array([limits[joints[j]][k] for j in moving]) for k in (0, 1))
+            if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(high > low)):
+                continue
+            # each joint's share of the floor: cells of ``2 * share / lever`` radians
+            floor = TABLE_FLOOR
+            while True:
+                step = 2 * (floor / len(moving)) / pair_reach[p, moving]
+                dim = np.ceil((high - low) / step).astype(np.int64)
+                if np.prod(dim) <= TABLE_CELLS:
+                    break
+                floor *= 1.25
+            free = np.zeros(int(np.prod(dim)), dtype=np.bool_)
+            la, lb = pairs[p]
+            grid_joints = np.array([*moving, -1][:2], dtype=np.int64)
+            free_cells(la, lb, spheres.self_root[la], spheres.self_root[lb], grid_joints, low, step,
+                       np.array([*dim, 1][:2], dtype=np.int64), floor, q.copy(), kin.parent, kin.origin_r,
+                       kin.origin_t, kin.kind, kin.axis, kin.q_index, kin.q_fixed, spheres.nodes,
+                       spheres.first_child, spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack, free)
+            if not free.any():                  # always near contact at this floor: the walk decides
+                continue
+            # cells to the nearest cell that is not free (in any joint); all free: as good as unbounded
+            room = (distance_transform_cdt(free.reshape(dim), metric="chessboard").ravel() if not free.all()
+                    else np.full(free.size, 1 << 30))
+            at[p] = size
+            joint[p, : len(moving)] = moving
+            low_[p, : len(moving)] = low
+            step_[p, : len(moving)] = step
+            dim_[p, : len(moving)] = dim
+            chunks.append(room.astype(np.int32))
+            size += room.size
+        cells = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.int32)
+        return Tables(at, joint, low_, step_, dim_, cells)
+
+    def _below(self, link: int, other: int) -> int:
+        """``link`` if ``other`` is one of its ancestors, else -1."""
+        parent = self.kinematics.parent
+        up = parent[link]
+        while up >= 0:
+            if up == other:
+                return link
+            up = parent[up]
+        return -1
+
+    def _joint_reach(self, robot: URDFRobot, index: dict[str, int], held: dict[str, float], link_root: np.ndarray,
+                     self_root: np.ndarray) -> np.ndarray:
+        """``(links, dof)``: how far any point of each link's spheres can lie from each planned joint's
+        axis (0 where the joint does not move the link; 1 for a prismatic joint: its motion), for
+        every configuration: the lengths of the joint origins on the way down plus the reach of the
+        link's root spheres (triangle inequality). A step ``dq`` moves the link's spheres by at most
+        ``sum_j |dq_j| reach[link, j]``."""
+        reach = np.zeros((len(self.links), self.dof))
+        nodes = self.model.nodes
+        q_index = self.kinematics.q_index
+        for link, i in index.items():
+            own = max([float(np.linalg.norm(nodes[r, :3]) + nodes[r, 3])
+                       for r in (link_root[i], self_root[i]) if r >= 0], default=0.0)
+            length, name = own, link
+            while name in robot.joints:              # up the chain to the root
+                joint = robot.joints[name]
+                j = q_index[index[name]]
+                if j >= 0:
+                    reach[i, j] = 1.0 if joint.kind == PRISMATIC else length
+                length += float(np.linalg.norm(joint.translation))
+                if joint.kind == PRISMATIC:          # its travel lengthens the lever of the joints above
+                    length += max(abs(joint.lower), abs(joint.upper), abs(held.get(joint.name, 0.0)))
+                name = joint.parent
+        return reach
+
+    # ------------------------------------------------------------------ the scene and the table
+    def set_obstacles(self, obstacles: Sequence[Any], exempt: dict[int, Sequence[str]] | None = None) -> None:
+        """Load a scene: a sequence of :class:`~gnn_mp_envs.robots.geometry.Obstacle` (box, cylinder or
+        sphere). ``exempt``: obstacle index -> links whose contact with it is not a collision (the
+        base standing on the table)."""
+        k = len(obstacles)
+        kind = np.zeros(k, dtype=np.int64)
+        centre, rot, size = np.zeros((k, 3)), np.zeros((k, 3, 3)), np.zeros((k, 3))
+        for i, ob in enumerate(obstacles):
+            kind[i] = KINDS[ob.kind]
+            centre[i] = ob.position
+            rot[i] = _quaternion_matrix(ob.quaternion())
+            if ob.kind == "box":
+                size[i] = ob.size
+            elif ob.kind == "cylinder":
+                size[i, :2] = (ob.size[0], ob.size[1] / 2)
+            else:
+                size[i, 0] = ob.size[0]
+        excused = np.zeros((k, len(self.links)), dtype=np.bool_)
+        index = {name: i for i, name in enumerate(self.links)}
+        for o, links in (exempt or {}).items():
+            for name in links:
+                excused[o, index[name]] = True
+        self.obstacles = Obstacles(kind, centre, rot, size, excused)
+        self.memo.meta[:] = 0           # clearances of the last scene's states
+        self.memo.q[:] = np.nan
+        self._grow(max(self.scratch.known.shape[0], 130))
+
+    def _pack(self) -> None:
+        """(Re)build the table of addresses the kernel reads (:func:`~gnn_mp_envs.robots.spheres.kernel.pack`)
+        after an array was replaced (a scene, more scratch); the arrays are kept alive with it."""
+        groups = (self.kinematics, self.spheres, self.tables, self.obstacles, self.scratch, self.memo)
+        self._packed, self._packed_groups = kernel.pack(groups), groups
+
+    def _grow_for(self, length: float, resolution: float) -> None:
+        """Room for an edge of ``length`` checked every ``resolution`` (the kernel answered 0: too few)."""
+        self._grow(max(2 * self.scratch.known.shape[0], int(math.ceil(length / resolution)) + 2))
+
+    def _grow(self, states: int) -> None:
+        """Room for the distance bounds of ``states`` states of an edge."""
+        rows = len(self.links) + len(self.spheres.pairs)
+        self.scratch = self.scratch._replace(gaps=np.zeros((states, rows)), known=np.zeros(states, dtype=np.bool_),
+                                             queue=np.zeros((2 * states + 2, 2), dtype=np.int64))  # two per state
+        self._pack()
+
+    # ------------------------------------------------------------------ checks
+    def valid(self, states: np.ndarray) -> np.ndarray:
+        """Whether each row of ``states`` is collision-free (joint limits are the caller's)."""
+        qs = np.asarray(states, dtype=np.float64)
+        if qs.ndim not in (1, 2) or qs.shape[-1] != self.dof:
+            raise ValueError(f"states must have shape ({self.dof},) or (n, {self.dof}), got shape {qs.shape}")
+        qs = np.ascontiguousarray(qs.reshape(-1, self.dof))
+        out = np.zeros(len(qs), dtype=np.bool_)
+        check_states(qs, out, self._packed)
+        return out
+
+    def check_motion(self, a: np.ndarray, b: np.ndarray, resolution: float, low: np.ndarray, high: np.ndarray,
+                     bisection: bool = True) -> tuple[bool, int]:
+        """Check the edge ``a -> b`` (``a`` valid: the tree's node) as the planner does: the states
+        ``a + (k / n)(b - a)``, ``k = 1..n``, ``n = max(1, ceil(|b - a| / resolution))``, in the
+        planner's order (``bisection``: ``n`` first, then by bisection; else ``1..n``) until the
+        first invalid one, out of ``[low, high]`` or in collision: ``(valid, states that order looks
+        at)``."""
+        while True:
+            r = check_edge(a, b, resolution, low, high, bisection, self._packed)
+            if r != 0:
+                return r > 0, abs(int(r))
+            self._grow_for(float(np.linalg.norm(b - a)), resolution)
+
+    def steer(self, a: np.ndarray, target: np.ndarray, step: float, resolution: float, low: np.ndarray,
+              high: np.ndarray, bisection: bool = True) -> tuple[np.ndarray, float, bool, int]:
+        """Steer from ``a`` toward ``target`` by at most ``step`` (joint-space L2) and check the edge as
+        :meth:`check_motion` does, in one compiled call: ``(x_new, distance to target, valid, states
+        looked at)``; a distance below :data:`ZERO_LENGTH` is a refused motion, nothing checked
+        ``(x_new undefined, distance, False, 0)``."""
+        distance = self._distance
+        x_new = np.empty(self.dof)
+        while True:
+            r = steer_edge(a, target, step, resolution, low, high, bisection, self._packed, x_new, distance)
+            if r != 0:
+                break
+            self._grow_for(min(step, float(distance[0])), resolution)
+        d = float(distance[0])
+        if d < ZERO_LENGTH:
+            return x_new, d, False, 0
+        return (x_new, d, True, r) if r > 0 else (x_new, d, False, -r)
+
+    # ------------------------------------------------------------------ what the kernel uses, for tests
+    def motion_rates(self, a: np.ndarray, b: np.ndarray, n: int, k: int) -> dict[str, np.ndarray]:
+        """The bounds the edge check skips states with, at state ``k`` of the edge ``a -> b`` of ``n``
+        steps: per link, ``delta`` (how far its spheres move per state anywhere), ``rate`` (how fast
+        here) and ``curve`` (how much that speed changes per state), so that over ``s`` states they
+        move at most ``min(s delta, s rate + s^2 curve / 2)``; per self pair, the same for the
+        relative motion (``pair_rate`` 0 where neither link is below the other: ``pair_delta`` only)."""
+        kin, spheres = self.kinematics, self.spheres
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        rot, trans = self.link_frames(a + (k / n) * (b - a))
+        omega, vel = np.zeros((len(self.links), 3)), np.zeros((len(self.links), 3))
+        kinematics.velocities(a, b, n, kin.parent, kin.kind, kin.axis, kin.q_index, rot, trans, omega, vel)
+        out = {name: np.zeros(size) for name, size in (("delta", len(self.links)), ("curve", len(self.links)),
+                                                       ("pair_delta", len(spheres.pairs)),
+                                                       ("pair_curve", len(spheres.pairs)))}
+        kinematics.motion_bounds(a, b, n, spheres.reach, out["delta"], out["curve"])
+        kinematics.motion_bounds(a, b, n, spheres.pair_reach, out["pair_delta"], out["pair_curve"])
+        rate, nodes = kinematics.rate, spheres.nodes
+        out["rate"] = np.array([rate(i, -1, r, nodes, rot, trans, omega, vel) if r >= 0 else 0.0
+                                for i, r in enumerate(spheres.link_root)])
+        out["pair_rate"] = np.array([rate(m, la + lb - m, spheres.self_root[m], nodes, rot, trans, omega, vel)
+                                     if m >= 0 else 0.0 for (la, lb), m in zip(spheres.pairs, spheres.pair_moving)])
+        return out
+
+    def table_room(self, q: np.ndarray) -> np.ndarray:
+        """Per self pair, its joint-space table's entry at ``q`` (:meth:`_joint_tables`; -1: no table):
+        ``d >= 1`` when ``q``'s cell, and every configuration less than ``d - 1`` cells from ``q`` in each
+        of the pair's joints, is free of contact between the pair's spheres."""
+        q = np.asarray(q, dtype=np.float64)
+        return np.array([table_room(p, q, self.tables) if self.tables.at[p] >= 0 else -1
+                         for p in range(len(self.spheres.pairs))])
+
+    def link_frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World rotation ``(links, 3, 3)`` and translation ``(links, 3)`` of every link at ``q``."""
+        kin = self.kinematics
+        rot, trans = np.zeros_like(self.scratch.rot), np.zeros_like(self.scratch.trans)
+        kinematics.forward_kinematics(np.asarray(q, dtype=np.float64), kin.parent, kin.origin_r, kin.origin_t,
+                                      kin.kind, kin.axis, kin.q_index, kin.q_fixed, rot, trans)
+        return rot, trans
+
+
+def check_mesh_hashes(model: SphereModel, robot: URDFRobot, path: Path) -> None:
+    """Refuse a sphere model made from other mesh files than the robot's (its recorded sha256 against the
+    files the URDF names, where they are there), in one line naming the model file."""
+    recorded = model.meta.get("mesh_sha256", {})
+    for link in robot.links:
+        for col in robot.collisions.get(link, ()):
+            if col.mesh is not None and col.mesh.name in recorded and col.mesh.exists():
+                if hashlib.sha256(col.mesh.read_bytes()).hexdigest() != recorded[col.mesh.name]:
+                    raise SphereModelError(f"{path}: made from another {col.mesh.name} than {col.mesh} (sha256 "
+                                           "differs): regenerate it with `python -m tools.spherize`")
+
+
+class SphereCollisionChecker:
+    """The :class:`~gnn_mp_envs.robots.checkers.Checker` of a world's robot with its shipped sphere model:
+    one :class:`SphereChecker`, built on first use from the robot's URDF, sphere model and the world's
+    joint names; the scene is loaded when it changes (with the box the robot stands on, which its base
+    links may touch)."""
+
+    name = "spheres"
+
+    def __init__(self, world: Any) -> None:
+        if world.robot_model.spheres is None:
+            raise ValueError(f"robot {world.robot_model.urdf!r} has no sphere model; use checker='pybullet'")
+        self.world = world
+        self._checker: SphereChecker | None = None
+        self._scene: object = None
+        self._compiled: CompiledKernel | None = None
+
+    def __getstate__(self) -> dict:
+        """A checker pickles as its world (the compiled state is rebuilt on first use)."""
+        return {"world": self.world}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["world"])
+
+    def kernel(self, scene: Any) -> SphereChecker:
+        """The robot's :class:`SphereChecker` with ``scene`` loaded."""
+        if self._checker is None:
+            self._checker = self._build()
+        if scene is not self._scene:
+            obstacles = list(scene.obstacles if isinstance(scene, Scene) else scene)
+            exempt = {}
+            table = self.world.robot_model.table
+            if table is not None:
+                exempt[len(obstacles)] = self._base_links
+                obstacles.append(Obstacle(table.kind, table.size, table.position))
+            self._checker.set_obstacles(obstacles, exempt)
+            self._scene = scene
+        return self._checker
+
+    def _build(self) -> SphereChecker:
+        world, model = self.world, self.world.robot_model
+        world._require()
+        p, cid, robot = world.p, world.client, world.robot
+        name = lambda j: p.getJointInfo(robot, j, physicsClientId=cid)[1].decode()  # noqa: E731
+        link = lambda j: (p.getBodyInfo(robot, physicsClientId=cid)[0].decode() if j < 0   # noqa: E731
+                          else p.getJointInfo(robot, j, physicsClientId=cid)[12].decode())
+        path = sphere_model_path(model.spheres)
+        spheres = load_sphere_model(path)
+        urdf = urdf_file(model.urdf)
+        check_mesh_hashes(spheres, read_urdf(str(urdf)), path)
+        checker = SphereChecker(urdf, spheres, [name(j) for j in model.joints],
+                                {name(j): v for j, v in model.held_joints},
+                                model.allowed_collisions)
+        self._base_links = [link(j) for j in model.base_links]
+        return checker
+
+    def prepare(self, scene: Any) -> None:
+        self.kernel(scene)
+
+    def valid(self, scene: Any, states: np.ndarray) -> np.ndarray:
+        return self.kernel(scene).valid(states)
+
+    def check_motion(self, scene: Any, a: np.ndarray, b: np.ndarray, resolution: float, low: np.ndarray,
+                     high: np.ndarray, bisection: bool) -> tuple[bool, int]:
+        return self.kernel(scene).check_motion(a, b, resolution, low, high, bisection)
+
+    def steer(self, scene: Any, a: np.ndarray, target: np.ndarray, step: float, resolution: float,
+              low: np.ndarray, high: np.ndarray, bisection: bool) -> tuple[np.ndarray, float, bool, int]:
+        return self.kernel(scene).steer(a, target, step, resolution, low, high, bisection)
+
+    def compiled_kernel(self, scene: Any, step: float, resolution: float, low: np.ndarray, high: np.ndarray,
+                        bisection: bool) -> CompiledKernel:
+        """The planning loop's kernel (:mod:`gnn_mp_envs.core.loop`) for ``scene``, with room for edges of
+        ``step`` checked every ``resolution`` (the loop cannot grow the scratch)."""
+        checker = self.kernel(scene)
+        if checker.scratch.known.shape[0] < math.ceil(step / resolution) + 2:
+            checker._grow_for(step, resolution)
+        kernel = self._compiled                   # the same object while nothing it holds changed
+        if kernel is None or (kernel.context[0] is not checker._packed or kernel.context[1] is not low
+                              or kernel.context[2] is not high or kernel.context[3] != resolution
+                              or kernel.context[4] != bisection):
+            kernel = self._compiled = CompiledKernel("spheres", planner_steer, planner_motion, goal_distance,
+                                                     (checker._packed, low, high, float(resolution), bool(bisection)))
+        return kernel

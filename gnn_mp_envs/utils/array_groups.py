@@ -1,0 +1,97 @@
+"""Arrays handed to compiled code as one table of addresses: groups of arrays (namedtuples) that compiled
+functions view without reference counts.
+
+A compiled call that takes dozens of arrays pays for each at the call (numba types and unboxes every
+argument) and, reading them from an object, an atomic reference count increment and decrement per
+array; for the sphere checker's kernel that was a fifth of its time. Here the arrays are grouped
+(:func:`array_group`: a namedtuple whose ``spec`` names each field's dtype and dimensions), a
+:class:`GroupTable` lays out a few groups, :meth:`GroupTable.pack` writes one int64 table of their
+addresses and shapes (refusing an array of another dtype, dimension count or layout in one line), and
+the compiled viewers (:meth:`GroupTable.viewer`, generated from the spec: no hand-kept order to drift)
+turn the table back into the namedtuple of arrays, as :func:`numba.carray` views. The arrays must
+outlive the table: keep them with it, and pack again after replacing one.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import namedtuple
+from typing import Any
+
+import numpy as np
+from numba import carray, types
+from numba.core.extending import intrinsic
+
+from gnn_mp_envs.utils.compiled import jit
+
+
+def array_group(name: str, fields: tuple[tuple[str, Any, int], ...]) -> type:
+    """A namedtuple of arrays with a ``spec``: per field its name, dtype and number of dimensions (a class
+    of the calling module, where it must be bound to ``name``: pickle finds it there)."""
+    cls = namedtuple(name, [field for field, _, _ in fields], module=sys._getframe(1).f_globals["__name__"])
+    cls.spec = tuple((field, np.dtype(dtype), ndim) for field, dtype, ndim in fields)
+    return cls
+
+
+@intrinsic
+def _voidptr(typingctx, address):
+    """The int64 ``address`` as a ``void*`` (for :func:`numba.carray`)."""
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+
+    return types.voidptr(types.int64), codegen
+
+
+@jit(inline=True)
+def _view1(table, g, i, dtype):
+    """Field ``i`` of group ``g`` of a table as the 1-D array it describes (scalars read: no view of the
+    table, no reference count)."""
+    return carray(_voidptr(table[g, i, 0]), (table[g, i, 1],), dtype)
+
+
+@jit(inline=True)
+def _view2(table, g, i, dtype):
+    return carray(_voidptr(table[g, i, 0]), (table[g, i, 1], table[g, i, 2]), dtype)
+
+
+@jit(inline=True)
+def _view3(table, g, i, dtype):
+    return carray(_voidptr(table[g, i, 0]), (table[g, i, 1], table[g, i, 2], table[g, i, 3]), dtype)
+
+
+class GroupTable:
+    """The layout of a table: ``groups`` (classes of :func:`array_group`) in order; ``name`` names its
+    viewers (``view_<name>_<group>``, and so their cache files)."""
+
+    def __init__(self, name: str, groups: tuple[type, ...]) -> None:
+        self.name = name
+        self.groups = groups
+        self.max_fields = max(len(group.spec) for group in groups)
+
+    def pack(self, instances: tuple) -> np.ndarray:
+        """The table of ``instances`` (one of each group, in order): per array its address and shape."""
+        table = np.zeros((len(self.groups), self.max_fields, 4), dtype=np.int64)
+        for g, (cls, group) in enumerate(zip(self.groups, instances, strict=True)):
+            if type(group) is not cls:
+                raise TypeError(f"the {self.name} table's group {g} must be a {cls.__name__}, "
+                                f"got {type(group).__name__}")
+            for i, (array, (name, dtype, ndim)) in enumerate(zip(group, cls.spec, strict=True)):
+                if not (type(array) is np.ndarray and array.dtype == dtype and array.ndim == ndim
+                        and array.flags.c_contiguous):
+                    raise TypeError(f"the {self.name} table's {cls.__name__}.{name} must be a C-contiguous {ndim}-D "
+                                    f"{dtype.name} array, got {getattr(array, 'dtype', type(array))} "
+                                    f"{getattr(array, 'shape', '')}")
+                table[g, i, 0] = array.ctypes.data
+                table[g, i, 1:1 + ndim] = array.shape
+        return table
+
+    def viewer(self, cls: type) -> Any:
+        """The compiled (inlined) function viewing group ``cls`` of a table of this layout."""
+        g = self.groups.index(cls)
+        views = ", ".join(f"_view{ndim}(table, {g}, {i}, np.{dtype.name})"
+                          for i, (_, dtype, ndim) in enumerate(cls.spec))
+        name = f"view_{self.name}_{cls.__name__.lower()}"
+        source = f"def {name}(table):\n    return {cls.__name__}({views})\n"
+        namespace = {"np": np, "_view1": _view1, "_view2": _view2, "_view3": _view3, cls.__name__: cls}
+        exec(compile(source, __file__, "exec"), namespace)
+        return jit(namespace[name], inline=True)

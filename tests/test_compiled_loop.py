@@ -1,0 +1,161 @@
+"""The compiled planning loop (gnn_mp_envs.core.loop) against its reference, the Python planner: the same
+samples grow the same trees, node for node; the k-d index against a brute-force scan; and an action
+of K samples against K actions of one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnn_mp_envs.core.nearest import NearestIndex
+from gnn_mp_envs.core.planners import make_planner
+from gnn_mp_envs.core.problem import _nearest_row_loop
+from gnn_mp_envs.registration import make_task
+
+
+# ---------------------------------------------------------------------- the k-d index
+@pytest.mark.parametrize("dim, periodic", [(2, (False, False)), (2, (True, False)), (7, (False,) * 7),
+                                           (8, (False,) * 8)])
+def test_the_index_answers_the_scans_first_argmin(dim, periodic):
+    """Exactly the scan's answer (the first node at the least distance, the distance to the bit), with
+    duplicate nodes, queries on nodes and on a lattice (ties between distinct nodes), as the tree grows."""
+    rng = np.random.default_rng(dim)
+    periodic = np.array(periodic)
+    weights = rng.uniform(0.2, 2.0, dim)
+    n = 1500
+    states = np.round(rng.uniform(-3, 3, (n, dim)), 1)          # a lattice: many exact ties
+    states[700:720] = states[100]                                # duplicates
+    index = NearestIndex(n, 2, weights, periodic)
+    tree_of = rng.integers(0, 2, n)
+    checked = 0
+    for i in range(n):
+        index.insert(i, int(tree_of[i]), states)
+        if i % 50 == 49:
+            for q in np.concatenate([rng.uniform(-3.5, 3.5, (10, dim)), np.round(rng.uniform(-3, 3, (10, dim)), 1),
+                                     states[rng.integers(0, i + 1, 5)]]):
+                for tree in (0, 1):
+                    rows = np.flatnonzero(tree_of[:i + 1] == tree)
+                    if not len(rows):
+                        continue
+                    j, d = _nearest_row_loop(states[rows], q, weights, periodic)
+                    assert index.nearest(q, tree, states) == (rows[j], d)
+                    checked += 1
+    assert checked > 1000
+
+
+# ---------------------------------------------------------------------- the loop against the reference
+CASES = [("maze2d", "rrt", 6), ("maze2d", "birrt", 6), ("panda-mbm", "birrt", 4), ("panda-mbm", "rrt", 2),
+         ("ur5-mbm", "birrt", 3), ("fetch-mbm", "birrt", 2)]
+
+
+def _grow(planner, samples, batch):
+    """Feed ``samples`` ``batch`` at a time (``run``) or one at a time (``step``: batch 0) until solved or full."""
+    if batch == 0:
+        for s in samples:
+            planner.step(s)
+            if planner.solution is not None or planner.tree.full:
+                break
+        return
+    at = 0
+    while at < len(samples) and planner.solution is None and not planner.tree.full:
+        at += planner.run(samples[at:at + batch]).consumed
+
+
+@pytest.mark.parametrize("task, planner, problems", CASES)
+def test_the_compiled_loop_grows_the_reference_trees(task, planner, problems):
+    t = make_task(task)
+    try:
+        for i in range(problems):
+            pa, pb = t.problem("test", i), t.problem("test", i)
+            a, b = make_planner(planner, pa, 3000), make_planner(planner, pb, 3000)
+            assert b.compiled
+            rng = np.random.default_rng(i)
+            samples = rng.uniform(pa.low, pa.high, (1500, pa.state_dim))
+            samples[::9] = pa.goal                   # goal-biased samples: the goal tests and connections
+            samples[5::11] = pa.start
+            _grow(a, samples, 0)
+            _grow(b, samples, 37)
+            n = a.tree.size
+            assert b.tree.size == n and a.iterations == b.iterations and a.active_tree == b.active_tree
+            for name in ("states", "parent", "cost", "tree_id"):
+                np.testing.assert_array_equal(getattr(a.tree, name)[:n], getattr(b.tree, name)[:n], err_msg=name)
+            assert (pa.collision_checks, pa.edges_checked) == (pb.collision_checks, pb.edges_checked)
+            assert (a.solution is None) == (b.solution is None)
+            if a.solution is not None:
+                np.testing.assert_array_equal(a.solution.states, b.solution.states)
+                np.testing.assert_array_equal(a.solution.nodes, b.solution.nodes)
+                assert a.solution.length == b.solution.length
+    finally:
+        t.close()
+
+
+def test_problems_without_compiled_checks_run_the_python_planner():
+    for task, kwargs in (("pendulum", {}), ("panda-mbm", {"checker": "pybullet"})):
+        t = make_task(task, **kwargs)
+        p = t.problem("test", 0)
+        planner = make_planner("rrt", p, 100)
+        assert p.compiled_kernel() is None and not planner.compiled
+        t.close()
+
+
+# ---------------------------------------------------------------------- batches of samples in the env
+@pytest.mark.parametrize("task", ["maze2d", "pendulum", "arm", "panda-mbm", "ur5-mbm", "fetch-mbm"])
+def test_64_samples_per_step_give_the_counters_of_one(task):
+    """The same uniform stream, 64 samples an action or one: the same runs, counter for counter."""
+    from agents.samplers import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+    one, batch = evaluation_env(task), evaluation_env(task, samples_per_step=64)
+    sampler = load_sampler("uniform", task=task, seed=0)
+    problems = {"fetch-mbm": 2, "arm": 2, "ur5-mbm": 3}.get(task, 4)
+    for i in range(problems):
+        a, b = plan_problem(one, sampler, i, 0).counters(), plan_problem(batch, sampler, i, 0).counters()
+        for key in ("success", "nodes_expanded", "edges", "collision_checks", "iterations", "path_length"):
+            assert a[key] == b[key], (task, i, key)
+    one.close()
+    batch.close()
+
+
+def test_an_action_of_k_samples():
+    import gymnasium as gym
+
+    import gnn_mp_envs  # noqa: F401
+    env = gym.make("GNNMP/Maze2DBiRRT-v0", split="test", samples_per_step=8)
+    assert env.action_space.shape == (8, 2)
+    obs, info = env.reset(options={"index": 0})
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert 1 <= info["samples_consumed"] <= 8 and info["iterations"] == info["samples_consumed"]
+    assert reward == -1.0 * info["samples_consumed"] + (10.0 if terminated else 0.0)
+    with pytest.raises(ValueError, match=r"action must have shape \(8, 2\)"):
+        env.step(np.zeros(2))
+    with pytest.raises(ValueError, match="must be finite"):
+        env.step(np.full((8, 2), np.nan))
+    env.close()
+    for bad in (0, 2.5, 10**9):
+        with pytest.raises(ValueError, match="samples_per_step must be"):
+            gym.make("GNNMP/Maze2DRRT-v0", samples_per_step=bad)
+
+
+def test_a_problem_that_overrides_a_method_in_python_runs_the_python_planner():
+    """A subclass with its own goal test (tools.probes.goal_free) must be planned by the planner that calls
+    it, not by a compiled loop that would test the goal its own way."""
+    from tools.probes import goal_free
+    t = make_task("maze2d")
+    p = goal_free(t.problem("test", 0))
+    planner = make_planner("rrt", p, 2000)
+    assert p.compiled_kernel() is not None and not planner.compiled
+    planner.run(np.repeat(p.goal[None], 5, axis=0))      # the goal itself, five times: never "reached"
+    assert planner.solution is None and planner.iterations == 5
+
+
+def test_a_sampler_that_overrides_act_is_batched_through_its_act():
+    from agents.samplers.baselines import UniformSampler
+
+    class Halved(UniformSampler):
+        def act(self, obs):
+            return super().act(obs) / 2
+
+    obs = {"start": np.zeros(2, np.float32), "goal": np.ones(2, np.float32), "active_tree": np.zeros(1, np.int64),
+           "node_features": np.zeros((4, 5), np.float32), "num_nodes": np.array([1])}
+    halved, plain = Halved(np.zeros(2), np.ones(2), 3), UniformSampler(np.zeros(2), np.ones(2), 3)
+    assert halved.samples_per_step == 1 and plain.samples_per_step == 64
+    np.testing.assert_array_equal(halved.act_batch(obs, 4), plain.act_batch(obs, 4) / 2)
