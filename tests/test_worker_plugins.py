@@ -80,3 +80,16 @@ def test_train_sampler_workers_import_the_plugin(tmp_path):
                             cwd=user, env=environment(), capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
     assert (user / "run" / "model.pt").is_file() or any((user / "run").glob("*.pt"))
+
+
+def test_ompl_rows_import_the_plugin_and_nothing_else_of_the_directory(tmp_path):
+    """The OMPL runner is a `python -m` subprocess: it put the current directory first on its path (a
+    `numpy.py` there failed every OMPL row) and found --import modules only that way."""
+    pytest.importorskip("ompl")
+    user = make_user_directory(tmp_path)
+    result = subprocess.run(cli("benchmark", "--import", "cwd_task", "--task", TASK, "--samplers",
+                                "uniform,ompl-rrtconnect", "--problems", "2", "--no-progress", "--json", "out.json"),
+                            cwd=user, env=environment(), capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = json.loads((user / "out.json").read_text())["runs"]["ompl-rrtconnect"]
+    assert [r["problem"] for r in runs] == [0, 1] and all(r["success"] for r in runs)

@@ -237,4 +237,5 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

@@ -17,7 +17,7 @@ import numpy as np
 from tools.probes import goal_free_env
 from gnn_mp_envs.registration import task_spec
 from gnn_mp_envs.rollout import run_steps
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int, seed_int
 
 
 @dataclass
@@ -27,7 +27,7 @@ class Args:
     tasks: list[str] = arg(["maze2d", "pendulum"], "tasks to measure")
     sizes: list[int] = arg([100, 1000, 5000], "tree sizes at which steps/s is measured")
     window: int = arg(1000, "timed env steps per size", parse=positive_int)
-    seed: int = arg(0, "seed of the uniform actions")
+    seed: int = arg(0, "seed of the uniform actions", parse=seed_int)
     copy_observations: bool = arg(True, "return live observation views instead of the default copies")
 
 
@@ -70,4 +70,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

@@ -31,14 +31,8 @@ import torch
 from tools import probes
 from gnn_mp_envs.envs.observation import OBSERVATION_KEYS
 from gnn_mp_envs.registration import TASK_SPECS, task_spec
-from train.args import (
-    OneLineParser,
-    add_dataclass_arguments,
-    arg,
-    from_namespace,
-    import_modules,
-    positive_int,
-)
+from train.args import (OneLineParser, add_dataclass_arguments, arg, from_namespace, import_modules, positive_int,
+                        seed_int)
 from train.benchmark.args import checkpoint_pair
 
 SPLIT = "val"   # problems the trees are grown on (timing only; never the held-out split)
@@ -63,7 +57,7 @@ class Args:
                                        flag="--checkpoint", metavar="NAME=PATH", parse=checkpoint_pair, append=True)
     modules: list[str] = arg([], "import MODULE first: it registers samplers or tasks (repeatable)",
                              flag=("--import", "--sampler-module"), metavar="MODULE", append=True)
-    seed: int = arg(0, "seed of the problems, tree-growing actions and samplers")
+    seed: int = arg(0, "seed of the problems, tree-growing actions and samplers", parse=seed_int)
     threads: int = arg(1, "torch threads", parse=positive_int)
     clock: str = arg("wall", "wall: elapsed time; cpu: this process's CPU time (steadier on a shared machine)",
                      choices=("wall", "cpu"))
@@ -234,4 +228,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, name_list, positive_int
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, name_list, positive_int, seed_int
 
 MODES = ("single", "sync", "async", "parallelenv")
 
@@ -31,7 +31,7 @@ class Args:
     modes: list[str] = arg(list(MODES), f"modes to measure ({', '.join(MODES)})", parse=name_list)
     n_envs: int = arg(2, "copies of the env in the vectorised modes", parse=positive_int)
     steps: int = arg(20000, "env steps per mode, all copies together", parse=positive_int)
-    seed: int = arg(0, "seed of the problems and of the actions")
+    seed: int = arg(0, "seed of the problems and of the actions", parse=seed_int)
     copy: bool = arg(True, "make the envs with copy_observations=False", flag="--no-copy")
     mp_start_method: str = arg("spawn", "ParallelEnv's start method (TorchRL's default: spawn, unless the program "
                                "set one; fork starts faster on Linux)", choices=("spawn", "fork", "forkserver"))
@@ -132,4 +132,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

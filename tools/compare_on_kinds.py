@@ -44,6 +44,7 @@ def run(job: tuple) -> tuple:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.args import positive_int, seed_int, worker_count
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--task", default="maze2d")
     p.add_argument("--sampler", default="gnn")
@@ -51,17 +52,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--kinds", default=None, help="comma-separated scenes ('-' = in-distribution; default: "
                    "in-distribution and the task's validation scenes)")
     p.add_argument("--split", default="val", choices=("train", "val"))
-    p.add_argument("--problems", type=int, default=40)
+    p.add_argument("--problems", type=positive_int, default=40)
     p.add_argument("--checkpoint", default=None)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--chunk", type=int, default=5, help="problems per job")
+    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--workers", type=worker_count, default=2)
+    p.add_argument("--chunk", type=positive_int, default=5, help="problems per job")
     p.add_argument("--json", default=None, help="write every run's counters here")
     args = p.parse_args(argv)
     from gnn_mp_envs.registration import task_spec
     spec = task_spec(args.task)
     kinds = args.kinds.split(",") if args.kinds else ["-", *spec.validation_scenes]
-    configs = json.loads(args.configs)
+    try:
+        configs = json.loads(args.configs)
+    except json.JSONDecodeError as exc:
+        p.error(f"--configs: not JSON ({exc})")
+    if not isinstance(configs, dict) or not configs or not all(isinstance(v, dict) for v in configs.values()):
+        p.error(f"--configs: expected a JSON object of name -> settings objects, got {args.configs!r}")
     metric = spec.headline_metric
     jobs = []
     for kind in kinds:
@@ -104,4 +110,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

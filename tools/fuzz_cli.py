@@ -408,20 +408,23 @@ def findings(outcomes: list[Outcome]) -> list[Outcome]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.args import check_output_path, path_arg, seed_int
     ap = argparse.ArgumentParser(prog="python -m tools.fuzz_cli", description=__doc__.splitlines()[0])
     ap.add_argument("--commands", default=",".join(COMMANDS),
                     help=f"comma-separated subcommands (default: all: {', '.join(COMMANDS)})")
     ap.add_argument("--max-attempts", type=int, default=400, help="attempts at most (every flag once first); 0: all")
     ap.add_argument("--jobs", type=int, default=2, help="attempts running at a time")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per attempt before it counts as a hang")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the choice of attempts")
+    ap.add_argument("--seed", type=seed_int, default=0, help="seed of the choice of attempts")
     ap.add_argument("--memory-gib", type=float, default=MEMORY_GIB,
                     help="heap and private memory of each of an attempt's processes, GiB (0: no limit)")
     ap.add_argument("--at-bound", action="store_true",
                     help="only every bounded number flag at its bound (the largest value it accepts)")
-    ap.add_argument("--json", type=Path, help="also write every outcome to this file")
+    ap.add_argument("--json", type=path_arg, help="also write every outcome to this file")
     ap.add_argument("--quiet", action="store_true", help="no line per attempt on stderr")
     args = ap.parse_args(argv)
+    if args.json is not None:          # refused now, not after the attempts
+        check_output_path("--json", args.json, is_dir=False)
     names = [n.strip() for n in args.commands.split(",") if n.strip()]
     unknown = [n for n in names if n not in COMMANDS]
     if unknown:
@@ -444,4 +447,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from tools import run_script
+    sys.exit(run_script(main))

@@ -473,4 +473,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from tools import run_script
+    sys.exit(run_script(main))

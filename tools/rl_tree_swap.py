@@ -34,7 +34,7 @@ import numpy as np
 from agents.registry import load_sampler
 from gnn_mp_envs.evaluation import evaluation_env, plan_problem, problem_seed
 from gnn_mp_envs.utils.io import atomic_write_text
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int, seed_int
 
 
 @dataclass
@@ -45,7 +45,7 @@ class Args:
     sampler: str = arg("rl-ppo", "RL sampler (rl-ppo, rl-ppo-torchrl, ...)")
     checkpoint: Path | None = arg(None, "policy checkpoint (default: the shipped weights)")
     problems: int = arg(20, "validation problems 0..N-1", parse=positive_int)
-    seed: int = arg(0, "root seed of the problems' sampler seeds")
+    seed: int = arg(0, "root seed of the problems' sampler seeds", parse=seed_int)
     max_steps: int = arg(4000, "planner iterations per problem (then a failure)", parse=positive_int)
     json: Path | None = arg(None, "write the figures (and per-problem rows) here")
     plot: Path | None = arg(None, "write a figure: per-problem nodes, own tree vs shadow tree")
@@ -211,4 +211,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from tools import run_script
+    sys.exit(run_script(main))

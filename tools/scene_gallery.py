@@ -71,21 +71,23 @@ def gallery(task: str, roles: list[str], problems: int, split: str, seed: int, o
 
 
 def main(argv: list[str] | None = None) -> int:
+    from train.args import figure_path, seed_int, size_int
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="maze2d")
     parser.add_argument("--roles", default="default,train,val,ood", help="comma-separated roles to show")
-    parser.add_argument("--problems", type=int, default=3)
+    parser.add_argument("--problems", type=size_int, default=3)
     parser.add_argument("--split", default="test", choices=("train", "val", "test"))
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--seed", type=seed_int, default=0)
+    parser.add_argument("--out", type=figure_path, required=True)
     args = parser.parse_args(argv)
     roles = [r.strip() for r in args.roles.split(",") if r.strip()]
     unknown = sorted(set(roles) - set(ROLE_ORDER))
-    if unknown:
-        parser.error(f"unknown role(s) {unknown}; known: {', '.join(ROLE_ORDER)}")
+    if unknown or not roles:
+        parser.error(f"unknown role(s) {unknown or args.roles!r}; known: {', '.join(ROLE_ORDER)}")
     print(gallery(args.task, roles, args.problems, args.split, args.seed, args.out))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

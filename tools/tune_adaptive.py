@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int
+from train.args import (OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_float, positive_int,
+                        seed_int)
 from tools.shipped_settings import store_tuned_setting, tool_command
 
 
@@ -46,7 +47,7 @@ class Args:
     metric: str = arg("headline", "the figure divided by uniform's: the task's headline metric, or wall_time_s "
                                   "(time to solution, inference included)", choices=("headline", "wall_time_s"))
     worst: float = arg(1.1, "largest acceptable ratio to uniform on any kind", parse=positive_float)
-    seed: int = arg(0, "root seed")
+    seed: int = arg(0, "root seed", parse=seed_int)
     workers: int = arg(2, "worker processes", parse=positive_int)
     write: bool = arg(False, "store the chosen value in the shipped checkpoint")
 
@@ -145,4 +146,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

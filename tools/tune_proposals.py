@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from agents.registry import load_sampler
 from gnn_mp_envs.evaluation import evaluation_env, plan_problems, summarize
-from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int
+from train.args import OneLineParser, add_dataclass_arguments, arg, from_namespace, positive_int, seed_int
 from tools.shipped_settings import store_tuned_setting, tool_command
 
 
@@ -31,7 +31,7 @@ class Args:
     task: str = arg("maze2d", "task")
     candidates: list[int] = arg([1, 2, 4, 8, 16], "proposals values to try")
     problems: int = arg(40, "validation problems 0..N-1", parse=positive_int)
-    seed: int = arg(0, "root seed of the problems' sampler seeds")
+    seed: int = arg(0, "root seed of the problems' sampler seeds", parse=seed_int)
     repeats: int = arg(2, "timing repeats per value (the fastest counts; counters are identical)",
                        parse=positive_int)
     inference_share: float | None = arg(None, "rule for samplers whose distribution does not depend on the "
@@ -100,4 +100,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from tools import run_script
+    raise SystemExit(run_script(main))

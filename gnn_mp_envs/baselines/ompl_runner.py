@@ -169,11 +169,13 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
             cmd += ["--task-kwargs", json.dumps(task_kwargs)]
         for module in modules:
             cmd += ["--import", module]
+        for name, file in _module_files(modules):
+            cmd += ["--import-file", f"{name}={file}"]
         if task_module(task) is not None:
             cmd += ["--task-module", task_module(task)]
         if keep_paths:
             cmd.append("--keep-paths")
-        proc = _run_reporting(cmd, timeout, on_problem)
+        proc = _run_reporting(cmd, timeout, on_problem, env=_runner_environment())
         try:
             data = json.loads(out.read_text()) if out.exists() else None
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -194,13 +196,58 @@ def run_ompl(task: str, indices: Any, split: str = "test", task_kwargs: dict[str
 PROGRESS_MARK = "ompl-runner: solved "
 
 
-def _run_reporting(cmd: list[str], timeout: float, on_problem: Callable[[int], None] | None
-                   ) -> subprocess.CompletedProcess:
+def _runner_environment() -> dict[str, str]:
+    """The runner's environment: its import path is this process's. ``PYTHONSAFEPATH``: ``-m`` does not
+    put the current directory first on it (a ``numpy.py`` or ``train.py`` there would be imported in
+    place of the module of that name); ``PYTHONPATH``: the directories this process imports from that
+    are not the interpreter's own (a test's root, the user's ``PYTHONPATH``). A module ``--import``
+    loaded from the current directory is passed as its file (``--import-file``)."""
+    own = tuple(p for p in {sys.prefix, sys.base_prefix, sys.exec_prefix} if p)
+    extra = [p for p in sys.path if p and os.path.isabs(p) and not p.startswith(own)]
+    return {**os.environ, "PYTHONSAFEPATH": "1", "PYTHONPATH": os.pathsep.join(dict.fromkeys(extra))}
+
+
+def _module_files(modules: Sequence[str]) -> list[tuple[str, str]]:
+    """``(name, file)`` of each of ``modules``' top-level modules this process loaded from a file: the
+    runner loads one from that file when a plain import does not find it (``gnn-mp --import`` loads a
+    module of the current directory by its file, without the directory on ``sys.path``)."""
+    out = []
+    for top in dict.fromkeys(m.split(".")[0] for m in modules):
+        file = getattr(sys.modules.get(top), "__file__", None)
+        if file:
+            out.append((top, file))
+    return out
+
+
+def _load_files(entries: Sequence[str]) -> None:
+    """The runner's ``--import-file NAME=FILE``: load the top-level module ``NAME`` from ``FILE`` (a
+    package's ``__init__.py``: its submodules import through its ``__path__``) unless it is installed."""
+    import importlib.util
+    for entry in entries:
+        name, _, file = entry.partition("=")
+        if name in sys.modules or importlib.util.find_spec(name) is not None:
+            continue
+        path = Path(file)
+        package = path.name == "__init__.py"
+        spec = importlib.util.spec_from_file_location(
+            name, path, submodule_search_locations=[str(path.parent)] if package else None)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+
+
+def _run_reporting(cmd: list[str], timeout: float, on_problem: Callable[[int], None] | None,
+                   env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     """``subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)``, calling
     ``on_problem`` for each progress line the runner writes on its standard error."""
     import threading
     # its own process group, so that a timeout ends the runner's children too
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env=env)
     expired = threading.Event()
 
     def kill() -> None:
@@ -404,6 +451,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--task-kwargs", default="{}", help="JSON dict of task constructor arguments")
     ap.add_argument("--import", dest="modules", action="append", default=[], metavar="MODULE",
                     help="import MODULE first (it registers the task; repeatable)")
+    ap.add_argument("--import-file", dest="import_files", action="append", default=[], metavar="NAME=FILE",
+                    help="load the top-level module NAME from FILE first, unless it is installed (what the caller "
+                         "loaded from its current directory; repeatable)")
     ap.add_argument("--task-module", default=None, metavar="MODULE",
                     help="import MODULE if the task is still unknown (the module of its entry point)")
     ap.add_argument("--json", required=True, help="output file")
@@ -420,6 +470,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         from gnn_mp_envs.registration import TASK_SPECS, make_task
 
+        _load_files(args.import_files)
         for module in args.modules:
             importlib.import_module(module)
         if args.task not in TASK_SPECS and args.task_module:
