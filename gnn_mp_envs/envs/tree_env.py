@@ -165,10 +165,10 @@ class TreePlanningEnv(gym.Env):
             raise ValueError(f"task {task!r} has no scenes (scene={scene!r})")
         if checker is not None and not spec.checkers:
             raise ValueError(f"task {task!r} has one collision checker (checker={checker!r})")
-        if checker is not None:
-            if task_kwargs.get("checker", checker) != checker:
-                raise ValueError(f"checker={checker!r} and task_kwargs['checker']={task_kwargs['checker']!r} disagree")
-            task_kwargs["checker"] = checker
+        if checker is not None and task_kwargs.get("checker", checker) != checker:
+            raise ValueError(f"checker={checker!r} and task_kwargs['checker']={task_kwargs['checker']!r} disagree")
+        if spec.checkers:                         # the name goes to the task, which makes the checker of it
+            task_kwargs.setdefault("checker", checker or spec.checkers[0])
         self.scene = task_kwargs.get("scene")
         self.task = make_task(task, **task_kwargs)
         #: The name of the planner's collision checker (None: the task has only one).

@@ -17,8 +17,7 @@ segment from start to goal is collision-free is rejected and redrawn.
 """
 
 from gnn_mp_envs.tasks.arm.scenes import LAYOUTS, SCENE_FAMILIES, register_scene_family, sample_scene
-from gnn_mp_envs.tasks.arm.task import (DEFAULT_CHECKER, RESOLUTION, STEP_SIZE, TRAIN_FAMILIES, ArmProblem, ArmTask,
-                                        xarm6_ik)
+from gnn_mp_envs.tasks.arm.task import RESOLUTION, STEP_SIZE, TRAIN_FAMILIES, ArmProblem, ArmTask, xarm6_ik
 
-__all__ = ["DEFAULT_CHECKER", "LAYOUTS", "RESOLUTION", "SCENE_FAMILIES", "STEP_SIZE", "TRAIN_FAMILIES", "ArmProblem",
+__all__ = ["LAYOUTS", "RESOLUTION", "SCENE_FAMILIES", "STEP_SIZE", "TRAIN_FAMILIES", "ArmProblem",
            "ArmTask", "register_scene_family", "sample_scene", "xarm6_ik"]

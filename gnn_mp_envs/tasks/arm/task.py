@@ -23,9 +23,6 @@ STEP_SIZE = 0.4
 #: Collision-checking resolution along edges (rad, joint-space L2). With the robot's padding it keeps
 #: returned paths valid at the benchmark's 10x finer re-check (docs/arm.md).
 RESOLUTION = 0.01
-#: The planner's collision checker on the arm (:data:`~gnn_mp_envs.robots.checkers.CHECKERS`): the sphere
-#: model (docs/arm.md says why); problems are drawn with pybullet's checks either way.
-DEFAULT_CHECKER = "spheres"
 #: Typical reaching postures (joint 1 relative to the target's azimuth, joint 6 free):
 #: tool down / tool horizontal, wrist unflipped / flipped. Half the IK seeds start near one.
 POSTURES = np.array([[0.0, 0.8, -1.45, np.pi, -0.65, 0.0],
@@ -89,7 +86,9 @@ class ArmProblem(JointSpaceProblem):
 
 class ArmTask(Task):
     """xArm6 tabletop problems of one scene family (``train-a``, ``train-b``, ``train`` =
-    either training family per problem, or the held-out ``test`` family)."""
+    either training family per problem, or the held-out ``test`` family), planned with ``checker`` (a name
+    of :data:`~gnn_mp_envs.robots.checkers.CHECKERS`; None: the default, the sphere model) and drawn with
+    pybullet's checks whichever it is; ``camera``: the images' (eye, target, up)."""
 
     name = "arm"
     #: ``[is_box, is_cylinder, size (3; a cylinder's radius, height, 0), position (3), cos yaw, sin yaw]``.
@@ -99,7 +98,7 @@ class ArmTask(Task):
 
     def __init__(self, scene: str = "train-a", step_size: float = STEP_SIZE,
                  resolution: float = RESOLUTION, require_blocked: bool = True,
-                 render_size: tuple[int, int] = (480, 360), checker: str = DEFAULT_CHECKER,
+                 render_size: tuple[int, int] = (480, 360), checker: str | None = None,
                  camera: tuple | None = None) -> None:
         if scene != "train" and scene not in SCENE_FAMILIES:
             raise ValueError(f"unknown arm scene {scene!r}; known: {sorted(SCENE_FAMILIES) + ['train']}")
