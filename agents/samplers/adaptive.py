@@ -108,8 +108,12 @@ class AdaptiveShare:
         share for the next one."""
         tree = self._tree = self._trees.of(obs)
         n = tree_size(obs)
-        useful = self._new_cells(obs, n)
         source = tree.pending
+        if type(source) is tuple:                 # a batch's samples (chose_batch): each scored in turn
+            self._score_batch(obs, n, *source)
+            tree.pending = None
+            return tree.share
+        useful = self._new_cells(obs, n)
         if source is not None and source != OTHER:
             # both sources' statistics decay; the pulled one gains a pull and its outcome (plain floats)
             pulls, hits, discount = tree.pulls, tree.useful, self.discount
@@ -129,6 +133,69 @@ class AdaptiveShare:
         """The source of the sample just handed out (scored at the next :meth:`observe` of its tree)."""
         self._tree.pending = source
         self._tree.drawn[source] += 1
+
+    def chose_batch(self, sources: np.ndarray, samples: np.ndarray) -> None:
+        """The sources of a batch of samples just handed out, in the order the planner consumes them
+        (``samples`` ``(k, d)``): scored at the next :meth:`observe` of their tree, one step each."""
+        sources = np.asarray(sources, dtype=np.int64)
+        self._tree.pending = (sources, np.asarray(samples, dtype=np.float64))
+        self._tree.drawn += np.bincount(sources, minlength=3)[:3]
+
+    def _score_batch(self, obs: Mapping, n: int, sources: np.ndarray, samples: np.ndarray) -> None:
+        """Score a batch's samples from the observation after it: each new row that reached a new cell
+        counts for the sample nearest to it (in cells; the node an extension makes lies between its
+        nearest node and the sample, and the connect nodes of BiRRT follow it); then, sample by sample in
+        order, the update of :meth:`observe` (a goal sample is not scored). One sample: exactly
+        :meth:`observe`'s scoring of one step."""
+        tree = self._tree
+        first = tree.seen
+        new = self._new_cell_rows(obs, n)
+        useful = np.zeros(len(sources), dtype=bool)
+        if new.any():
+            rows = np.asarray(obs["nodes"][first:n], np.float64)[new]
+            if len(sources) == 1:
+                useful[0] = True
+            else:
+                scale = np.array([a[1] for a in self.axes])
+                diff = (rows[:, None, :] - samples[None, :, :]) * scale
+                useful[np.unique(np.argmin((diff * diff).sum(-1), axis=1))] = True
+        pulls, hits, discount = tree.pulls, tree.useful, self.discount
+        scored = False
+        for source, hit in zip(sources.tolist(), useful.tolist()):
+            if source == OTHER:
+                continue
+            pulls[0] *= discount
+            pulls[1] *= discount
+            hits[0] *= discount
+            hits[1] *= discount
+            pulls[source] += 1.0
+            hits[source] += float(hit)
+            scored = True
+        if scored:
+            rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
+            relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
+            tree.share = self.floor + (self.top - self.floor) * relative ** self.power
+
+    def _new_cell_rows(self, obs: Mapping, n: int) -> np.ndarray:
+        """:meth:`_new_cells` row by row: for rows ``seen..n-1``, whether each reached a cell not reached
+        before (by an earlier row too)."""
+        stats = self._tree
+        if n <= stats.seen:
+            return np.zeros(0, dtype=bool)
+        rows = np.asarray(obs["nodes"][stats.seen:n]).tolist()
+        trees = np.asarray(obs["node_features"][stats.seen:n, -1]).tolist()
+        cells, top, floor, visited = self.cells, self.cells - 1, math.floor, stats.visited
+        out = np.zeros(len(rows), dtype=bool)
+        for r, (tree, row) in enumerate(zip(trees, rows)):
+            key = [tree]
+            for x, (low, scale, periodic) in zip(row, self.axes):
+                i = floor((x - low) * scale)
+                key.append(i % cells if periodic else (0 if i < 0 else top if i > top else i))
+            size = len(visited)
+            visited.add(tuple(key))
+            out[r] = len(visited) > size
+        stats.seen = n
+        return out
 
     def _new_cells(self, obs: Mapping, n: int) -> bool:
         """Mark the cells of rows ``seen..n-1`` of the current tree; whether any was new."""

@@ -269,7 +269,7 @@ class ModelSampler(Sampler):
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, uniform_mix: float = 0.25,
                  goal_bias: float = 0.0, periodic: np.ndarray | None = None, proposals: int = 1,
-                 adaptive: bool | Mapping = False) -> None:
+                 adaptive: bool | Mapping = False, samples_per_step: int = 1) -> None:
         if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in (uniform_mix, goal_bias)):
             raise ValueError(f"uniform_mix and goal_bias must be numbers, got {uniform_mix!r}, {goal_bias!r}")
         if not (0.0 <= uniform_mix <= 1.0 and 0.0 <= goal_bias <= 1.0 and uniform_mix + goal_bias <= 1.0):
@@ -277,8 +277,16 @@ class ModelSampler(Sampler):
                              f"{goal_bias}")
         if isinstance(proposals, bool) or int(proposals) != proposals or proposals < 1:
             raise ValueError(f"proposals must be an integer >= 1, got {proposals!r}")
+        if isinstance(samples_per_step, bool) or samples_per_step != 1:
+            from gnn_mp_envs.envs.tree_env import MAX_SAMPLES_PER_STEP     # the env's bound (its module is heavier)
+            if (not isinstance(samples_per_step, numbers.Integral) or isinstance(samples_per_step, bool)
+                    or not 1 <= samples_per_step <= MAX_SAMPLES_PER_STEP):
+                raise ValueError(f"samples_per_step must be an integer in [1, {MAX_SAMPLES_PER_STEP}], got "
+                                 f"{samples_per_step!r}")
         self.uniform_mix, self.goal_bias, self.proposals = float(uniform_mix), float(goal_bias), int(proposals)
         super().__init__(low, high, seed)
+        if "act_batch" not in vars(self):     # (a subclass that only overrides act is planned one sample a step)
+            self.samples_per_step = int(samples_per_step)
         self.periodic = np.zeros(self.state_dim, dtype=bool) if periodic is None else np.asarray(periodic, dtype=bool)
         if self.periodic.shape != (self.state_dim,):
             raise ValueError(f"periodic must have {self.state_dim} entries, got {self.periodic.shape}")
@@ -311,6 +319,48 @@ class ModelSampler(Sampler):
         if u < self.uniform_mix + self.goal_bias:
             return np.asarray(active_target(obs), dtype=np.float32).copy()   # a copy: obs may be live views
         return self.model_action(obs)
+
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        """The next ``k`` samples ``(k, d)`` float32 from the one mixture, for the trees they extend
+        (:func:`batch_active_trees`), the model's from one forward over the tree as it stands
+        (:meth:`model_batch`). The draws: ``k`` choices (``rng.random(k)``), the uniform samples'
+        values (``rng.random((u, d))``), then the model's; so ``act_batch(obs, 1)`` draws exactly
+        what ``act(obs)`` draws. With the adaptive share, one share for the batch (read from ``obs``),
+        and each sample is scored at the next observation (:meth:`AdaptiveShare.chose_batch`)."""
+        if np.shape(obs["start"])[-1] != self.state_dim:
+            self.check_observation(obs)
+        k = int(k)
+        trees = batch_active_trees(obs, k)
+        u = self.rng.random(k)
+        adaptive = self.adaptive
+        p_uniform = self.uniform_mix if adaptive is None else 1.0 - self.goal_bias - adaptive.observe(obs)
+        uniform = u < p_uniform
+        model = u >= p_uniform + self.goal_bias
+        out = np.empty((k, self.state_dim), dtype=np.float32)
+        nu = int(np.count_nonzero(uniform))
+        if nu:
+            out[uniform] = (self.low + self._range * self.rng.random((nu, self.state_dim))).astype(np.float32)
+        goal = ~(uniform | model)
+        if goal.any():
+            ends = np.stack([np.asarray(obs["goal"], np.float32), np.asarray(obs["start"], np.float32)])
+            out[goal] = ends[trees[goal]]
+        if model.any():
+            out[model] = self.model_batch(obs, trees[model])
+        if adaptive is not None:
+            adaptive.chose_batch(np.where(uniform, UNIFORM, np.where(model, MODEL, OTHER)), out)
+        return out
+
+    def model_batch(self, obs: Mapping, trees: np.ndarray) -> np.ndarray:
+        """The model's samples ``(m, d)`` float32 (finished: wrapped, clipped) for the trees ``trees``
+        ``(m,)`` of one observation, in order. This default calls :meth:`model_action` per sample, each
+        with its tree active; a model that draws a batch from one forward overrides it (drawing, for one
+        sample, what :meth:`model_action` draws)."""
+        view = dict(obs)
+        out = np.empty((len(trees), self.state_dim), dtype=np.float32)
+        for j in range(len(trees)):
+            view["active_tree"] = trees[j:j + 1]
+            out[j] = self.model_action(view)
+        return out
 
     def _act_adaptive(self, obs: Mapping, u: float) -> np.ndarray:
         """:meth:`act` with the model's share from :class:`AdaptiveShare` (the same draws)."""

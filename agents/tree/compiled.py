@@ -545,6 +545,29 @@ def mixture_after_rows(i0, n, nodes, node_features, parents, states, tree_id, se
     return node_mixture(keys[:n], q, active, inv_temperature, _w2(flat, layout, 32), _w1(flat, layout, 33),
                         _w1(flat, layout, 0))
 
+
+@jit
+def mixtures_after_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                        counts, periodic, flags, flat, layout, ends, actives, inv_temperature):
+    """A batch's forward in one compiled call: embed the observation's rows ``i0..n-1`` once, then the node
+    mixture of each tree in ``actives`` (int64): running sums ``(len(actives), n)`` and shifts
+    ``(len(actives), d)``. Row ``a`` is what :func:`mixture_after_rows` gives for tree ``actives[a]`` (the
+    same compiled functions in the same order, so the same floats)."""
+    _embed_new_rows(i0, n, nodes, node_features, parents, states, tree_id, sender, keys, offsets, log_sigma, sums,
+                    counts, periodic, flags, flat, layout)
+    A, d = actives.shape[0], states.shape[1]
+    cumulative = np.empty((A, n))
+    shifts = np.empty((A, d))
+    for a in range(A):
+        q = tree_context(ends, actives[a], sums, counts, flags[4] != 0, _w2(flat, layout, 28), _w1(flat, layout, 29),
+                         _w2(flat, layout, 30), _w1(flat, layout, 31))
+        _, c, s = node_mixture(keys[:n], q, actives[a], inv_temperature, _w2(flat, layout, 32), _w1(flat, layout, 33),
+                               _w1(flat, layout, 0))
+        cumulative[a] = c
+        shifts[a] = s
+    return cumulative, shifts
+
+
 # ---------------------------------------------------------------------------- the pendulum's scorer
 @jit(inline=True)
 def _sin_cos_into(out, r, o, v, cols):
@@ -775,5 +798,5 @@ def scorer_candidate_logits(cands, n, active, multi_tree, states, tree_id, h_las
     out = np.dot(hid, w3) + b3
     return out[:, 0]
 
-__all__ = ["PACKED_WEIGHTS", "context_after_rows", "embed_rows", "mixture_after_rows", "node_mixture", "pack_weights", "scorer_candidate_logits", "scorer_embed_rows",
+__all__ = ["PACKED_WEIGHTS", "context_after_rows", "embed_rows", "mixture_after_rows", "mixtures_after_rows", "node_mixture", "pack_weights", "scorer_candidate_logits", "scorer_embed_rows",
            "tree_context"]

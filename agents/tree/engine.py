@@ -32,6 +32,7 @@ from agents.tree.compiled import (
     context_after_rows,
     embed_rows,
     mixture_after_rows,
+    mixtures_after_rows,
     node_mixture,
     pack_weights,
     scorer_candidate_logits,
@@ -238,6 +239,22 @@ class IncrementalTreeGNN(_Engine):
                                  self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
                                  self.periodic, self._flags, self._flat, self._layout, ends, int(active),
                                  1.0 / float(temperature))
+        self.n = n
+        return out
+
+    def grown_mixtures(self, obs: Mapping[str, np.ndarray], rows: tuple[int, int], actives: np.ndarray,
+                       temperature: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`grown_mixture` of several trees from one embedding of the new rows, in one compiled call (a
+        batch's forward): running sums ``(len(actives), n)`` and shifts ``(len(actives), d)``, row ``a`` the
+        floats :meth:`grown_mixture` gives for tree ``actives[a]``."""
+        if not self.heads:
+            raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
+        i0, n = rows
+        ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
+        out = mixtures_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
+                                  self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                                  self.periodic, self._flags, self._flat, self._layout, ends,
+                                  np.asarray(actives, dtype=np.int64), 1.0 / float(temperature))
         self.n = n
         return out
 

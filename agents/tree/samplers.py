@@ -88,15 +88,17 @@ class TreeGNNSampler(_EngineSampler):
     read and the mixture computed once per ``proposals`` samples (the nodes added since are not
     candidates until the next refresh)."""
 
-    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals", "adaptive")
+    settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals", "adaptive", "samples_per_step")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNN,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, temperature: float = 1.0,
-                 sigma_scale: float = 1.0, proposals: int = 1, adaptive: bool | Mapping = False) -> None:
+                 sigma_scale: float = 1.0, proposals: int = 1, adaptive: bool | Mapping = False,
+                 samples_per_step: int = 1) -> None:
         if not (np.isfinite(temperature) and temperature > 0 and np.isfinite(sigma_scale) and sigma_scale > 0):
             raise ValueError(f"temperature and sigma_scale must be finite and > 0, got {temperature}, {sigma_scale}")
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive)
+                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive,
+                         samples_per_step=samples_per_step)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model)
         self.temperature, self.sigma_scale = float(temperature), float(sigma_scale)
@@ -134,20 +136,46 @@ class TreeGNNSampler(_EngineSampler):
         return e.states[m] + e.offsets[m, active] + shift + sigma * self.rng.standard_normal(e.d)
 
 
+    def mixtures(self, obs: Mapping, trees: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A batch's forward: the new rows embedded once, the node mixture of each tree of ``trees``
+        (running sums ``(len(trees), n)``, shifts ``(len(trees), d)``), in one compiled call."""
+        e = self.engine
+        return e.grown_mixtures(obs, e.new_rows(obs), trees, self.temperature)
+
+    def model_batch(self, obs: Mapping, trees: np.ndarray) -> np.ndarray:
+        """The batch's model samples from one forward (:meth:`mixtures`) over the tree as it stands: per
+        sample a node of its tree's mixture, then the Gaussian around its offset. Draws: the ``m`` node
+        choices (``rng.random(m)``), then the ``m`` Gaussians' normals (``(m, d)``); for one sample those
+        of :meth:`model_sample`, with the same floats."""
+        e = self.engine
+        needed = np.flatnonzero(np.bincount(trees, minlength=2))
+        cumulative, shifts = self.timed(lambda o: self.mixtures(o, needed), obs)
+        m, n = len(trees), cumulative.shape[1]
+        r = self.rng.random(m) * (1 - 1e-12)
+        z = self.rng.standard_normal((m, e.d))
+        x = np.empty((m, e.d))
+        for row, tree in enumerate(needed.tolist()):
+            mine = np.flatnonzero(trees == tree)
+            nodes = np.minimum(cumulative[row].searchsorted(r[mine], "right"), n - 1)
+            sigma = self.sigma_scale * np.exp(e.log_sigma[nodes, tree])
+            x[mine] = e.states[nodes] + e.offsets[nodes, tree] + shifts[row] + sigma * z[mine]
+        return self.finish(x)
+
+
 class TreeScorerSampler(_EngineSampler):
     """``candidates`` uniform states, one drawn with ``softmax(score / temperature)`` of the
     :class:`TreeGNNScorer` (each candidate scored with its nearest node of the active tree under
     the planner's metric: the node the planner would extend)."""
 
-    settings = ("uniform_mix", "goal_bias", "candidates", "temperature", "adaptive")
+    settings = ("uniform_mix", "goal_bias", "candidates", "temperature", "adaptive", "samples_per_step")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNScorer,
                  uniform_mix: float = 0.2, goal_bias: float = 0.05, candidates: int = 16,
-                 temperature: float = 1.0, adaptive: bool | Mapping = False) -> None:
+                 temperature: float = 1.0, adaptive: bool | Mapping = False, samples_per_step: int = 1) -> None:
         if int(candidates) < 1 or not (np.isfinite(temperature) and temperature > 0):
             raise ValueError(f"candidates must be >= 1 and temperature finite and > 0, got {candidates}, {temperature}")
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy(), adaptive=adaptive)
+                         periodic=model.periodic.numpy(), adaptive=adaptive, samples_per_step=samples_per_step)
         self.model = model.eval()
         self.engine = IncrementalTreeScorer(model)
         self.candidates, self.temperature = int(candidates), float(temperature)
@@ -172,13 +200,14 @@ class TreeCVAESampler(_BatchDecoder, ModelSampler):
     """Ichter et al.'s CVAE: decodes ``proposals`` states per forward pass for the problem
     (start, goal, obstacles) and spends them over the next steps; it does not read the tree."""
 
-    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive")
+    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive", "samples_per_step")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeCVAE,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 32,
-                 adaptive: bool | Mapping = False) -> None:
+                 adaptive: bool | Mapping = False, samples_per_step: int = 1) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive)
+                         periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive,
+                         samples_per_step=samples_per_step)
         self.model = model.eval()
 
     def refresh_key(self, obs: Mapping):
@@ -194,13 +223,14 @@ class TreeGNNCVAESampler(_BatchDecoder, _EngineSampler):
     the decoder turns latent draws and that context into the next samples: ``proposals`` of
     them per forward, handed out one per step."""
 
-    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive")
+    settings = ("uniform_mix", "goal_bias", "proposals", "adaptive", "samples_per_step")
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None, *, model: TreeGNNCVAE,
                  uniform_mix: float = 0.25, goal_bias: float = 0.0, proposals: int = 1,
-                 adaptive: bool | Mapping = False) -> None:
+                 adaptive: bool | Mapping = False, samples_per_step: int = 1) -> None:
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
-                         periodic=model.gnn.periodic.numpy(), proposals=proposals, adaptive=adaptive)
+                         periodic=model.gnn.periodic.numpy(), proposals=proposals, adaptive=adaptive,
+                         samples_per_step=samples_per_step)
         self.model = model.eval()
         self.engine = IncrementalTreeGNN(model.gnn, heads=False)     # it reads the tree sums only
 

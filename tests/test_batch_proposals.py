@@ -1,0 +1,84 @@
+"""A learned sampler's batches (``samples_per_step=K``): ``K`` samples from one forward over the tree.
+
+Oracles: one sample of a batch is exactly one :meth:`act` (the same draws, the adaptive share scored the
+same way), a batch's forward over several trees is each tree's own forward, and a batched sampler plans
+with the env of its batch size, deterministically.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.registry import load_sampler
+from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+from gnn_mp_envs.registration import task_spec
+
+
+def _env(task: str, **kwargs):
+    return gym.make(task_spec(task).env_id, split="val", disable_env_checker=True, **kwargs)
+
+
+@pytest.mark.parametrize("task, name, settings", [
+    ("maze2d", "gnn", {}), ("maze2d", "gnn", {"adaptive": True}), ("maze2d", "gnn-cvae", {"proposals": 4}),
+    ("maze2d", "cvae", {}), ("panda-mbm", "gnn", {"goal_bias": 0.05}), ("arm", "gnn", {"adaptive": True})])
+def test_a_batch_of_one_is_one_act(task, name, settings):
+    """Two envs plan the same problem, one driven by ``act``, one by ``act_batch(obs, 1)`` of a sampler
+    with the same seed: the same actions at every step (so the same trees), the adaptive share's
+    scoring of a batch of one included."""
+    envs = [_env(task), _env(task)]
+    obs = [env.reset(seed=0, options={"index": 1})[0] for env in envs]
+    samplers = [load_sampler(name, task=task, seed=5, **settings) for _ in envs]
+    for sampler in samplers:
+        sampler.reset(5)
+    for step in range(60):
+        a = samplers[0].act(obs[0])
+        b = samplers[1].act_batch(obs[1], 1)
+        assert b.shape == (1, len(a)) and b.dtype == np.float32
+        np.testing.assert_array_equal(a, b[0], err_msg=f"step {step}")
+        results = [env.step(action) for env, action in zip(envs, (a, b[0]))]
+        obs = [r[0] for r in results]
+        if results[0][2] or results[0][3]:
+            break
+    assert step > 5
+
+
+def test_a_batch_forward_over_both_trees_is_each_trees_forward():
+    """:meth:`IncrementalTreeGNN.grown_mixtures` of trees (0, 1) in one call gives, row by row, the floats
+    of :meth:`grown_mixture` for each tree alone (fresh engines, the same grown BiRRT tree)."""
+    env = _env("panda-mbm")
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        obs = env.step(rng.uniform(env.action_space.low, env.action_space.high).astype(np.float32))[0]
+    assert int(obs["num_nodes"][0]) > 10
+    assert set(obs["node_features"][:int(obs["num_nodes"][0]), -1].tolist()) == {0.0, 1.0}
+    batch = load_sampler("gnn", task="panda-mbm", seed=0)
+    cumulative, shifts = batch.engine.grown_mixtures(obs, batch.engine.new_rows(obs), np.array([0, 1]), 0.7)
+    for tree in (0, 1):
+        alone = load_sampler("gnn", task="panda-mbm", seed=0)
+        _, c, s = alone.engine.grown_mixture(obs, alone.engine.new_rows(obs), tree, 0.7)
+        np.testing.assert_array_equal(cumulative[tree], c)
+        np.testing.assert_array_equal(shifts[tree], s)
+
+
+@pytest.mark.parametrize("task", ["maze2d", "panda-mbm"])
+def test_a_batched_learned_sampler_plans_with_its_batch_and_repeats_itself(task):
+    """``samples_per_step=16``: the benchmark's env of that batch size, every sample consumed by the
+    planner counted, the same counters from the same seed twice; K=1 stays the default."""
+    assert load_sampler("gnn", task=task, seed=0).samples_per_step == 1
+    sampler = load_sampler("gnn", task=task, seed=0, samples_per_step=16)
+    assert sampler.samples_per_step == 16
+    env = evaluation_env(task, "val", samples_per_step=16)
+    first = [plan_problem(env, sampler, i, 0) for i in range(3)]
+    again = [plan_problem(env, sampler, i, 0) for i in range(3)]
+    assert all(r.success for r in first)
+    assert [(r.iterations, r.collision_checks) for r in first] == [(r.iterations, r.collision_checks) for r in again]
+    env.close()
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "4", 10**9])
+def test_a_bad_batch_size_is_refused_in_one_line(bad):
+    with pytest.raises(ValueError, match="samples_per_step must be an integer"):
+        load_sampler("gnn", task="maze2d", seed=0, samples_per_step=bad)
