@@ -196,9 +196,10 @@ def test_a_setting_overrides_the_one_stored_with_the_weights(tmp_path):
     assert exc.value.code == 2
 
 
-@pytest.mark.parametrize("flag", [["--out", "elsewhere"], ["--out", "results"], ["--no-ompl"], ["--no-render"]])
+@pytest.mark.parametrize("flag", [["--out", "elsewhere"], ["--out", "results"], ["--no-ompl"], ["--no-vamp"],
+                                  ["--no-render"]])
 def test_suite_only_flags_without_a_suite_are_refused_in_one_line(flag, capsys):
-    """A one-task run writes only --json/--plot/--render: a suite's --out (or --no-ompl, --no-render)
+    """A one-task run writes only --json/--plot/--render: a suite's --out (or --no-ompl, --no-vamp, --no-render)
     given without --suite is refused in one line before anything runs, not silently ignored."""
     code = cli.main(["benchmark", "--samplers", "uniform", "--problems", "1", "--no-progress", *flag])
     err = capsys.readouterr().err.strip().splitlines()

@@ -39,7 +39,7 @@ def test_the_help_names_every_built_in_task():
 
 def test_the_quickstart_flag_table_covers_every_flag_of_the_benchmark():
     """Every flag ``gnn-mp benchmark --help`` lists has a row of its own, or is named in one (the
-    suite's --out, --no-ompl, --no-render; --import's alias)."""
+    suite's --out, --no-ompl, --no-vamp, --no-render; --import's alias)."""
     table = flag_table("quickstart.md")
     text = (ROOT / "docs" / "quickstart.md").read_text()
     rows = "\n".join(line for line in text.splitlines() if line.startswith("| `--"))

@@ -289,6 +289,21 @@ def test_the_benchmark_rechecks_the_rows_paths(fake_vamp_python, monkeypatch, tm
     assert "0.001 [0.001, 0.001]" in vamp_line             # VAMP's 1.234 us, in ms with three decimals
 
 
+def test_a_suite_adds_vamps_rows_where_vamp_is_built_and_not_with_no_vamp(fake_vamp_python, monkeypatch, tmp_path):
+    """A suite entry's ``vamp`` planners become rows when VAMP is built (here the stand-in), beside the
+    entry's own rows, in its JSON and table; ``with_vamp=False`` (``--no-vamp``) leaves them out."""
+    import json
+    from train.benchmark import suites
+    monkeypatch.setenv(PYTHON_ENV, fake_vamp_python)
+    monkeypatch.setitem(suites.SUITES, "vamp-test", [suites.SuiteEntry("panda-mbm", ["uniform"], problems=1,
+                                                                         vamp=("rrtconnect",))])
+    for with_vamp, rows in ((None, ["uniform", "vamp-rrtconnect"]), (False, ["uniform"])):
+        out = tmp_path / str(with_vamp)
+        suites.run_suite("vamp-test", out, progress=False, with_ompl=False, with_vamp=with_vamp)
+        assert list(json.loads((out / "panda-mbm.json").read_text())["results"]) == rows
+        assert ("vamp-rrtconnect" in (out / "panda-mbm.txt").read_text()) is (with_vamp is None)
+
+
 # ---------------------------------------------------------------------- with VAMP itself
 @needs_vamp
 def test_our_environment_is_vamps_own_loaders(tmp_path):

@@ -164,9 +164,9 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     terminate_as_interrupt()
     suite = from_namespace(SuiteOptions, ns)
-    if suite.suite is None and (suite.out is not None or not suite.ompl or not suite.render_images):
+    if suite.suite is None and (suite.out is not None or not suite.ompl or not suite.vamp or not suite.render_images):
         # a one-task run writes only what --json / --plot / --render ask for: refuse rather than write nothing
-        raise UsageError("--out, --no-ompl and --no-render apply to --suite only; for one task give "
+        raise UsageError("--out, --no-ompl, --no-vamp and --no-render apply to --suite only; for one task give "
                          "--json FILE, --plot FILE or --render DIR (OMPL rows: --samplers ompl-rrt,...)")
     if suite.suite is not None:
         # a suite names its own tasks, samplers, problems and outputs: refuse one task's flags, not ignore them
@@ -185,7 +185,8 @@ def cmd_benchmark(ns: argparse.Namespace) -> int:
             out = suite.out or SuiteOptions.DEFAULT_OUT
             renders = (args.render or out / "renders") if suite.render_images else None
             bm.run_suite(suite.suite, out, seed=args.seed, workers=args.workers, progress=args.progress,
-                         with_ompl=None if suite.ompl else False, render=renders)
+                         with_ompl=None if suite.ompl else False, render=renders,
+                         with_vamp=None if suite.vamp else False)
             return 0
         bm.benchmark(args)
     except bm.BenchmarkIncomplete as exc:      # not a usage error: exit 1 (130: interrupted)

@@ -20,6 +20,7 @@ from gnn_mp_envs.utils.io import atomic_write_text
 from train.args import arg
 from train.benchmark.args import (
     OMPL_PREFIX,
+    VAMP_PREFIX,
     BenchmarkArgs,
     BenchmarkError,
     ompl_available,
@@ -38,6 +39,7 @@ class SuiteOptions:
                             "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
     out: Path | None = arg(None, "output directory of --suite (default: results)")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
+    vamp: bool = arg(True, "--suite: skip VAMP's rows even if VAMP is built (docs/mbm.md)", flag="--no-vamp")
     render_images: bool = arg(True, "--suite: skip tree-growth images (else written to --render DIR, default "
                               "OUT/renders)", flag="--no-render")
 
@@ -55,6 +57,8 @@ class SuiteEntry:
     max_nodes: int | None = None
     scene: str | None = None           # None: the task's benchmark scene (TaskSpec.benchmark_scene)
     ompl: tuple[str, ...] = ()
+    #: VAMP's planners (rows ``vamp-<planner>``) added when VAMP is built (:func:`vamp_available`)
+    vamp: tuple[str, ...] = ()
     split: str = "test"
     checker: str | None = None         # None: the task's default (TaskSpec.checkers[0], where it has several)
     #: also report as the field does: <name>_field.txt (solved as every table counts it, median / p95 time,
@@ -84,16 +88,19 @@ SUITES: dict[str, list[SuiteEntry]] = {
     ],
     # MotionBenchMaker's problems (docs/mbm.md): the whole test split of each robot, 30 problems of
     # each of the seven scenes, reported as the field reports (Planner Arena log in OUT/ompl/), with
-    # the sphere checker (the default) and, for the Panda, the same rows with pybullet's. The learned
+    # the sphere checker (the default) and, for the Panda, the same rows with pybullet's; VAMP's
+    # RRTConnect beside them where VAMP is built (docs/mbm.md). The learned
     # rows trained on five scenes: bookshelf_thin and cage are their held-out scenes.
     "mbm": [
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae", "rl-ppo"], problems=210,
-                   ompl=("rrtconnect",), field=True),
+                   ompl=("rrtconnect",), vamp=("rrtconnect",), field=True),
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
                    field=True, checker="pybullet"),
         # the UR5's and the Fetch's test splits without the problems their checkers call invalid (docs/mbm.md)
-        SuiteEntry("ur5-mbm", ["uniform", "goal-bias"], problems=206, ompl=("rrtconnect",), field=True),
-        SuiteEntry("fetch-mbm", ["uniform", "goal-bias"], problems=197, ompl=("rrtconnect",), field=True),
+        SuiteEntry("ur5-mbm", ["uniform", "goal-bias"], problems=206, ompl=("rrtconnect",), vamp=("rrtconnect",),
+                   field=True),
+        SuiteEntry("fetch-mbm", ["uniform", "goal-bias"], problems=197, ompl=("rrtconnect",), vamp=("rrtconnect",),
+                   field=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
@@ -124,24 +131,30 @@ SUITES["ood-val"] = _ood_entries("val")
 
 
 def run_suite(name: str, out: Path, seed: int = 0, workers: int = 1, progress: bool = True,
-              with_ompl: bool | None = None, render: Path | None = None) -> dict[str, dict[str, Any]]:
+              with_ompl: bool | None = None, render: Path | None = None,
+              with_vamp: bool | None = None) -> dict[str, dict[str, Any]]:
     """Run a named suite; writes ``{task}.json``, ``{task}.png``, ``{task}.txt`` and ``summary.md`` to
-    ``out`` and tree-growth images to ``render`` (None: none)."""
+    ``out`` and tree-growth images to ``render`` (None: none). ``with_ompl`` / ``with_vamp``: add the
+    entries' OMPL / VAMP rows (None: where installed / built)."""
     if name not in SUITES:
         raise BenchmarkError(f"unknown suite {name!r}; known: {', '.join(sorted(SUITES))}")
     if with_ompl is None:
         with_ompl = ompl_available()
+    if with_vamp is None:
+        from gnn_mp_envs.baselines.vamp_runner import vamp_available
+        with_vamp = vamp_available()
     out.mkdir(parents=True, exist_ok=True)
     # one pool for every task of the suite (each worker pays its imports once), no larger than its largest task
     workers = min(workers, max(e.problems * len(e.samplers) for e in SUITES[name]))
     if workers > 1:
         with WorkerPool(workers) as pool:
-            return _run_entries(name, out, seed, workers, progress, with_ompl, render, pool)
-    return _run_entries(name, out, seed, workers, progress, with_ompl, render, None)
+            return _run_entries(name, out, seed, workers, progress, (with_ompl, with_vamp), render, pool)
+    return _run_entries(name, out, seed, workers, progress, (with_ompl, with_vamp), render, None)
 
 
-def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, with_ompl: bool,
+def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, others: tuple[bool, bool],
                  render: Path | None, pool: WorkerPool | None) -> dict[str, dict[str, Any]]:
+    with_ompl, with_vamp = others
     reports: dict[str, dict[str, Any]] = {}
     tables: list[str] = []
     suite_start = time.perf_counter()
@@ -149,6 +162,8 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
         samplers = list(entry.samplers)
         if with_ompl:
             samplers += [OMPL_PREFIX + p for p in entry.ompl]
+        if with_vamp:
+            samplers += [VAMP_PREFIX + p for p in entry.vamp]
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers, split=entry.split,
                              checker=entry.checker,
