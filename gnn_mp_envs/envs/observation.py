@@ -116,16 +116,26 @@ def _write_row(i: int, states: np.ndarray, tree_id: np.ndarray, parents: np.ndar
     num_nodes[0] = i + 1
 
 
+def _write_rows(first: int, stop: int, states: np.ndarray, tree_id: np.ndarray, parents: np.ndarray,
+                endpoints: np.ndarray, nodes: np.ndarray, node_features: np.ndarray, parent: np.ndarray,
+                mask: np.ndarray, num_nodes: np.ndarray) -> None:
+    """:func:`_write_row` for rows ``first..stop-1`` (a batch's new nodes: one call, not one per node)."""
+    for i in range(first, stop):
+        _write_row(i, states, tree_id, parents, endpoints, nodes, node_features, parent, mask, num_nodes)
+
+
 #: :func:`_write_row` compiled (numba), or None without numba.
 compiled_write_row = lazy_njit(_write_row)
+#: :func:`_write_rows` compiled (numba), or None without numba.
+compiled_write_rows = lazy_njit(_write_rows, calls={"_write_row": compiled_write_row})
 
 
-def _row_writer(problem: Problem | None):
-    """The compiled row write for ``problem`` where its features are plain differences; None (numpy's
-    path, e.g. the pendulum's wrapped angles) otherwise."""
+def _row_writers(problem: Problem | None) -> tuple:
+    """The compiled writes of one row and of a run of rows for ``problem`` where its features are plain
+    differences; ``(None, None)`` (numpy's path, e.g. the pendulum's wrapped angles) otherwise."""
     if problem is None or type(problem).difference is not Problem.difference:
-        return None
-    return compiled_write_row()
+        return None, None
+    return compiled_write_row(), compiled_write_rows()
 
 
 class GraphObservation:
@@ -144,7 +154,7 @@ class GraphObservation:
         self.active_tree = np.zeros(1, dtype=np.int64)
         self.obstacles = np.zeros(obstacles, dtype=np.float32)
         self._problem: Problem | None = None
-        self._write = None
+        self._write = self._write_run = None
         #: The feature columns ``[x_init - x_n, x_goal - x_n]`` as a (N, 2, d) view: both differences
         #: of a new node are computed and written in one operation each.
         self._differences = self.node_features[:, :2 * state_dim].reshape(max_nodes, 2, state_dim)
@@ -156,12 +166,12 @@ class GraphObservation:
 
     def __getstate__(self) -> dict:
         # the difference view is rebuilt on the copy's own arrays (a copied view would be detached)
-        return {k: v for k, v in self.__dict__.items() if k not in ("_differences", "_write")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_differences", "_write", "_write_run")}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._differences = self.node_features[:, :2 * self.state_dim].reshape(self.max_nodes, 2, self.state_dim)
-        self._write = _row_writer(self._problem)
+        self._write, self._write_run = _row_writers(self._problem)
 
     def reset(self, problem: Problem, tree: TreeStore, obstacle_rows: np.ndarray | None = None) -> None:
         """Clear the rows used by the previous episode and write the roots of ``tree`` and the
@@ -185,7 +195,7 @@ class GraphObservation:
             self.obstacles[:k, 1:] = obstacle_rows
         self._problem = problem
         self._endpoints = np.stack([problem.start, problem.goal])
-        self._write = _row_writer(problem)
+        self._write, self._write_run = _row_writers(problem)
         for i in range(len(tree)):
             self.add(tree, i)
 
@@ -202,6 +212,16 @@ class GraphObservation:
         self.parent[i] = tree.parent[i]
         self.mask[i] = 1
         self.num_nodes[0] = i + 1
+
+    def add_rows(self, tree: TreeStore, first: int, stop: int) -> None:
+        """Write nodes ``first..stop-1`` of ``tree`` (what a step added), in one compiled call where
+        :meth:`add` compiles."""
+        if self._write_run is not None:
+            self._write_run(first, stop, tree.states, tree.tree_id, tree.parent, self._endpoints, self.nodes,
+                            self.node_features, self.parent, self.mask, self.num_nodes)
+            return
+        for i in range(first, stop):
+            self.add(tree, i)
 
     def as_dict(self, copy: bool = True) -> dict:
         """The observation; ``copy=False`` returns live views that later steps overwrite."""

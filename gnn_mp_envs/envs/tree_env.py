@@ -249,10 +249,8 @@ class TreePlanningEnv(gym.Env):
         problem, obs = self.problem, self._obs
         checks_before = problem.collision_checks
         result = planner.run(samples if samples.ndim == 2 else samples[None], self.max_steps - planner.iterations)
-        if result.added:
-            tree = planner.tree
-            for i in result.added:
-                obs.add(tree, i)
+        if result.added:                          # appended in index order: one run of rows
+            obs.add_rows(planner.tree, result.added[0], result.added[-1] + 1)
         obs.active_tree[0] = planner.active_tree
         reward = (-self.step_penalty * result.consumed
                   - self.collision_check_cost * (problem.collision_checks - checks_before)
