@@ -106,7 +106,9 @@ class JointSpaceProblem(Problem):
     def check_motion(self, a: np.ndarray, b: np.ndarray) -> bool:
         """The checker's edge check (the states every ``resolution``, ``b`` included, in
         :attr:`bisection` order, stopping at the first invalid one), counted; sequentially it counts
-        exactly as :meth:`Problem.check_motion`."""
+        exactly as :meth:`Problem.check_motion`. ``a`` is assumed valid for this checker and not tested
+        (as OMPL's motion validators assume): a state pybullet calls free may be invalid for the sphere
+        model's margin, so ``check_motion(a, b)`` and ``check_motion(b, a)`` may differ when one end is."""
         a, b = self._state_arg(a, "a"), self._state_arg(b, "b")
         self.edges_checked += 1
         valid, checks = self.checker.check_motion(self.scene, a, b, self.resolution, self._low, self._high,
