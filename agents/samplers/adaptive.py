@@ -115,19 +115,30 @@ class AdaptiveShare:
             return tree.share
         useful = self._new_cells(obs, n)
         if source is not None and source != OTHER:
-            # both sources' statistics decay; the pulled one gains a pull and its outcome (plain floats)
-            pulls, hits, discount = tree.pulls, tree.useful, self.discount
-            pulls[0] *= discount
-            pulls[1] *= discount
-            hits[0] *= discount
-            hits[1] *= discount
-            pulls[source] += 1.0
-            hits[source] += float(useful)
-            rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
-            relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
-            tree.share = self.floor + (self.top - self.floor) * relative ** self.power
+            self._pull(source, useful)
+            self._update_share()
         tree.pending = None
         return tree.share
+
+    def _pull(self, source: int, useful: bool) -> None:
+        """One scored sample of the current tree: both sources' statistics decay, the pulled one gains
+        a pull and its outcome (plain floats)."""
+        tree = self._tree
+        pulls, hits, discount = tree.pulls, tree.useful, self.discount
+        pulls[0] *= discount
+        pulls[1] *= discount
+        hits[0] *= discount
+        hits[1] *= discount
+        pulls[source] += 1.0
+        hits[source] += float(useful)
+
+    def _update_share(self) -> None:
+        """The model's share of the current tree from its sources' discounted success rates."""
+        tree = self._tree
+        hits, pulls = tree.useful, tree.pulls
+        rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
+        relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
+        tree.share = self.floor + (self.top - self.floor) * relative ** self.power
 
     def chose(self, source: int) -> None:
         """The source of the sample just handed out (scored at the next :meth:`observe` of its tree)."""
@@ -151,45 +162,35 @@ class AdaptiveShare:
         first = tree.seen
         new = self._new_cell_rows(obs, n)
         useful = np.zeros(len(sources), dtype=bool)
-        if new.any():
-            rows = np.asarray(obs["nodes"][first:n], np.float64)[new]
+        if any(new):
+            rows = np.asarray(obs["nodes"][first:n], np.float64)[np.array(new)]
             if len(sources) == 1:
                 useful[0] = True
             else:
                 scale = np.array([a[1] for a in self.axes])
                 diff = (rows[:, None, :] - samples[None, :, :]) * scale
                 useful[np.unique(np.argmin((diff * diff).sum(-1), axis=1))] = True
-        pulls, hits, discount = tree.pulls, tree.useful, self.discount
-        scored = False
-        for source, hit in zip(sources.tolist(), useful.tolist()):
-            if source == OTHER:
-                continue
-            pulls[0] *= discount
-            pulls[1] *= discount
-            hits[0] *= discount
-            hits[1] *= discount
-            pulls[source] += 1.0
-            hits[source] += float(hit)
-            scored = True
+        scored = [(source, hit) for source, hit in zip(sources.tolist(), useful.tolist()) if source != OTHER]
+        for source, hit in scored:
+            self._pull(source, hit)
         if scored:
-            rate_model, rate_uniform = hits[MODEL] / pulls[MODEL], hits[UNIFORM] / pulls[UNIFORM]
-            relative = 1.0 if rate_model >= rate_uniform else rate_model / max(rate_uniform, 1e-12)
-            tree.share = self.floor + (self.top - self.floor) * relative ** self.power
+            self._update_share()
 
-    def _new_cell_rows(self, obs: Mapping, n: int) -> np.ndarray:
+    def _new_cell_rows(self, obs: Mapping, n: int) -> list[bool]:
         """:meth:`_new_cells` row by row: for rows ``seen..n-1``, whether each reached a cell not reached
         before (by an earlier row too)."""
         stats = self._tree
         if n <= stats.seen:
-            return np.zeros(0, dtype=bool)
+            return []
+        # float32 rows as Python floats: the same values as a float64 copy, without the copy
         rows = np.asarray(obs["nodes"][stats.seen:n]).tolist()
         trees = np.asarray(obs["node_features"][stats.seen:n, -1]).tolist()
         cells, top, floor, visited = self.cells, self.cells - 1, math.floor, stats.visited
-        out = np.zeros(len(rows), dtype=bool)
+        out = [False] * len(rows)
         for r, (tree, row) in enumerate(zip(trees, rows)):
             key = [tree]
             for x, (low, scale, periodic) in zip(row, self.axes):
-                i = floor((x - low) * scale)
+                i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
                 key.append(i % cells if periodic else (0 if i < 0 else top if i > top else i))
             size = len(visited)
             visited.add(tuple(key))
@@ -199,22 +200,7 @@ class AdaptiveShare:
 
     def _new_cells(self, obs: Mapping, n: int) -> bool:
         """Mark the cells of rows ``seen..n-1`` of the current tree; whether any was new."""
-        stats = self._tree
-        if n <= stats.seen:
-            return False
-        # float32 rows as Python floats: the same values as a float64 copy, without the copy
-        rows = np.asarray(obs["nodes"][stats.seen:n]).tolist()
-        trees = np.asarray(obs["node_features"][stats.seen:n, -1]).tolist()
-        cells, top, floor, visited = self.cells, self.cells - 1, math.floor, stats.visited
-        size = len(visited)
-        for tree, row in zip(trees, rows):
-            key = [tree]
-            for x, (low, scale, periodic) in zip(row, self.axes):
-                i = floor((x - low) * scale)          # numpy's (rows - low) * scale, floored: the same floats
-                key.append(i % cells if periodic else (0 if i < 0 else top if i > top else i))
-            visited.add(tuple(key))
-        stats.seen = n
-        return len(visited) > size
+        return any(self._new_cell_rows(obs, n))
 
 
 class _TreeStats:
