@@ -39,6 +39,7 @@ BUDGET: dict[str, list[str]] = {
     "python -m tools.bench_arm": ["--problems", "2", "--raw-checks", "200", "--window", "100"],
     "python -m tools.bench_vec": ["--steps", "400", "--modes", "single,sync,async"],
     "python -m tools.tune_proposals": ["--problems", "2", "--repeats", "1"],
+    "python -m tools.tune_batch": ["--problems", "2", "--repeats", "1", "--batches", "1,2"],
     "python -m tools.rl_tree_swap": ["--problems", "2", "--max-steps", "200"],
     "python -m tools.compare_on_kinds": ["--problems", "2", "--workers", "1"],
     "python -m pytest": ["tests/test_architecture.py"],
