@@ -109,9 +109,9 @@ class SphereChecker:
         # a self pair moves relative to itself only through the joints that move one link and not the other
         ra, rb = reach[pairs[:, 0]], reach[pairs[:, 1]]
         pair_reach = np.where(rb == 0, ra, 0.0) + np.where(ra == 0, rb, 0.0)
-        # per self pair, the link that moves in the other's frame when one is below the other (-1: neither)
-        pair_moving = np.array([self._below(b_, a_) if self._below(b_, a_) >= 0 else self._below(a_, b_)
-                                for a_, b_ in pairs], dtype=np.int64)
+        # per self pair, the link that moves in the other's frame (-1: neither): the one below the other, else
+        # the one moved by every planned joint that moves the other (-1: each has a joint of its own)
+        pair_moving = np.array([self._moving(a_, b_, reach) for a_, b_ in pairs], dtype=np.int64)
         #: The sphere trees, the self pairs and the joints' levers.
         self.spheres = Spheres(link_root, self_root, model.nodes, model.first_child, model.child_count, pairs,
                                pair_moving, reach, pair_reach)
@@ -123,7 +123,8 @@ class SphereChecker:
         empty = np.zeros(0)
         self.scratch = Scratch(np.zeros(self.dof), np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
                                np.zeros((n, 3)), np.zeros(width * depth + 1, dtype=np.int64),
-                               np.zeros((width * 2 * depth + 1, 2), dtype=np.int64), empty.reshape(0, n + k),
+                               np.zeros((width * 2 * depth + 1, 2), dtype=np.int64),
+                               np.zeros((width * 2 * depth + 1, 3)), empty.reshape(0, n + k),
                                np.zeros(0, dtype=np.bool_), np.zeros((0, 2), dtype=np.int64), np.zeros(n),
                                np.zeros(k), np.zeros(n), np.zeros(k), np.zeros(k))
         self.memo = Memo(np.full((MEMO_STATES, self.dof), np.nan), np.zeros((MEMO_STATES, n + k)),
@@ -181,7 +182,8 @@ class SphereChecker:
             free_cells(la, lb, spheres.self_root[la], spheres.self_root[lb], grid_joints, low, step,
                        np.array([*dim, 1][:2], dtype=np.int64), floor, q.copy(), kin.parent, kin.origin_r,
                        kin.origin_t, kin.kind, kin.axis, kin.q_index, kin.q_fixed, spheres.nodes,
-                       spheres.first_child, spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack, free)
+                       spheres.first_child, spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack,
+                       scratch.pair_point, free)
             if not free.any():                  # always near contact at this floor: the walk decides
                 continue
             # cells to the nearest cell that is not free (in any joint); all free: as good as unbounded
@@ -196,6 +198,28 @@ class SphereChecker:
             size += room.size
         cells = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.int32)
         return Tables(at, joint, low_, step_, dim_, cells)
+
+    def _moving(self, a: int, b: int, reach: np.ndarray) -> int:
+        """The link of the self pair ``(a, b)`` that moves in the other's frame, -1: neither.
+
+        The one below the other; else, where the planned joints that move one link all move the other
+        too (a link on the torso beside the arm, or rigidly on the root: none), the other. Either way
+        the joints both share move both links as one rigid body, so the pair's relative motion is that
+        of a chain of the other link's own joints below a fixed link, the case
+        :func:`~gnn_mp_envs.robots.spheres.kinematics.motion_bounds` and
+        :func:`~gnn_mp_envs.robots.spheres.kinematics.rate` bound (``pair_reach``: those joints' levers)."""
+        below = self._below(b, a)
+        if below >= 0:
+            return below
+        below = self._below(a, b)
+        if below >= 0:
+            return below
+        ja, jb = reach[a] > 0, reach[b] > 0
+        if not np.any(jb & ~ja):            # b's joints all move a: a moves in b's frame
+            return a
+        if not np.any(ja & ~jb):
+            return b
+        return -1
 
     def _below(self, link: int, other: int) -> int:
         """``link`` if ``other`` is one of its ancestors, else -1."""

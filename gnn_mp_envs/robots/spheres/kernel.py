@@ -75,13 +75,15 @@ Tables = array_group("Tables", (("at", np.int64, 1), ("joint", np.int64, 2), ("l
 #: The scene: per obstacle its kind (:data:`KINDS`), centre, rotation, size, and the links it may touch.
 Obstacles = array_group("Obstacles", (("kind", np.int64, 1), ("centre", np.float64, 2), ("rot", np.float64, 3),
                                  ("size", np.float64, 2), ("exempt", np.bool_, 2)))
-#: Working space: the configuration, link frames and velocities, walk stacks, an edge's bounds per state
-#: (``gaps``, ``known``), the bisection queue and the edge's motion bounds per link and pair.
+#: Working space: the configuration, link frames and velocities, walk stacks (the pair walk's with its points
+#: in its first link's frame), an edge's bounds per state (``gaps``, ``known``), the bisection queue and the
+#: edge's motion bounds per link and pair.
 Scratch = array_group("Scratch", (("q", np.float64, 1), ("rot", np.float64, 3), ("trans", np.float64, 2),
                              ("omega", np.float64, 2), ("vel", np.float64, 2), ("stack", np.int64, 1),
-                             ("pair_stack", np.int64, 2), ("gaps", np.float64, 2), ("known", np.bool_, 1),
-                             ("queue", np.int64, 2), ("delta", np.float64, 1), ("pair_delta", np.float64, 1),
-                             ("curve", np.float64, 1), ("pair_curve", np.float64, 1), ("pair_cell", np.float64, 1)))
+                             ("pair_stack", np.int64, 2), ("pair_point", np.float64, 2), ("gaps", np.float64, 2),
+                             ("known", np.bool_, 1), ("queue", np.int64, 2), ("delta", np.float64, 1),
+                             ("pair_delta", np.float64, 1), ("curve", np.float64, 1), ("pair_curve", np.float64, 1),
+                             ("pair_cell", np.float64, 1)))
 #: The remembered edge ends: configurations (NaN: a row not valid), their walks' clearances per link and
 #: pair (-1: not walked) and ``meta`` = (rows filled, next row to write).
 Memo = array_group("Memo", (("q", np.float64, 2), ("clear", np.float64, 2), ("meta", np.int64, 1)))
@@ -130,43 +132,66 @@ def _dist2(cx, cy, cz, kind, ox, oy, oz, r00, r01, r02, r10, r11, r12, r20, r21,
 
 
 @jit(inline=True)
-def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_count, rot, trans, pair_stack):
+def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_count, rot, trans, pair_stack,
+               pair_point):
     """Whether a leaf under ``root_a`` (of link ``la``) and one under ``root_b`` (of ``lb``) are at most
     ``floor`` apart (``(True, ...)``), else ``(False, least)``: the least gap of the node pairs the walk
     pruned, a lower bound of every leaf pair's. Simultaneous descent from the roots, splitting the
-    larger of two nodes nearer than ``tau`` (at least ``floor``)."""
+    larger of two nodes nearer than ``tau`` (at least ``floor``).
+
+    The walk measures in ``la``'s frame: ``lb``'s node centres are moved into it once, when pushed
+    (``pair_point``, beside ``pair_stack``), and ``la``'s are used as stored, so a node pair costs a
+    subtraction and a root (the distance is the world one's: frames are rigid motions)."""
+    # lb's frame in la's: m = R_a^T R_b, u = R_a^T (t_b - t_a)
+    ex, ey, ez = trans[lb, 0] - trans[la, 0], trans[lb, 1] - trans[la, 1], trans[lb, 2] - trans[la, 2]
+    u0 = rot[la, 0, 0] * ex + rot[la, 1, 0] * ey + rot[la, 2, 0] * ez
+    u1 = rot[la, 0, 1] * ex + rot[la, 1, 1] * ey + rot[la, 2, 1] * ez
+    u2 = rot[la, 0, 2] * ex + rot[la, 1, 2] * ey + rot[la, 2, 2] * ez
+    m00 = rot[la, 0, 0] * rot[lb, 0, 0] + rot[la, 1, 0] * rot[lb, 1, 0] + rot[la, 2, 0] * rot[lb, 2, 0]
+    m01 = rot[la, 0, 0] * rot[lb, 0, 1] + rot[la, 1, 0] * rot[lb, 1, 1] + rot[la, 2, 0] * rot[lb, 2, 1]
+    m02 = rot[la, 0, 0] * rot[lb, 0, 2] + rot[la, 1, 0] * rot[lb, 1, 2] + rot[la, 2, 0] * rot[lb, 2, 2]
+    m10 = rot[la, 0, 1] * rot[lb, 0, 0] + rot[la, 1, 1] * rot[lb, 1, 0] + rot[la, 2, 1] * rot[lb, 2, 0]
+    m11 = rot[la, 0, 1] * rot[lb, 0, 1] + rot[la, 1, 1] * rot[lb, 1, 1] + rot[la, 2, 1] * rot[lb, 2, 1]
+    m12 = rot[la, 0, 1] * rot[lb, 0, 2] + rot[la, 1, 1] * rot[lb, 1, 2] + rot[la, 2, 1] * rot[lb, 2, 2]
+    m20 = rot[la, 0, 2] * rot[lb, 0, 0] + rot[la, 1, 2] * rot[lb, 1, 0] + rot[la, 2, 2] * rot[lb, 2, 0]
+    m21 = rot[la, 0, 2] * rot[lb, 0, 1] + rot[la, 1, 2] * rot[lb, 1, 1] + rot[la, 2, 2] * rot[lb, 2, 1]
+    m22 = rot[la, 0, 2] * rot[lb, 0, 2] + rot[la, 1, 2] * rot[lb, 1, 2] + rot[la, 2, 2] * rot[lb, 2, 2]
     least = UNBOUNDED
     top = 0
     pair_stack[0, 0] = root_a
     pair_stack[0, 1] = root_b
+    x, y, z = nodes[root_b, 0], nodes[root_b, 1], nodes[root_b, 2]
+    pair_point[0, 0] = u0 + m00 * x + m01 * y + m02 * z
+    pair_point[0, 1] = u1 + m10 * x + m11 * y + m12 * z
+    pair_point[0, 2] = u2 + m20 * x + m21 * y + m22 * z
     while top >= 0:
         na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
+        px, py, pz = pair_point[top, 0], pair_point[top, 1], pair_point[top, 2]
         top -= 1
-        x, y, z = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
-        u, v, w = nodes[nb_, 0], nodes[nb_, 1], nodes[nb_, 2]
-        dx = (trans[la, 0] + rot[la, 0, 0] * x + rot[la, 0, 1] * y + rot[la, 0, 2] * z
-              - trans[lb, 0] - rot[lb, 0, 0] * u - rot[lb, 0, 1] * v - rot[lb, 0, 2] * w)
-        dy = (trans[la, 1] + rot[la, 1, 0] * x + rot[la, 1, 1] * y + rot[la, 1, 2] * z
-              - trans[lb, 1] - rot[lb, 1, 0] * u - rot[lb, 1, 1] * v - rot[lb, 1, 2] * w)
-        dz = (trans[la, 2] + rot[la, 2, 0] * x + rot[la, 2, 1] * y + rot[la, 2, 2] * z
-              - trans[lb, 2] - rot[lb, 2, 0] * u - rot[lb, 2, 1] * v - rot[lb, 2, 2] * w)
-        g = math.sqrt(dx * dx + dy * dy + dz * dz) - nodes[na_, 3] - nodes[nb_, 3]
+        dx, dy, dz = nodes[na_, 0] - px, nodes[na_, 1] - py, nodes[na_, 2] - pz
+        ra, rb = nodes[na_, 3], nodes[nb_, 3]
+        g = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
         ca, cb = child_count[na_], child_count[nb_]
         if g > tau or (g > floor and ca == 0 and cb == 0):
             least = g if g < least else least
             continue
         if ca == 0 and cb == 0:
             return True, least
-        if cb == 0 or (ca > 0 and nodes[na_, 3] >= nodes[nb_, 3]):
+        if cb == 0 or (ca > 0 and ra >= rb):
             for c in range(first_child[na_], first_child[na_] + ca):
                 top += 1
                 pair_stack[top, 0] = c
                 pair_stack[top, 1] = nb_
+                pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = px, py, pz
         else:
             for c in range(first_child[nb_], first_child[nb_] + cb):
                 top += 1
                 pair_stack[top, 0] = na_
                 pair_stack[top, 1] = c
+                x, y, z = nodes[c, 0], nodes[c, 1], nodes[c, 2]
+                pair_point[top, 0] = u0 + m00 * x + m01 * y + m02 * z
+                pair_point[top, 1] = u1 + m10 * x + m11 * y + m12 * z
+                pair_point[top, 2] = u2 + m20 * x + m21 * y + m22 * z
     return False, least
 
 
@@ -332,7 +357,7 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
         else:
             hit, least = _pair_walk(la, lb, spheres.self_root[la], spheres.self_root[lb], tau, 0.0, spheres.nodes,
                                     spheres.first_child, spheres.child_count, scratch.rot, scratch.trans,
-                                    scratch.pair_stack)
+                                    scratch.pair_stack, scratch.pair_point)
             if hit:
                 return True
             if rec >= 0:
@@ -689,7 +714,7 @@ def goal_distance(a, b):
 # ---------------------------------------------------------------------- building the tables
 @jit
 def free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, q, parent, origin_r, origin_t, kind, axis,
-                q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, out):
+                q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, pair_point, out):
     """``out[c]``: no leaf of link ``la``'s tree at ``root_a`` comes within ``floor`` of one of ``lb``'s
     at the centre of cell ``c`` of the grid of ``dim[k]`` cells of ``step[k]`` from ``low[k]`` over
     joints ``joints`` (row-major; ``joints[1] < 0``: one joint) with the other joints at ``q``."""
@@ -701,5 +726,5 @@ def free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, q, parent,
             q[joints[1]] = low[1] + (i1 + 0.5) * step[1]
         forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
         hit, _ = _pair_walk(la, lb, root_a, root_b, floor, floor, nodes, first_child, child_count, rot, trans,
-                            pair_stack)
+                            pair_stack, pair_point)
         out[c] = not hit
