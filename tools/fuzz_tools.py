@@ -50,6 +50,7 @@ TOOLS: dict[str, tuple[str, ...]] = {
     "scene_gallery": ("--out", "{scratch}/gallery.png"),
     "spherize": ("--robot", "panda", "--out", "{scratch}/spheres.npz"),
     "tune_adaptive": (),
+    "tune_batch": (),
     "tune_proposals": (),
     "vamp_table": (),
 }
