@@ -99,8 +99,8 @@ SUITES: dict[str, list[SuiteEntry]] = {
         # the UR5's and the Fetch's test splits without the problems their checkers call invalid (docs/mbm.md)
         SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn"], problems=206, ompl=("rrtconnect",), vamp=("rrtconnect",),
                    field=True),
-        SuiteEntry("fetch-mbm", ["uniform", "goal-bias"], problems=197, ompl=("rrtconnect",), vamp=("rrtconnect",),
-                   field=True),
+        SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, ompl=("rrtconnect",),
+                   vamp=("rrtconnect",), field=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
