@@ -35,7 +35,7 @@ from train.workers import WorkerPool
 class SuiteOptions:
     """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
 
-    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm); writes "
+    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm, mbm-vamp); writes "
                             "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
     out: Path | None = arg(None, "output directory of --suite (default: results)")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
@@ -101,6 +101,13 @@ SUITES: dict[str, list[SuiteEntry]] = {
                    field=True),
         SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, ompl=("rrtconnect",),
                    vamp=("rrtconnect",), field=True),
+    ],
+    # Ours beside VAMP (docs/mbm.md, "VAMP's row"): the mbm suite's sphere-checker rows of the three robots
+    # and VAMP's RRTConnect, without OMPL and pybullet's checker, so that it runs in minutes on one worker.
+    "mbm-vamp": [
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn"], problems=210, vamp=("rrtconnect",), field=True),
+        SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn"], problems=206, vamp=("rrtconnect",), field=True),
+        SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, vamp=("rrtconnect",), field=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
