@@ -93,3 +93,30 @@ def test_ompl_rows_import_the_plugin_and_nothing_else_of_the_directory(tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     runs = json.loads((user / "out.json").read_text())["runs"]["ompl-rrtconnect"]
     assert [r["problem"] for r in runs] == [0, 1] and all(r["success"] for r in runs)
+
+
+def test_a_plugin_from_a_folder_on_the_parents_path_reaches_a_process_started_elsewhere(tmp_path):
+    """A plugin the parent imported by name from a folder on its own ``sys.path`` (pytest's root, PYTHONPATH),
+    here a namespace package (a folder without ``__init__.py``) and a plain package: a process started in
+    another folder without that path (a Ray actor) imports it from the recorded file. It failed before
+    ("No module named ...": only modules loaded from the current directory were recorded by file), which
+    killed the Ray actors of a test run after another test had imported tests.tiny_task."""
+    import sys
+    for name, init in (("nsplug", False), ("pkgplug", True)):
+        root = tmp_path / f"root_{name}"
+        (root / name).mkdir(parents=True)
+        if init:
+            (root / name / "__init__.py").write_text("")
+        (root / name / "mod.py").write_text("VALUE = 7\n")
+        parent = (f"import sys, json; sys.path.insert(0, {str(root)!r}); "
+                  f"from train.args import import_modules, plugin_sources; import_modules([{name + '.mod'!r}]); "
+                  "print(json.dumps(plugin_sources()))")
+        out = subprocess.run([sys.executable, "-c", parent], cwd=tmp_path, capture_output=True, text=True, check=True)
+        sources = json.loads(out.stdout.strip().splitlines()[-1])
+        child = ("import sys, json; from train.args import import_plugin_sources; "
+                 f"import_plugin_sources([tuple(s) for s in json.loads({json.dumps(json.dumps(sources))})]); "
+                 f"import {name}.mod; print({name}.mod.VALUE)")
+        elsewhere = tmp_path / "elsewhere"
+        elsewhere.mkdir(exist_ok=True)
+        run = subprocess.run([sys.executable, "-c", child], cwd=elsewhere, capture_output=True, text=True)
+        assert run.returncode == 0 and run.stdout.strip() == "7", run.stderr[-400:]

@@ -196,6 +196,12 @@ def _load_from_file(top: str, file: Path, package: bool) -> None:
     submodules then import through the package's ``__path__``); no directory joins ``sys.path``."""
     import importlib.util
     import sys
+    if file.is_dir():                # a namespace package: a module whose submodules import from the folder
+        namespace = types.ModuleType(top)
+        namespace.__path__ = [str(file)]
+        sys.modules[top] = namespace
+        _FROM_DIRECTORY[top] = (str(file), True)
+        return
     spec = (importlib.util.spec_from_file_location(top, file, submodule_search_locations=[str(file.parent)])
             if package else importlib.util.spec_from_file_location(top, file))
     module = importlib.util.module_from_spec(spec)
@@ -235,7 +241,31 @@ def _imported(module: str, load) -> None:
         line = str(exc).splitlines()[0] if str(exc) else ""
         raise ValueError(f"--import {module}: the module raised {type(exc).__name__}"
                          + (f": {line}" if line else "")) from None
-    _PLUGINS.setdefault(module, _FROM_DIRECTORY.get(module.split(".")[0]))
+    top = module.split(".")[0]
+    _PLUGINS.setdefault(module, _FROM_DIRECTORY.get(top) or _local_origin(top))
+
+
+def _local_origin(top: str) -> tuple[str, bool] | None:
+    """The file of the imported top-level module ``top`` and whether it is a package, where it is no
+    installed module (not under site-packages or the standard library): a directory this process has
+    on ``sys.path`` (pytest's root, ``PYTHONPATH``) that a Ray actor, started elsewhere, does not have.
+    None for an installed module, which every process imports by name."""
+    import sys
+    import sysconfig
+    module = sys.modules.get(top)
+    file = getattr(module, "__file__", None)
+    if file is None:                 # a namespace package (a folder without __init__.py): its one folder
+        folders = list(getattr(module, "__path__", []))
+        if len(folders) != 1:
+            return None
+        file = folders[0]
+    path = Path(file).resolve()
+    installed = [Path(p).resolve() for key in ("stdlib", "platstdlib", "purelib", "platlib")
+                 if (p := sysconfig.get_paths().get(key))]
+    if any(part in ("site-packages", "dist-packages") for part in path.parts) or any(
+            path.is_relative_to(root) for root in installed):
+        return None
+    return str(path), path.is_dir() or path.name == "__init__.py"
 
 
 def import_modules(modules: typing.Iterable[str]) -> None:
@@ -278,7 +308,7 @@ def import_plugin_sources(sources: typing.Iterable[PluginSource]) -> None:
         top = module.split(".")[0]
 
         def load(module=module, top=top, file=file, package=package):
-            if file is not None and top not in sys.modules and Path(file).is_file():
+            if file is not None and top not in sys.modules and Path(file).exists():
                 _load_from_file(top, Path(file), package)
             importlib.import_module(module)
         _imported(module, load)
