@@ -320,28 +320,35 @@ def limited(code: str, gib: float) -> str:
     return f"import resource; resource.setrlimit(resource.RLIMIT_DATA, ({limit}, {limit}))\n{code}"
 
 
-def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float,
-                memory_gib: float = MEMORY_GIB) -> Outcome:
-    scratch = Path(tempfile.mkdtemp(prefix="attempt-", dir=workdir))
-    nodes, checks = _make_nodes(scratch)
-    argv = argv_of(attempt, scratch, data, nodes)
+def run_limited(code: str, argv: list[str], scratch: Path, timeout: float,
+                memory_gib: float) -> tuple[int, str, float, bool]:
+    """Run ``python -c code *argv`` in ``scratch`` under the memory limit, in a session of its own (killed
+    with its children past ``timeout``): its exit status, standard error, seconds, and whether it ran
+    past the timeout."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
     started = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", limited(ENTRY, memory_gib), *argv], cwd=scratch,
-                            stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True)
-    hang = False
+    proc = subprocess.Popen([sys.executable, "-c", limited(code, memory_gib), *argv], cwd=scratch,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env=env, start_new_session=True)
+    timed_out = False
     try:
         _, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
-        hang = True
+        timed_out = True
         try:
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
         _, err = proc.communicate()
-    seconds = time.perf_counter() - started
+    return proc.returncode, err or "", time.perf_counter() - started, timed_out
+
+
+def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float,
+                memory_gib: float = MEMORY_GIB) -> Outcome:
+    scratch = Path(tempfile.mkdtemp(prefix="attempt-", dir=workdir))
+    nodes, checks = _make_nodes(scratch)
+    argv = argv_of(attempt, scratch, data, nodes)
+    returncode, err, seconds, hang = run_limited(ENTRY, argv, scratch, timeout, memory_gib)
     replaced = []
     for key, check in checks.items():
         path = nodes[key]
@@ -351,9 +358,9 @@ def run_attempt(attempt: Attempt, workdir: Path, data: Path, timeout: float,
                     replaced.append(key.strip("{}"))
             except FileNotFoundError:
                 replaced.append(key.strip("{}") + " (removed)")
-    lines = [line for line in (err or "").splitlines() if line.strip()]
+    lines = [line for line in err.splitlines() if line.strip()]
     budget_run = hang and attempt.label == AT_BOUND and (attempt.command, attempt.option) in RUN_LENGTH
-    outcome = Outcome(attempt, proc.returncode, round(seconds, 1), "Traceback (most recent call last)" in (err or ""),
+    outcome = Outcome(attempt, returncode, round(seconds, 1), "Traceback (most recent call last)" in err,
                       hang and not budget_run, replaced, lines[-1][:200] if lines else "", budget_run)
     shutil.rmtree(scratch, ignore_errors=True)
     return outcome

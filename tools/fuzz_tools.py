@@ -24,16 +24,14 @@ import json
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
-import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from tools.fuzz_cli import HUGE, MEMORY_GIB, ROOT, _make_nodes, _names_a_device, limited
+from tools.fuzz_cli import HUGE, MEMORY_GIB, ROOT, _make_nodes, _names_a_device, run_limited
 
 #: The scripts, and flags every attempt of theirs gets (``{scratch}``: its directory): outputs kept in it.
 TOOLS: dict[str, tuple[str, ...]] = {
@@ -126,24 +124,10 @@ def run_attempt(attempt: Attempt, workdir: Path, timeout: float, memory_gib: flo
         raise RuntimeError(f"the fuzzer never names a device of the machine: {named}")
     code = f"import runpy, sys; sys.argv[0] = 'tools.{attempt.tool}'; runpy.run_module('tools.{attempt.tool}', " \
            "run_name='__main__', alter_sys=True)"
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
-    started = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", limited(code, memory_gib), *argv], cwd=scratch,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True)
-    running = False
-    try:
-        _, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        running = True
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        _, err = proc.communicate()
-    lines = [line for line in (err or "").splitlines() if line.strip()]
-    outcome = Outcome(attempt, None if running else proc.returncode, round(time.perf_counter() - started, 1),
-                      "Traceback (most recent call last)" in (err or ""), running, lines[-1][:200] if lines else "")
+    returncode, err, seconds, running = run_limited(code, argv, scratch, timeout, memory_gib)
+    lines = [line for line in err.splitlines() if line.strip()]
+    outcome = Outcome(attempt, None if running else returncode, round(seconds, 1),
+                      "Traceback (most recent call last)" in err, running, lines[-1][:200] if lines else "")
     shutil.rmtree(scratch, ignore_errors=True)
     return outcome
 
