@@ -299,3 +299,20 @@ def test_paths_are_rechecked_after_every_timed_run_with_the_verdicts_of_an_inlin
     assert [{k: r[k] for k in keys} for r in records] == [{k: r[k] for k in keys} for r in inline]
     assert all(set(r) == set(i) for r, i in zip(records, inline)), "a record kept its path or lost a key"
     json.dumps(report)
+
+
+def test_times_from_one_millisecond_up_keep_three_significant_figures():
+    """Rows 1.28 and 1.47 ms apart read apart (they printed as "1" and "1"); sub-millisecond rows keep three
+    decimals; the sampler / planner split follows the same rule."""
+    from train.benchmark.tables import ms_digits
+    assert [f"{v:.{ms_digits(v)}f}" for v in (0.0874, 1.284, 12.84, 128.4, 1284.0)] == \
+        ["0.087", "1.28", "12.8", "128", "1284"]
+    stat = {"median": 1.284e-3, "q25": 0.9e-3, "q75": 3.5e-3}
+    split = {"median": 0.2e-3, "q25": 0.1e-3, "q75": 0.3e-3}
+    report = {"task": "maze2d", "env_id": "GNNMP/Maze2D-v0", "max_nodes": 100, "problems": 1, "seed": 0,
+              "results": {"uniform": {"nodes_expanded": stat, "edges": stat, "collision_checks": stat,
+                                      "path_length": stat, "wall_time_s": stat, "sampler_time_s": split,
+                                      "planner_time_s": stat, "success_rate": 1.0}},
+              "runs": {}}
+    row = bm.format_table(report).splitlines()[3]
+    assert "1.28 [0.90, 3.50]" in row and "0.200 / 1.28" in row, row

@@ -12,8 +12,14 @@ def _fmt(x: float | None, digits: int) -> str:
 
 
 def ms_digits(median_ms: float | None) -> int:
-    """Decimals of a time in ms: none from 1 ms up, three below (VAMP's rows plan in tens of microseconds)."""
-    return 0 if median_ms is None or median_ms >= 1.0 else 3
+    """Decimals of a time in ms: three significant figures from 1 ms up (1.28, 12.8, 128), none from
+    100 ms, three decimals below 1 ms (VAMP's rows plan in tens of microseconds), so rows a few tenths
+    apart read apart."""
+    if median_ms is None or median_ms >= 100.0:
+        return 0
+    if median_ms >= 10.0:
+        return 1
+    return 2 if median_ms >= 1.0 else 3
 
 
 def _cell(stats: dict[str, float | None], digits: int = 0, scale: float = 1.0) -> str:
@@ -82,7 +88,8 @@ def format_table(report: dict[str, Any]) -> str:
         rate = success_rate(report, name)
         split = "-"
         if s.get("sampler_time_s", {}).get("median") is not None:
-            split = f"{1e3 * s['sampler_time_s']['median']:.0f} / {1e3 * s['planner_time_s']['median']:.0f}"
+            sampler_ms, planner_ms = (1e3 * s[k]["median"] for k in ("sampler_time_s", "planner_time_s"))
+            split = f"{sampler_ms:.{ms_digits(sampler_ms)}f} / {planner_ms:.{ms_digits(planner_ms)}f}"
         rows.append([name, "-" if rate is None else f"{100 * rate:.0f}%", _cell(s["nodes_expanded"]), _cell(s["edges"]),
                      _cell(s["collision_checks"]), _cell(s["path_length"], 2),
                      _cell(s["wall_time_s"], ms_digits(None if s["wall_time_s"]["median"] is None
