@@ -27,6 +27,7 @@ SHIPPED_SAMPLERS = {
     ("rl-ppo-torchrl", "pendulum"): "rl/torchrl-ppo-pick",
     ("gnn", "panda-mbm"): "tree/gnn", ("cvae", "panda-mbm"): "tree/cvae",
     ("rl-ppo", "panda-mbm"): "rl/sb3-ppo-pick", ("gnn", "ur5-mbm"): "tree/gnn", ("gnn", "fetch-mbm"): "tree/gnn",
+    ("cvae", "ur5-mbm"): "tree/cvae",
 }
 #: Critical-sample models (maze2d's fixed Halton graph; no task in the name).
 SHIPPED_CRITICAL = {"gnn": "critical/gnn", "gat": "critical/gat", "gnn-cvae": "critical/gnn-cvae",

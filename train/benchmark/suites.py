@@ -97,8 +97,8 @@ SUITES: dict[str, list[SuiteEntry]] = {
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=210, ompl=("rrtconnect",),
                    field=True, checker="pybullet"),
         # the UR5's and the Fetch's test splits without the problems their checkers call invalid (docs/mbm.md)
-        SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn"], problems=206, ompl=("rrtconnect",), vamp=("rrtconnect",),
-                   field=True),
+        SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn", "cvae"], problems=206, ompl=("rrtconnect",),
+                   vamp=("rrtconnect",), field=True),
         SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, ompl=("rrtconnect",),
                    vamp=("rrtconnect",), field=True),
     ],
