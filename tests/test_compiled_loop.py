@@ -43,6 +43,31 @@ def test_the_index_answers_the_scans_first_argmin(dim, periodic):
     assert checked > 1000
 
 
+def test_a_node_of_equal_distance_but_larger_square_still_wins_by_its_index():
+    """Two nodes whose squared distances differ by rounding but whose distances are equal: the first
+    one in insertion order wins, also when its square is the larger and the other node is met first."""
+    rng = np.random.default_rng(0)
+    angle = rng.uniform(0.3, 1.2, 20000)
+    points = np.stack([np.cos(angle), np.sin(angle)], axis=1) * 1.7          # squares in [2, 4)
+    square = points[:, 0] * points[:, 0] + points[:, 1] * points[:, 1]
+    order = np.argsort(np.sqrt(square), kind="stable")
+    pairs = [(order[k], order[k + 1]) for k in range(len(order) - 1)
+             if np.sqrt(square[order[k]]) == np.sqrt(square[order[k + 1]]) and square[order[k]] != square[order[k + 1]]]
+    assert len(pairs) > 10
+    weights, periodic, x = np.ones(2), np.zeros(2, dtype=bool), np.zeros(2)
+    for small, large in pairs[:50]:
+        larger = points[large] if square[large] > square[small] else points[small]
+        smaller = points[small] if square[large] > square[small] else points[large]
+        # the root splits on the first coordinate; x's side holds the smaller square, met first
+        states = np.array([[-0.1, 100.0], [-larger[0], larger[1]], smaller])
+        index = NearestIndex(3, 1, weights, periodic)
+        for i in range(3):
+            index.insert(i, 0, states)
+        j, d = _nearest_row_loop(states, x, weights, periodic)
+        assert j == 1
+        assert index.nearest(x, 0, states) == (j, d)
+
+
 # ---------------------------------------------------------------------- the loop against the reference
 CASES = [("maze2d", "rrt", 6), ("maze2d", "birrt", 6), ("panda-mbm", "birrt", 4), ("panda-mbm", "rrt", 2),
          ("ur5-mbm", "birrt", 3), ("fetch-mbm", "birrt", 2)]

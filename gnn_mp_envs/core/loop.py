@@ -49,9 +49,8 @@ TreeArrays = array_group("TreeArrays", (("states", np.float64, 2), ("parent", np
                                         ("tree_id", np.int64, 1), ("size", np.int64, 1), ("nodes_in", np.int64, 1)))
 #: The exact k-d index (:class:`~gnn_mp_envs.core.nearest.NearestIndex`'s arrays).
 IndexArrays = array_group("IndexArrays", (("weights", np.float64, 1), ("periodic", np.bool_, 1),
-                                          ("left", np.int64, 1), ("right", np.int64, 1), ("split", np.int64, 1),
-                                          ("root", np.int64, 1), ("stack", np.int64, 1), ("bounds", np.float64, 1),
-                                          ("offsets", np.float64, 2)))
+                                          ("links", np.int32, 2), ("cut", np.float64, 1), ("root", np.int64, 1),
+                                          ("stack", np.int64, 2), ("bounds", np.float64, 2), ("cell", np.float64, 1)))
 #: The problem's goal and the loop's scratch and answers (``counters``: :data:`EDGES`, :data:`CHECKS`;
 #: ``result``: :data:`CONSUMED` ... :data:`MEET_B`).
 LoopArrays = array_group("LoopArrays", (("goal", np.float64, 1), ("x_new", np.float64, 1), ("distance", np.float64, 1),
@@ -86,14 +85,14 @@ def _add(state, parent, tree, cost, t, ix):
     t.tree_id[i] = tree
     t.size[0] = i + 1
     t.nodes_in[tree] += 1
-    kd_insert(i, tree, t.states, ix.periodic, ix.left, ix.right, ix.split, ix.root)
+    kd_insert(i, tree, t.states, ix.periodic, ix.links, ix.cut, ix.root)
     return i
 
 
 @jit(inline=True)
 def _nearest(x, tree, t, ix):
-    return kd_nearest(x, tree, t.states, ix.weights, ix.periodic, ix.left, ix.right, ix.split, ix.root, ix.stack,
-                      ix.bounds, ix.offsets)[0]
+    return kd_nearest(x, tree, t.states, ix.weights, ix.periodic, ix.links, ix.cut, ix.root, ix.stack, ix.bounds,
+                      ix.cell)[0]
 
 
 def _plan(samples, planner, active, budget, step, goal_tolerance, table, context):

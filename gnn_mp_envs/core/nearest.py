@@ -5,14 +5,17 @@ distance under the problem's weighted metric (:func:`~gnn_mp_envs.core.problem._
 Every node is a point of the k-d tree, inserted once when it joins its search tree (no rebuilds), split
 on the coordinates in turn (periodic ones never: the gap to a plane across a wrapped coordinate is not a
 bound). A query descends to the query's cell, then backs up into the far side of each plane only where
-the plane is not farther than the best distance so far (with a relative margin far above rounding), and
-computes every distance it looks at as the scan does; ties go to the smallest node index. So the answer
+the plane is not farther than the best distance so far (with a margin far above rounding). It compares
+squared distances and takes the square root, as the scan does, only of those within that margin of the
+best, so every distance it compares is the scan's; ties go to the smallest node index. So the answer
 is the scan's, bit for bit, at a cost that grows with the depth of the tree rather than its size: the
 Fetch's trees reach 30,000 nodes in 8 dimensions.
 
-Arrays (``n``: node capacity): ``left``, ``right`` (child node or -1), ``split`` (the coordinate a node
-splits on); ``root`` (per search tree, -1 while empty); ``stack``, ``bounds``, ``offsets`` (scratch). States are
-the planner's node store (global rows), so the index holds no copy of them.
+Arrays (``n``: node capacity): ``links`` (int32, ``(n, 3)``: a node's left and right child, -1 for none,
+and the coordinate it splits on, -1 for none), ``cut`` (a node's state on that coordinate: the descent
+picks its side from one small array, not from the state rows); ``root`` (per search tree, -1 while empty); ``stack``,
+``bounds``, ``cell`` (scratch). States are the planner's node store (global rows), so the index holds
+no other copy of them.
 """
 
 from __future__ import annotations
@@ -23,14 +26,20 @@ import numpy as np
 
 from gnn_mp_envs.utils.compiled import jit
 
-#: A cell is skipped when its squared distance exceeds the best squared distance by this factor: far above
-#: the rounding of either, so no node that could tie or win is skipped.
+#: A cell is skipped, and a node's square root not taken, when its squared distance exceeds the best
+#: squared distance by this factor plus :data:`PRUNE_FLOOR`: far above the rounding of either, so no node
+#: that could tie or win is passed over.
 PRUNE_MARGIN = 1.0 + 1e-9
+#: The margin's absolute part, for distances so small that their squares lose precision (subnormal).
+PRUNE_FLOOR = 2.0 ** -1000
+#: ``links`` columns.
+LEFT, RIGHT, SPLIT = 0, 1, 2
 
 
 @jit(inline=True)
-def _distance(states, i, x, weights, periodic):
-    """The scan's distance from row ``i`` of ``states`` to ``x`` (the same operations, in order)."""
+def _squared_distance(states, i, x, weights, periodic):
+    """The scan's sum of squares from row ``i`` of ``states`` to ``x`` (the same operations, in order):
+    its square root is the scan's distance."""
     acc = 0.0
     for c in range(x.shape[0]):
         v = states[i, c] - x[c]
@@ -39,7 +48,7 @@ def _distance(states, i, x, weights, periodic):
             v = (a if 0.0 < a < 2 * math.pi else a % (2 * math.pi)) - math.pi
         v = v * weights[c]
         acc += v * v
-    return math.sqrt(acc)
+    return acc
 
 
 @jit(inline=True)
@@ -54,39 +63,45 @@ def _next_split(dim, periodic):
 
 
 @jit
-def kd_insert(i, tree, states, periodic, left, right, split, root):
+def kd_insert(i, tree, states, periodic, links, cut, root):
     """Add node ``i`` (a row of ``states``) to search tree ``tree``'s k-d tree."""
-    left[i], right[i] = -1, -1
+    links[i, LEFT], links[i, RIGHT] = -1, -1
     node = root[tree]
     if node < 0:
         root[tree] = i
-        split[i] = _next_split(-1, periodic)
-        return
-    while True:
-        c = split[node]
-        if c < 0 or states[i, c] >= states[node, c]:        # no splitting coordinate: a chain on the right
-            if right[node] < 0:
-                right[node] = i
+        c = _next_split(-1, periodic)
+    else:
+        while True:
+            c = links[node, SPLIT]
+            side = RIGHT if c < 0 or states[i, c] >= cut[node] else LEFT   # no split: a chain on the right
+            child = links[node, side]
+            if child < 0:
+                links[node, side] = i
                 break
-            node = right[node]
-        else:
-            if left[node] < 0:
-                left[node] = i
-                break
-            node = left[node]
-    split[i] = _next_split(split[node], periodic) if split[node] >= 0 else -1
+            node = child
+        c = _next_split(c, periodic) if c >= 0 else -1
+    links[i, SPLIT] = c
+    cut[i] = states[i, c] if c >= 0 else 0.0
 
 
 @jit
-def kd_nearest(x, tree, states, weights, periodic, left, right, split, root, stack, bounds, offsets):
+def kd_nearest(x, tree, states, weights, periodic, links, cut, root, stack, bounds, cell):
     """``(node, distance)``: the node of search tree ``tree`` nearest ``x``, the first of equals (the
     smallest index), as the scan finds it; ``(-1, inf)`` for an empty tree; a NaN in ``x``: the root
-    and NaN (a scan's first NaN distance). Scratch: ``stack``, ``bounds`` (one entry per node, plus
-    one) and ``offsets`` (one row per node, plus two, of the state's size).
+    and NaN (a scan's first NaN distance). Scratch: ``stack`` (int64) and ``bounds`` (one row of two per
+    node, plus one) and ``cell`` (the state's size).
 
     A subtree is visited only when its cell may hold a node as near as the best so far: the cell's
     squared distance from ``x`` (the sum over coordinates of the squared weighted gap to the cell's slab,
-    kept per stacked cell and updated one coordinate per plane crossed) is not beyond the best's square."""
+    ``cell``, updated one coordinate per plane crossed) is not beyond the best's square. A stacked cell is
+    ``(node, plane) (squared distance, squared gap to the plane)``; once entered, its row stays on the
+    stack as a mark, ``(-1, plane) (_, the coordinate's former gap)``, that restores ``cell`` when the
+    cell's subtree is done.
+
+    A far side is written to the stack always and kept by the count, not by a branch (which far sides
+    are kept is too irregular for the branch predictor), and is tested against the limit from before
+    the node's own distance, so that the push need not wait for that distance: a larger limit only
+    keeps more cells, and a cell too far by then is dropped when it is popped."""
     node = root[tree]
     if node < 0:
         return -1, math.inf
@@ -94,43 +109,44 @@ def kd_nearest(x, tree, states, weights, periodic, left, right, split, root, sta
     for c in range(d):
         if x[c] != x[c]:
             return node, math.nan
-    cur = offsets.shape[0] - 1                       # the row of the cell being walked
-    best, best_d, best_sq = -1, math.inf, math.inf
-    stack[0], bounds[0] = node, 0.0
     for c in range(d):
-        offsets[0, c] = 0.0
+        cell[c] = 0.0
+    best, best_d, limit = -1, math.inf, math.inf
+    stack[0, 0], stack[0, 1], bounds[0, 0], bounds[0, 1] = node, 0, 0.0, 0.0
     top = 1
     while top > 0:
-        top -= 1
-        bound = bounds[top]
-        if bound > best_sq:                          # the cell already farther than the best
+        e = top - 1
+        node, c = stack[e, 0], stack[e, 1]
+        if node < 0:                                 # a mark: the cell's subtree is done
+            cell[c] = bounds[e, 1]
+            top = e
             continue
-        node = stack[top]
-        for c in range(d):
-            offsets[cur, c] = offsets[top, c]
-        while node >= 0:                             # down toward x, keeping the far sides
-            dist = _distance(states, node, x, weights, periodic)
-            if dist < best_d or (dist == best_d and node < best):
-                best, best_d = node, dist
-                best_sq = dist * dist * PRUNE_MARGIN
-            c = split[node]
-            if c < 0:
-                node = right[node]
-                continue
-            gap = (x[c] - states[node, c]) * weights[c]
-            if gap < 0.0:
-                near, far, gap = left[node], right[node], -gap
-            else:
-                near, far = right[node], left[node]
-            if far >= 0:
-                old = offsets[cur, c]
-                far_bound = bound - old * old + gap * gap
-                if far_bound <= best_sq:
-                    for k in range(d):
-                        offsets[top, k] = offsets[cur, k]
-                    offsets[top, c] = gap
-                    stack[top], bounds[top] = far, far_bound
-                    top += 1
+        bound = bounds[e, 0]
+        if bound > limit:                            # the cell already farther than the best
+            top = e
+            continue
+        stack[e, 0] = -1
+        bounds[e, 1], cell[c] = cell[c], bounds[e, 1]
+        while node >= 0:                             # down toward x, stacking the far sides
+            c = links[node, SPLIT]
+            if c >= 0:
+                gap = (x[c] - cut[node]) * weights[c]
+                near_side = RIGHT if gap >= 0.0 else LEFT
+                far = links[node, RIGHT + LEFT - near_side]
+                gap_sq = gap * gap
+                far_bound = bound - cell[c] + gap_sq
+                stack[top, 0], stack[top, 1] = far, c
+                bounds[top, 0], bounds[top, 1] = far_bound, gap_sq
+                top += (far >= 0) & (far_bound <= limit)
+                near = links[node, near_side]
+            else:                                    # no splitting coordinate: a chain on the right
+                near = links[node, RIGHT]
+            acc = _squared_distance(states, node, x, weights, periodic)
+            if acc <= limit:
+                dist = math.sqrt(acc)
+                if dist < best_d or (dist == best_d and node < best):
+                    best, best_d = node, dist
+                    limit = dist * dist * PRUNE_MARGIN + PRUNE_FLOOR
             node = near
     return best, best_d
 
@@ -139,19 +155,20 @@ class NearestIndex:
     """The k-d trees of a planner's search trees over its node store (see the module)."""
 
     def __init__(self, capacity: int, num_trees: int, weights: np.ndarray, periodic: np.ndarray) -> None:
-        self.left = np.full(capacity, -1, dtype=np.int64)
-        self.right = np.full(capacity, -1, dtype=np.int64)
-        self.split = np.full(capacity, -1, dtype=np.int64)
+        if capacity >= 2 ** 31:
+            raise ValueError(f"a node capacity of {capacity}: the index holds node numbers as int32")
+        self.links = np.full((capacity, 3), -1, dtype=np.int32)
+        self.cut = np.zeros(capacity)
         self.root = np.full(num_trees, -1, dtype=np.int64)
-        self.stack = np.zeros(capacity + 1, dtype=np.int64)
-        self.bounds = np.zeros(capacity + 1)
-        self.offsets = np.zeros((capacity + 2, len(weights)))
+        self.stack = np.zeros((capacity + 1, 2), dtype=np.int64)
+        self.bounds = np.zeros((capacity + 1, 2))
         self.weights = np.ascontiguousarray(weights, dtype=np.float64)
         self.periodic = np.ascontiguousarray(periodic, dtype=np.bool_)
+        self.cell = np.zeros(len(self.weights))
 
     def insert(self, i: int, tree: int, states: np.ndarray) -> None:
-        kd_insert(i, tree, states, self.periodic, self.left, self.right, self.split, self.root)
+        kd_insert(i, tree, states, self.periodic, self.links, self.cut, self.root)
 
     def nearest(self, x: np.ndarray, tree: int, states: np.ndarray) -> tuple[int, float]:
-        return kd_nearest(x, tree, states, self.weights, self.periodic, self.left, self.right, self.split,
-                          self.root, self.stack, self.bounds, self.offsets)
+        return kd_nearest(x, tree, states, self.weights, self.periodic, self.links, self.cut, self.root,
+                          self.stack, self.bounds, self.cell)

@@ -155,8 +155,8 @@ class TreePlanner:
         t, ix, d = self.tree, self.tree.index, self.problem.state_dim
         self._counters, self._result = np.zeros(2, dtype=np.int64), np.zeros(4, dtype=np.int64)
         self._groups = (TreeArrays(t.states, t.parent, t.cost, t.tree_id, t._size, t._tree_size),
-                        IndexArrays(ix.weights, ix.periodic, ix.left, ix.right, ix.split, ix.root, ix.stack, ix.bounds,
-                                    ix.offsets),
+                        IndexArrays(ix.weights, ix.periodic, ix.links, ix.cut, ix.root, ix.stack, ix.bounds,
+                                    ix.cell),
                         LoopArrays(np.ascontiguousarray(self.problem.goal, dtype=np.float64), np.zeros(d), np.zeros(1),
                                    self._counters, self._result))
         self._table = LAYOUT.pack(self._groups)
