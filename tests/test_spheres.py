@@ -214,6 +214,64 @@ def test_the_tree_walk_equals_brute_force(world):
     assert 5 < got.sum() < 55            # both answers occur
 
 
+def _object_collides(checker, obstacles, exempt, leaves, q):
+    """Every obstacle-tree leaf against each obstacle as the scene gives it (its own position, rotation
+    and size, in the scene's order), links excused by ``exempt`` skipped: the oracle of the kernel's
+    arrays (runs of one kind, columns by coordinate)."""
+    from scipy.spatial.transform import Rotation
+    rot, trans = checker.link_frames(q)
+    for o, ob in enumerate(obstacles):
+        r = Rotation.from_quat(ob.quaternion()).as_matrix()
+        for i, link in enumerate(checker.links):
+            if link not in leaves or link in exempt.get(o, ()):
+                continue
+            lv = leaves[link]
+            local = (lv[:, :3] @ rot[i].T + trans[i] - np.asarray(ob.position)) @ r
+            if ob.kind == "box":
+                gap = np.linalg.norm(np.maximum(np.abs(local) - np.asarray(ob.size), 0.0), axis=1)
+            elif ob.kind == "cylinder":
+                gap = np.hypot(np.maximum(np.linalg.norm(local[:, :2], axis=1) - ob.size[0], 0.0),
+                               np.maximum(np.abs(local[:, 2]) - ob.size[1] / 2, 0.0))
+            else:
+                gap = np.maximum(np.linalg.norm(local, axis=1) - ob.size[0], 0.0)
+            if (gap <= lv[:, 3]).any():
+                return True
+    return False
+
+
+def test_obstacles_of_mixed_kinds_in_any_order_answer_as_each_obstacle_alone(world):
+    """The kernel keeps a scene's obstacles in runs of one kind and tests a link's root against all of
+    them at once: a scene whose kinds come mixed, with one obstacle in the robot's way excused,
+    answers as the leaves against each obstacle of the scene as given (and the robot's own pairs), in
+    either order."""
+    centre = _around(world, (0.0, 0.0, 0.0))
+    obstacles = [Obstacle("sphere", (0.08,), _around(world, (0.0, 0.35, 0.2))),
+                 Obstacle("box", (0.1, 0.3, 0.02), _around(world, (0.25, 0.0, 0.0)), yaw=0.3),
+                 Obstacle("cylinder", (0.05, 0.5), _around(world, (0.1, -0.3, -0.1))),
+                 Obstacle("box", (0.05, 0.05, 0.05), centre),
+                 Obstacle("sphere", (0.05,), _around(world, (-0.2, 0.1, 0.1)))]
+    checker = sphere_checker(world, ())
+    exempt = {3: list(checker.links)}             # the box at the links' middle, excused for every link
+    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    states = np.random.default_rng(5).uniform(world.low, world.high, (60, len(world.low)))
+    try:
+        checker.set_obstacles(())                 # no table either: the robot alone
+        self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
+        want = np.array([not (_brute_force_collides(checker, leaves, self_leaves, q)       # the robot alone
+                              or _object_collides(checker, obstacles, exempt, leaves, q)) for q in states])
+        checker.set_obstacles(obstacles, exempt)
+        got = checker.valid(states)
+        order = [4, 2, 0, 3, 1]
+        checker.set_obstacles([obstacles[o] for o in order], {order.index(3): exempt[3]})
+        again = checker.valid(states)
+    finally:
+        checker.set_obstacles(())
+        _CHECKERS.pop(id(world))                  # the next test loads its own scene
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(again, want)
+    assert 5 < (~want).sum() < 55                 # both answers occur
+
+
 def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
     """The edge kernel skips states and pairs that its distance bounds vouch for; the answer and the
     count must be those of checking every state in order (the oracle: ``valid`` state by state, and

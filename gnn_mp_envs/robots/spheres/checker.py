@@ -23,9 +23,9 @@ from gnn_mp_envs.core.problem import ZERO_LENGTH
 from gnn_mp_envs.robots.geometry import Obstacle, Scene
 from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres import kernel, kinematics
-from gnn_mp_envs.robots.spheres.kernel import (KINDS, Kinematics, Memo, Obstacles, Scratch, Spheres, Tables,
-                                               check_edge, check_states, free_cells, goal_distance, planner_motion,
-                                               planner_steer, steer_edge, table_room)
+from gnn_mp_envs.robots.spheres.kernel import (BOX, COLUMNS, CYLINDER, KINDS, SPHERE, Kinematics, Memo, Obstacles,
+                                               Scratch, Spheres, Tables, check_edge, check_states, free_cells,
+                                               goal_distance, planner_motion, planner_steer, steer_edge, table_room)
 from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, load_sphere_model
 from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, URDFRobot, read_urdf
 
@@ -58,6 +58,18 @@ def _tree_depth(model: SphereModel) -> int:
         if model.child_count[i]:
             depth[model.first_child[i]:model.first_child[i] + model.child_count[i]] = depth[i] + 1
     return int(depth.max()) + 1
+
+
+def _obstacle_arrays(kind: np.ndarray, centre: np.ndarray, rot: np.ndarray, size: np.ndarray,
+                     exempt: np.ndarray) -> Obstacles:
+    """The kernel's :class:`~gnn_mp_envs.robots.spheres.kernel.Obstacles`: the obstacles in runs of one kind
+    (boxes, cylinders, spheres; in their given order within a run: an answer does not depend on the
+    order) and their numbers by coordinate, for the tests of a root sphere against all of them at once."""
+    order = np.argsort(kind, kind="stable")
+    kind, centre, rot, size, exempt = (np.ascontiguousarray(a[order]) for a in (kind, centre, rot, size, exempt))
+    runs = np.array([np.count_nonzero(kind <= k) for k in (BOX, CYLINDER, SPHERE)], dtype=np.int64)
+    columns = np.ascontiguousarray(np.concatenate([centre.T, rot.reshape(-1, 9).T, size.T]).reshape(COLUMNS, -1))
+    return Obstacles(kind, centre, rot, size, exempt, runs, columns, np.zeros(len(kind)))
 
 
 class SphereChecker:
@@ -132,8 +144,8 @@ class SphereChecker:
                                np.zeros(k), np.zeros(n), np.zeros(k), np.zeros(k))
         self.memo = Memo(np.full((MEMO_STATES, self.dof), np.nan), np.zeros((MEMO_STATES, n + k)),
                          np.zeros(2, dtype=np.int64))
-        self.obstacles = Obstacles(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
-                                   np.zeros((0, 3)), np.zeros((0, n), dtype=np.bool_))
+        self.obstacles = _obstacle_arrays(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                                          np.zeros((0, 3)), np.zeros((0, n), dtype=np.bool_))
         self.tables = self._joint_tables(robot, joints, held)
         self._distance = np.zeros(1)          # where the steer kernel writes the distance it measured
         self.set_obstacles(())
@@ -282,7 +294,7 @@ class SphereChecker:
         for o, links in (exempt or {}).items():
             for name in links:
                 excused[o, index[name]] = True
-        self.obstacles = Obstacles(kind, centre, rot, size, excused)
+        self.obstacles = _obstacle_arrays(kind, centre, rot, size, excused)
         self.memo.meta[:] = 0           # clearances of the last scene's states
         self.memo.q[:] = np.nan
         self._grow(max(self.scratch.known.shape[0], 130))

@@ -72,9 +72,15 @@ Spheres = array_group("Spheres", (("link_root", np.int64, 1), ("self_root", np.i
 Tables = array_group("Tables", (("at", np.int64, 1), ("joint", np.int64, 2), ("low", np.float64, 2),
                                 ("step", np.float64, 2),
                            ("dim", np.int64, 2), ("cells", np.int32, 1)))
-#: The scene: per obstacle its kind (:data:`KINDS`), centre, rotation, size, and the links it may touch.
+#: The scene: per obstacle its kind (:data:`KINDS`), centre, rotation, size, and the links it may touch,
+#: the obstacles in runs of one kind (boxes, cylinders, spheres: ``runs`` holds where each run ends); the same
+#: numbers by coordinate (``columns``, rows :data:`COLUMNS`), and ``root_d2``, the working space of the
+#: tests of a link's root sphere against every obstacle at once (:func:`_root_tests`).
 Obstacles = array_group("Obstacles", (("kind", np.int64, 1), ("centre", np.float64, 2), ("rot", np.float64, 3),
-                                 ("size", np.float64, 2), ("exempt", np.bool_, 2)))
+                                 ("size", np.float64, 2), ("exempt", np.bool_, 2), ("runs", np.int64, 1),
+                                 ("columns", np.float64, 2), ("root_d2", np.float64, 1)))
+#: The rows of ``Obstacles.columns``: centre, rotation (row by row), size.
+COLUMNS = 15
 #: Working space: the configuration, link frames and velocities, walk stacks (the pair walk's with its points
 #: in its first link's frame), an edge's bounds per state (``gaps``, ``known``), the bisection queue and the
 #: edge's motion bounds per link and pair.
@@ -129,6 +135,39 @@ def _dist2(cx, cy, cz, kind, ox, oy, oz, r00, r01, r02, r10, r11, r12, r20, r21,
     er = er if er > 0.0 else 0.0
     ez = ez if ez > 0.0 else 0.0
     return er * er + ez * ez, 0.0
+
+
+@jit(inline=True)
+def _root_tests(cx, cy, cz, obstacles):
+    """``root_d2[o]``: :func:`_dist2` of the point ``c`` to every obstacle ``o`` (a link's root sphere's
+    centre), in loops of one kind over the obstacles' columns that the compiler turns into SIMD lanes:
+    the same operations on each obstacle as :func:`_dist2`, so the same floats."""
+    col, out, runs = obstacles.columns, obstacles.root_d2, obstacles.runs
+    for o in range(0, runs[0]):                          # boxes
+        dx, dy, dz = cx - col[0, o], cy - col[1, o], cz - col[2, o]
+        lx = col[3, o] * dx + col[6, o] * dy + col[9, o] * dz
+        ly = col[4, o] * dx + col[7, o] * dy + col[10, o] * dz
+        lz = col[5, o] * dx + col[8, o] * dy + col[11, o] * dz
+        ex = abs(lx) - col[12, o]
+        ey = abs(ly) - col[13, o]
+        ez = abs(lz) - col[14, o]
+        ex = ex if ex > 0.0 else 0.0
+        ey = ey if ey > 0.0 else 0.0
+        ez = ez if ez > 0.0 else 0.0
+        out[o] = ex * ex + ey * ey + ez * ez
+    for o in range(runs[0], runs[1]):                    # cylinders
+        dx, dy, dz = cx - col[0, o], cy - col[1, o], cz - col[2, o]
+        lx = col[3, o] * dx + col[6, o] * dy + col[9, o] * dz
+        ly = col[4, o] * dx + col[7, o] * dy + col[10, o] * dz
+        lz = col[5, o] * dx + col[8, o] * dy + col[11, o] * dz
+        er = math.sqrt(lx * lx + ly * ly) - col[12, o]
+        ez = abs(lz) - col[13, o]
+        er = er if er > 0.0 else 0.0
+        ez = ez if ez > 0.0 else 0.0
+        out[o] = er * er + ez * ez
+    for o in range(runs[1], runs[2]):                    # spheres
+        dx, dy, dz = cx - col[0, o], cy - col[1, o], cz - col[2, o]
+        out[o] = dx * dx + dy * dy + dz * dz
 
 
 @jit(inline=True)
@@ -230,7 +269,8 @@ def _carried(gaps, known, i, k, left, right):
 def _link_walk(link, root, tau, spheres, obstacles, scratch):
     """Whether a leaf of ``link``'s obstacle tree (at ``root``) touches an obstacle (``(True, _)``), else
     ``(False, clearance)``: the least gap of the nodes the walks pruned, a lower bound of the link's
-    distance to every obstacle. Walks go on below nodes nearer than ``tau``."""
+    distance to every obstacle. Walks go on below nodes nearer than ``tau``. The root is tested against
+    every obstacle at once (:func:`_root_tests`); most walks end there."""
     nodes, child_count, first_child, stack = spheres.nodes, spheres.child_count, spheres.first_child, scratch.stack
     ob_kind, ob_centre, ob_rot, ob_size = obstacles.kind, obstacles.centre, obstacles.rot, obstacles.size
     rot, trans = scratch.rot, scratch.trans
@@ -238,19 +278,40 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
     m00, m01, m02 = rot[link, 0, 0], rot[link, 0, 1], rot[link, 0, 2]
     m10, m11, m12 = rot[link, 1, 0], rot[link, 1, 1], rot[link, 1, 2]
     m20, m21, m22 = rot[link, 2, 0], rot[link, 2, 1], rot[link, 2, 2]
+    x, y, z, r = nodes[root, 0], nodes[root, 1], nodes[root, 2], nodes[root, 3]
+    _root_tests(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z, t2 + m20 * x + m21 * y + m22 * z,
+                obstacles)
+    root_d2, root_children = obstacles.root_d2, child_count[root]
+    # the link's least clearance so far: only a node nearer than it can lower it
     clearance = UNBOUNDED
     for o in range(ob_kind.shape[0]):
         if obstacles.exempt[o, link]:
             continue
-        # the link's least clearance so far: only a node nearer than it can lower it (the same
-        # minimum as the obstacle's own least, then the link's)
+        # the root, as the walk below tests every node
+        d2 = root_d2[o]
+        adds = ob_size[o, 0] if ob_kind[o] == SPHERE else 0.0
+        reach = tau + r + adds
+        if d2 > reach * reach * SQUARES_MARGIN:
+            near = clearance + r + adds
+            if d2 < near * near * SQUARES_MARGIN:
+                g = math.sqrt(d2) - r - adds
+                clearance = g if g < clearance else clearance
+            continue
+        g = math.sqrt(d2) - r - adds
+        if g > tau or (g > 0.0 and root_children == 0):
+            clearance = g if g < clearance else clearance
+            continue
+        if root_children == 0:
+            return True, clearance
         least = clearance
-        top = 0
-        stack[0] = root
+        top = -1
+        for c in range(first_child[root], first_child[root] + root_children):
+            top += 1
+            stack[top] = c
         while top >= 0:
             node = stack[top]
             top -= 1
-            x, y, z, r = nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3]
+            x, y, z, r_node = nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3]
             d2, adds = _dist2(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z,
                               t2 + m20 * x + m21 * y + m22 * z, ob_kind[o],
                               ob_centre[o, 0], ob_centre[o, 1], ob_centre[o, 2],
@@ -261,14 +322,14 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
             # squares first, the root (a long-latency instruction, a tenth of the kernel's time)
             # only where needed: farther than tau by a margin far above rounding, the node is
             # pruned as below; its distance counts only if it may be the least so far
-            reach = tau + r + adds
+            reach = tau + r_node + adds
             if d2 > reach * reach * SQUARES_MARGIN:
-                near = least + r + adds
+                near = least + r_node + adds
                 if d2 < near * near * SQUARES_MARGIN:
-                    g = math.sqrt(d2) - r - adds
+                    g = math.sqrt(d2) - r_node - adds
                     least = g if g < least else least
                 continue
-            g = math.sqrt(d2) - r - adds
+            g = math.sqrt(d2) - r_node - adds
             if g > tau or (g > 0.0 and nc == 0):
                 least = g if g < least else least
                 continue
