@@ -265,6 +265,31 @@ def _carried(gaps, known, i, k, left, right):
     return bound
 
 
+#: What a walk does with a node (:func:`_node_verdict`).
+PRUNED, TOUCHES, DESCEND = 0, 1, 2
+
+
+@jit(inline=True)
+def _node_verdict(d2, r, adds, tau, least, leaf):
+    """A walk's step at a node of radius ``r`` whose centre is at squared distance ``d2`` from an obstacle's
+    core (which ``adds`` to it): ``(PRUNED, least)`` with the node's gap taken into the least so far,
+    ``(TOUCHES, least)`` for a touching leaf, ``(DESCEND, least)`` for a node nearer than ``tau``. Squares
+    first, the root (a long-latency instruction, a tenth of the kernel's time) only where needed: farther
+    than tau by a margin far above rounding, the node is pruned; its distance counts only if it may be the
+    least so far."""
+    reach = tau + r + adds
+    if d2 > reach * reach * SQUARES_MARGIN:
+        near = least + r + adds
+        if d2 < near * near * SQUARES_MARGIN:
+            g = math.sqrt(d2) - r - adds
+            least = g if g < least else least
+        return PRUNED, least
+    g = math.sqrt(d2) - r - adds
+    if g > tau or (g > 0.0 and leaf):
+        return PRUNED, (g if g < least else least)
+    return (TOUCHES if leaf else DESCEND), least
+
+
 @jit(inline=True)
 def _link_walk(link, root, tau, spheres, obstacles, scratch):
     """Whether a leaf of ``link``'s obstacle tree (at ``root``) touches an obstacle (``(True, _)``), else
@@ -281,63 +306,37 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
     x, y, z, r = nodes[root, 0], nodes[root, 1], nodes[root, 2], nodes[root, 3]
     _root_tests(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z, t2 + m20 * x + m21 * y + m22 * z,
                 obstacles)
-    root_d2, root_children = obstacles.root_d2, child_count[root]
     # the link's least clearance so far: only a node nearer than it can lower it
     clearance = UNBOUNDED
     for o in range(ob_kind.shape[0]):
         if obstacles.exempt[o, link]:
             continue
-        # the root, as the walk below tests every node
-        d2 = root_d2[o]
         adds = ob_size[o, 0] if ob_kind[o] == SPHERE else 0.0
-        reach = tau + r + adds
-        if d2 > reach * reach * SQUARES_MARGIN:
-            near = clearance + r + adds
-            if d2 < near * near * SQUARES_MARGIN:
-                g = math.sqrt(d2) - r - adds
-                clearance = g if g < clearance else clearance
-            continue
-        g = math.sqrt(d2) - r - adds
-        if g > tau or (g > 0.0 and root_children == 0):
-            clearance = g if g < clearance else clearance
-            continue
-        if root_children == 0:
+        verdict, clearance = _node_verdict(obstacles.root_d2[o], r, adds, tau, clearance, child_count[root] == 0)
+        if verdict == TOUCHES:
             return True, clearance
+        if verdict == PRUNED:
+            continue
         least = clearance
-        top = -1
-        for c in range(first_child[root], first_child[root] + root_children):
-            top += 1
-            stack[top] = c
-        while top >= 0:
+        stack[0] = root
+        top = 0
+        while top >= 0:                          # the root's children, then theirs where they are near
             node = stack[top]
             top -= 1
-            x, y, z, r_node = nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3]
-            d2, adds = _dist2(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z,
-                              t2 + m20 * x + m21 * y + m22 * z, ob_kind[o],
-                              ob_centre[o, 0], ob_centre[o, 1], ob_centre[o, 2],
-                              ob_rot[o, 0, 0], ob_rot[o, 0, 1], ob_rot[o, 0, 2], ob_rot[o, 1, 0],
-                              ob_rot[o, 1, 1], ob_rot[o, 1, 2], ob_rot[o, 2, 0], ob_rot[o, 2, 1],
-                              ob_rot[o, 2, 2], ob_size[o, 0], ob_size[o, 1], ob_size[o, 2])
-            nc = child_count[node]
-            # squares first, the root (a long-latency instruction, a tenth of the kernel's time)
-            # only where needed: farther than tau by a margin far above rounding, the node is
-            # pruned as below; its distance counts only if it may be the least so far
-            reach = tau + r_node + adds
-            if d2 > reach * reach * SQUARES_MARGIN:
-                near = least + r_node + adds
-                if d2 < near * near * SQUARES_MARGIN:
-                    g = math.sqrt(d2) - r_node - adds
-                    least = g if g < least else least
-                continue
-            g = math.sqrt(d2) - r_node - adds
-            if g > tau or (g > 0.0 and nc == 0):
-                least = g if g < least else least
-                continue
-            if nc == 0:
-                return True, clearance
-            for c in range(first_child[node], first_child[node] + nc):
-                top += 1
-                stack[top] = c
+            for c in range(first_child[node], first_child[node] + child_count[node]):
+                x, y, z, r_node = nodes[c, 0], nodes[c, 1], nodes[c, 2], nodes[c, 3]
+                d2, adds = _dist2(t0 + m00 * x + m01 * y + m02 * z, t1 + m10 * x + m11 * y + m12 * z,
+                                  t2 + m20 * x + m21 * y + m22 * z, ob_kind[o],
+                                  ob_centre[o, 0], ob_centre[o, 1], ob_centre[o, 2],
+                                  ob_rot[o, 0, 0], ob_rot[o, 0, 1], ob_rot[o, 0, 2], ob_rot[o, 1, 0],
+                                  ob_rot[o, 1, 1], ob_rot[o, 1, 2], ob_rot[o, 2, 0], ob_rot[o, 2, 1],
+                                  ob_rot[o, 2, 2], ob_size[o, 0], ob_size[o, 1], ob_size[o, 2])
+                verdict, least = _node_verdict(d2, r_node, adds, tau, least, child_count[c] == 0)
+                if verdict == TOUCHES:
+                    return True, clearance
+                if verdict == DESCEND:
+                    top += 1
+                    stack[top] = c
         clearance = least
     return False, clearance
 
