@@ -144,11 +144,9 @@ class SphereChecker:
                                np.zeros(k), np.zeros(n), np.zeros(k), np.zeros(k))
         self.memo = Memo(np.full((MEMO_STATES, self.dof), np.nan), np.zeros((MEMO_STATES, n + k)),
                          np.zeros(2, dtype=np.int64))
-        self.obstacles = _obstacle_arrays(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
-                                          np.zeros((0, 3)), np.zeros((0, n), dtype=np.bool_))
         self.tables = self._joint_tables(robot, joints, held)
         self._distance = np.zeros(1)          # where the steer kernel writes the distance it measured
-        self.set_obstacles(())
+        self.set_obstacles(())                # the kernel's obstacle arrays (an empty scene) and its table
 
     # ------------------------------------------------------------------ construction
     def _joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
