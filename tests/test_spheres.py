@@ -77,19 +77,62 @@ def test_forward_kinematics_matches_pybullet(world):
 
 
 def test_every_inner_node_contains_the_leaves_below_it(world):
-    """What the walk relies on: a sphere that misses a node misses every leaf under it."""
-    model = sphere_checker(world, ()).model
-    for i in np.flatnonzero(model.child_count > 0):
+    """What the walk relies on: a sphere that misses a node misses every leaf under it; in the model's
+    trees and in the trees the checker merges for links rigidly joined (rows after the model's)."""
+    checker = sphere_checker(world, ())
+    spheres = checker.spheres
+    assert len(spheres.nodes) >= len(checker.model.nodes)
+    np.testing.assert_array_equal(spheres.nodes[: len(checker.model.nodes)], checker.model.nodes)
+    for i in np.flatnonzero(spheres.child_count > 0):
         below, stack = [], [int(i)]
         while stack:
             k = stack.pop()
-            if model.child_count[k] == 0:
+            if spheres.child_count[k] == 0:
                 below.append(k)
             else:
-                stack.extend(range(model.first_child[k], model.first_child[k] + model.child_count[k]))
-        leaves = model.nodes[below]
-        reach = np.linalg.norm(leaves[:, :3] - model.nodes[i, :3], axis=1) + leaves[:, 3]
-        assert (reach <= model.nodes[i, 3] + 1e-12).all()
+                stack.extend(range(spheres.first_child[k], spheres.first_child[k] + spheres.child_count[k]))
+        leaves = spheres.nodes[below]
+        reach = np.linalg.norm(leaves[:, :3] - spheres.nodes[i, :3], axis=1) + leaves[:, 3]
+        assert (reach <= spheres.nodes[i, 3] + 1e-12).all()
+
+
+def test_self_collision_of_rigid_bodies_answers_as_every_checked_link_pair(world):
+    """Links rigidly joined are one body to the kernel (the UR5's forearm against the gripper's nine parts
+    is one pair): its answers are those of every checked link pair (``self_pairs``), each link's own
+    self-collision leaves in its own frame, brute force; and a pair that cannot move apart is dropped."""
+    checker = sphere_checker(world, ())
+    assert len(checker.spheres.pairs) <= len(checker.self_pairs)        # the xArm6 has no links to merge
+    rng = np.random.default_rng(11)
+    states = rng.uniform(world.low, world.high, (80, len(world.low)))
+    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
+    got = ~checker.valid(states)
+    want = np.array([_brute_force_collides(checker, leaves, self_leaves, q) for q in states])
+    np.testing.assert_array_equal(got, want)
+    assert 0 < got.sum() < len(states)         # both answers occur
+
+
+def test_rigidly_joined_links_whose_spheres_touch_are_refused_in_one_line(monkeypatch):
+    """A pair of links that never move apart and touch would make every configuration collide: the
+    checker says so when it is built, naming the pair, instead of planning nothing."""
+    from gnn_mp_envs.robots.spheres import checker as checker_module
+    from gnn_mp_envs.robots.spheres.model import SphereModel
+    model = load_sphere_model(sphere_model_path(ur5_model().spheres))
+    nodes = model.nodes.copy()
+    stack = [model.self_roots["robotiq_85_left_finger_tip_link"]]
+    while stack:                                # every sphere of one finger tip grown by 20 cm
+        i = stack.pop()
+        nodes[i, 3] += 0.2
+        stack.extend(range(model.first_child[i], model.first_child[i] + model.child_count[i]))
+    touching = SphereModel(nodes, model.first_child, model.child_count, model.roots, model.self_roots, model.meta)
+    monkeypatch.setattr(checker_module, "load_sphere_model", lambda path: touching)
+    world = RobotWorld(ur5_model())
+    try:
+        with pytest.raises(ValueError, match="rigidly joined and their spheres touch") as info:
+            SphereCollisionChecker(world).kernel(())
+    finally:
+        world.close()
+    assert "\n" not in str(info.value) and "robotiq_85_left_finger_tip_link" in str(info.value)
 
 
 def test_spheres_cover_every_link_hull_grown_by_the_margin(world):
@@ -481,13 +524,12 @@ def test_the_motion_bounds_hold_along_edges(world):
                     if m < 0:
                         continue
                     f = la + lb - m
-                    name = checker.links[m]
+                    own = checker.pair_leaves(p)[0 if m == la else 1][:, :3]   # the moving side's, in m's frame
 
-                    def local(frames, leaves):     # the moving link's self leaves in the other link's frame
+                    def local(frames):     # the moving side's self leaves in the other link's frame
                         rot, trans = frames
-                        return (leaves[name] - trans[f]) @ rot[f]
-                    moved = float(np.linalg.norm(local(frames_there, there[True]) - local(frames_here, here[True]),
-                                                 axis=1).max())
+                        return (own @ rot[m].T + trans[m] - trans[f]) @ rot[f]
+                    moved = float(np.linalg.norm(local(frames_there) - local(frames_here), axis=1).max())
                     assert moved <= s * bounds["pair_delta"][p] + 1e-9
                     assert moved <= s * bounds["pair_rate"][p] + 0.5 * s * s * bounds["pair_curve"][p] + 1e-9
     assert np.median(tighter) < 0.9        # the local bound is what saves the work: it must be tighter
@@ -510,7 +552,7 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
     checker = sphere_checker(world, ())
     at, joint, low, step, dim, table = checker.tables
     tabled = np.flatnonzero(at >= 0)
-    assert len(tabled) >= 2
+    assert len(tabled) >= 1
     rng = np.random.default_rng(6)
     border_seen = 0
     for p in tabled:
@@ -522,9 +564,9 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
                                 rng.choice(np.flatnonzero(cells >= 1), 20)]).astype(np.int64)
         border_seen += len(border) > 0
         from scipy.spatial import cKDTree
-        names = sorted(checker.self_pairs[p], key=lambda name: len(checker.model.leaves(name, True)))
-        s_index, b_index = (checker.links.index(name) for name in names)
-        small, big = (checker.model.leaves(name, True) for name in names)
+        (s_index, small), (b_index, big) = sorted(zip(checker.spheres.pairs[p], checker.pair_leaves(p)),
+                                                  key=lambda side: len(side[1]))
+        names = [checker.links[s_index], checker.links[b_index]]
         tree = cKDTree(big[:, :3])             # the larger link's spheres, in its own frame
         for c in picks:
             cell = np.unravel_index(c, dim[p][: len(moving)])

@@ -51,13 +51,42 @@ def _quaternion_matrix(q: Sequence[float]) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def _tree_depth(model: SphereModel) -> int:
-    """Levels of the deepest tree of the model."""
-    depth = np.zeros(len(model.nodes), dtype=np.int64)
-    for i in range(len(model.nodes)):           # breadth-first rows: parents before children
-        if model.child_count[i]:
-            depth[model.first_child[i]:model.first_child[i] + model.child_count[i]] = depth[i] + 1
+def _tree_depth(nodes: np.ndarray, first_child: np.ndarray, child_count: np.ndarray) -> int:
+    """Levels of the deepest of the trees ``nodes`` holds."""
+    depth = np.zeros(len(nodes), dtype=np.int64)
+    for i in range(len(nodes)):                 # breadth-first rows: parents before children
+        if child_count[i]:
+            depth[first_child[i]:first_child[i] + child_count[i]] = depth[i] + 1
     return int(depth.max()) + 1
+
+
+def _merged_tree(nodes: np.ndarray, first_child: np.ndarray, child_count: np.ndarray, base: int,
+                 members: Sequence[tuple[int, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One sphere tree over several trees of links rigidly joined, in one link's frame: ``members`` are
+    ``(root, R, t)``, a tree's root row and its link's frame in that frame. The new root (a sphere around
+    the members' roots) has the members' roots as its children, and below them their trees, moved by
+    ``(R, t)``: the same leaves, so the same answers. Rows from ``base`` on, breadth first (each node's
+    children consecutive); returns the new rows' ``nodes``, ``first_child``, ``child_count``."""
+    order = [(int(root), k) for k, (root, _, _) in enumerate(members)]      # below the new root: (row, member)
+    out_first, out_count = [base + 1], [len(members)]
+    i = 0
+    while i < len(order):
+        row, k = order[i]
+        out_first.append(base + 1 + len(order) if child_count[row] else 0)
+        out_count.append(int(child_count[row]))
+        order.extend((c, k) for c in range(first_child[row], first_child[row] + child_count[row]))
+        i += 1
+    rows = np.array([row for row, _ in order], dtype=np.int64)
+    which = np.array([k for _, k in order], dtype=np.int64)
+    moved = np.empty((len(order), 4))
+    for k, (_, rot, trans) in enumerate(members):
+        mine = which == k
+        moved[mine, :3] = nodes[rows[mine], :3] @ rot.T + trans
+        moved[mine, 3] = nodes[rows[mine], 3]
+    from gnn_mp_envs.robots.spheres.build import bounding_sphere
+    root = bounding_sphere(moved[: len(members)])
+    return (np.vstack([root[None], moved]), np.array(out_first, dtype=np.int64),
+            np.array(out_count, dtype=np.int64))
 
 
 def _obstacle_arrays(kind: np.ndarray, centre: np.ndarray, rot: np.ndarray, size: np.ndarray,
@@ -121,19 +150,21 @@ class SphereChecker:
         #: The checked self pairs, by link name.
         self.self_pairs = [(self.links[a], self.links[b]) for a, b in pairs]
         reach = self._joint_reach(robot, index, held, link_root, self_root)
+        nodes, first_child, child_count, pairs, pair_root, pair_own = self._body_pairs(pairs, self_root)
         # a self pair moves relative to itself only through the joints that move one link and not the other
-        ra, rb = reach[pairs[:, 0]], reach[pairs[:, 1]]
+        ra, rb = (np.array([reach[link] if own is None else self._levers(robot, link, own, held) for link, own in
+                            zip(pairs[:, side], pair_own[side])]).reshape(-1, self.dof) for side in (0, 1))
         pair_reach = np.where(rb == 0, ra, 0.0) + np.where(ra == 0, rb, 0.0)
         # per self pair, the link that moves in the other's frame (-1: neither): the one below the other, else
         # the one moved by every planned joint that moves the other (-1: each has a joint of its own)
         pair_moving = np.array([self._moving(a_, b_, reach) for a_, b_ in pairs], dtype=np.int64)
         #: The sphere trees, the self pairs and the joints' levers.
-        self.spheres = Spheres(link_root, self_root, model.nodes, model.first_child, model.child_count, pairs,
-                               pair_moving, reach, pair_reach)
+        self.spheres = Spheres(link_root, nodes, first_child, child_count, pairs, pair_root, pair_moving, reach,
+                               pair_reach)
         # depth-first stacks: at most (children per node) entries per level of the deepest tree
         # (two trees for pairs)
-        depth = _tree_depth(model)
-        width = int(model.child_count.max()) + 1
+        depth = _tree_depth(nodes, first_child, child_count)
+        width = int(child_count.max()) + 1
         k = len(pairs)
         empty = np.zeros(0)
         self.scratch = Scratch(np.zeros(self.dof), np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
@@ -155,7 +186,8 @@ class SphereChecker:
         contact between the pair. A cell is free when the pair's leaves are more than
         ``TABLE_FLOOR`` apart at its centre; within the cell they come at most that much nearer.
         Built once per robot and pair set (a few hundred milliseconds)."""
-        key = (robot.name, id(self.model), tuple(joints), tuple(sorted(held.items())), self.spheres.pairs.tobytes())
+        key = (robot.name, id(self.model), tuple(joints), tuple(sorted(held.items())), self.spheres.pairs.tobytes(),
+               self.spheres.pair_root.tobytes())
         if key not in _TABLES:
             _TABLES[key] = self._build_joint_tables(robot, joints, held)
         return _TABLES[key]
@@ -192,7 +224,7 @@ class SphereChecker:
             free = np.zeros(int(np.prod(dim)), dtype=np.bool_)
             la, lb = pairs[p]
             grid_joints = np.array([*moving, -1][:2], dtype=np.int64)
-            free_cells(la, lb, spheres.self_root[la], spheres.self_root[lb], grid_joints, low, step,
+            free_cells(la, lb, spheres.pair_root[p, 0], spheres.pair_root[p, 1], grid_joints, low, step,
                        np.array([*dim, 1][:2], dtype=np.int64), floor, q.copy(), kin.parent, kin.origin_r,
                        kin.origin_t, kin.kind, kin.axis, kin.q_index, kin.q_fixed, spheres.nodes,
                        spheres.first_child, spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack,
@@ -244,6 +276,107 @@ class SphereChecker:
             up = parent[up]
         return -1
 
+    def _body(self, link: int) -> int:
+        """The link that ``link`` is rigidly joined to nearest the root: up its fixed and held joints."""
+        parent, q_index = self.kinematics.parent, self.kinematics.q_index
+        while parent[link] >= 0 and q_index[link] < 0:
+            link = parent[link]
+        return link
+
+    def _body_pairs(self, pairs: np.ndarray, self_root: np.ndarray) -> tuple:
+        """The self pairs as the kernel checks them, with the same answers and less work: links rigidly
+        joined (fixed or held joints: a gripper's parts, a torso and its head) are one rigid body.
+
+        A pair within one body never moves: its spheres are tested here once (apart, or every
+        configuration would collide: :class:`ValueError`) and dropped. The pairs between two bodies that
+        are every link of one set against every link of another (a forearm against the gripper's nine
+        parts) become one pair whose trees (:func:`_merged_tree`) cover each set in its body's frame, so
+        that a walk descends the forearm's tree once, not nine times; other pairs stay as they are.
+        Returns the nodes (the model's and the merged trees'), ``first_child``, ``child_count``, the
+        kernel's ``pairs``, ``pair_root`` and, per side, the merged tree's reach from its frame's origin
+        (``None``: a link's own trees, whose levers :meth:`_joint_reach` gives)."""
+        model = self.model
+        nodes, first_child, child_count = model.nodes, model.first_child, model.child_count
+        body = np.array([self._body(i) for i in range(len(self.links))], dtype=np.int64)
+        kin, n = self.kinematics, len(self.links)
+        rot, trans = np.zeros((n, 3, 3)), np.zeros((n, 3))       # any configuration: the bodies are rigid
+        kinematics.forward_kinematics(np.zeros(self.dof), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis,
+                                      kin.q_index, kin.q_fixed, rot, trans)
+        groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
+        for a, b in pairs:
+            if body[a] == body[b]:
+                self._check_rigid_pair(a, b, self_root, rot, trans)
+                continue
+            groups.setdefault((body[a], body[b]) if body[a] < body[b] else (body[b], body[a]), []).append((a, b))
+        out_pairs, out_roots, out_own = [], [], ([], [])
+        extra: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        merged: dict[tuple[int, ...], tuple[int, float]] = {}
+        size = len(nodes)
+
+        def side(head: int, links: list[int]) -> tuple[int, int, float | None]:
+            """(frame link, tree root, its reach): a link's own tree, or one tree over several in ``head``'s frame."""
+            nonlocal size
+            if len(links) == 1:
+                return links[0], int(self_root[links[0]]), None
+            key = (head, *links)
+            if key not in merged:
+                members = [(self_root[m], rot[head].T @ rot[m], rot[head].T @ (trans[m] - trans[head])) for m in links]
+                tree = _merged_tree(nodes, first_child, child_count, size, members)
+                merged[key] = (size, float(np.linalg.norm(tree[0][0, :3]) + tree[0][0, 3]))
+                extra.append(tree)
+                size += len(tree[0])
+            return (head, *merged[key])
+
+        for (ha, hb), members in groups.items():
+            side_a = sorted({a if body[a] == ha else b for a, b in members})
+            side_b = sorted({b if body[b] == hb else a for a, b in members})
+            if len(members) == 1 or len(members) != len(side_a) * len(side_b):
+                for a, b in members:                 # one pair, or not every link against every link: as they are
+                    out_pairs.append((a, b))
+                    out_roots.append((self_root[a], self_root[b]))
+                    out_own[0].append(None)
+                    out_own[1].append(None)
+                continue
+            (la, ra, oa), (lb, rb, ob) = side(ha, side_a), side(hb, side_b)
+            out_pairs.append((la, lb))
+            out_roots.append((ra, rb))
+            out_own[0].append(oa)
+            out_own[1].append(ob)
+        if extra:
+            nodes = np.vstack([nodes, *(t[0] for t in extra)])
+            first_child = np.concatenate([first_child, *(t[1] for t in extra)])
+            child_count = np.concatenate([child_count, *(t[2] for t in extra)])
+        return (nodes, first_child, child_count, np.array(out_pairs, dtype=np.int64).reshape(-1, 2),
+                np.array(out_roots, dtype=np.int64).reshape(-1, 2), out_own)
+
+    def _check_rigid_pair(self, a: int, b: int, self_root: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> None:
+        """Links ``a`` and ``b`` never move relative to each other: their spheres must be apart."""
+        from scipy.spatial import cKDTree
+        la, lb = (self.model.leaves(self.links[i], True) for i in (a, b))
+        wa, wb = (leaves[:, :3] @ rot[i].T + trans[i] for leaves, i in ((la, a), (lb, b)))
+        tree = cKDTree(wb)
+        for i, near in enumerate(tree.query_ball_point(wa, la[:, 3] + lb[:, 3].max())):
+            if near and (np.linalg.norm(wb[near] - wa[i], axis=1) <= la[i, 3] + lb[near, 3]).any():
+                raise ValueError(f"links {self.links[a]!r} and {self.links[b]!r} are rigidly joined and their "
+                                 f"spheres touch: every configuration would collide (allow the pair)")
+
+    def _levers(self, robot: URDFRobot, link: int, own: float, held: dict[str, float]) -> np.ndarray:
+        """``(dof,)``: :meth:`_joint_reach`'s row of ``link`` for spheres within ``own`` of its frame's origin."""
+        out = np.zeros(self.dof)
+        q_index = self.kinematics.q_index
+        index = {name: i for i, name in enumerate(self.links)}
+        length, name = own, self.links[link]
+        while name in robot.joints:                  # up the chain to the root
+            joint = robot.joints[name]
+            j = q_index[index[name]]
+            if j >= 0:
+                out[j] = 1.0 if joint.kind == PRISMATIC else length
+            length += float(np.linalg.norm(joint.translation))
+            if joint.kind == PRISMATIC:              # its travel lengthens the lever of the joints above
+                length += max(abs(joint.lower), abs(joint.upper), abs(held.get(joint.name, 0.0)))
+            name = joint.parent
+        return out
+
     def _joint_reach(self, robot: URDFRobot, index: dict[str, int], held: dict[str, float], link_root: np.ndarray,
                      self_root: np.ndarray) -> np.ndarray:
         """``(links, dof)``: how far any point of each link's spheres can lie from each planned joint's
@@ -251,22 +384,12 @@ class SphereChecker:
         every configuration: the lengths of the joint origins on the way down plus the reach of the
         link's root spheres (triangle inequality). A step ``dq`` moves the link's spheres by at most
         ``sum_j |dq_j| reach[link, j]``."""
-        reach = np.zeros((len(self.links), self.dof))
         nodes = self.model.nodes
-        q_index = self.kinematics.q_index
-        for link, i in index.items():
+        reach = np.zeros((len(self.links), self.dof))
+        for i in index.values():
             own = max([float(np.linalg.norm(nodes[r, :3]) + nodes[r, 3])
                        for r in (link_root[i], self_root[i]) if r >= 0], default=0.0)
-            length, name = own, link
-            while name in robot.joints:              # up the chain to the root
-                joint = robot.joints[name]
-                j = q_index[index[name]]
-                if j >= 0:
-                    reach[i, j] = 1.0 if joint.kind == PRISMATIC else length
-                length += float(np.linalg.norm(joint.translation))
-                if joint.kind == PRISMATIC:          # its travel lengthens the lever of the joints above
-                    length += max(abs(joint.lower), abs(joint.upper), abs(held.get(joint.name, 0.0)))
-                name = joint.parent
+            reach[i] = self._levers(robot, i, own, held)
         return reach
 
     # ------------------------------------------------------------------ the scene and the table
@@ -376,9 +499,27 @@ class SphereChecker:
         rate, nodes = kinematics.rate, spheres.nodes
         out["rate"] = np.array([rate(i, -1, r, nodes, rot, trans, omega, vel) if r >= 0 else 0.0
                                 for i, r in enumerate(spheres.link_root)])
-        out["pair_rate"] = np.array([rate(m, la + lb - m, spheres.self_root[m], nodes, rot, trans, omega, vel)
-                                     if m >= 0 else 0.0 for (la, lb), m in zip(spheres.pairs, spheres.pair_moving)])
+        out["pair_rate"] = np.array([rate(m, la + lb - m, ra if m == la else rb, nodes, rot, trans, omega, vel)
+                                     if m >= 0 else 0.0 for (la, lb), (ra, rb), m in
+                                     zip(spheres.pairs, spheres.pair_root, spheres.pair_moving)])
         return out
+
+    def pair_leaves(self, p: int) -> tuple[np.ndarray, np.ndarray]:
+        """The leaves ``(k, 4)`` of the kernel's self pair ``p``'s two trees, each in the frame of its link
+        (``spheres.pairs[p]``): a link's own self-collision spheres, or those of the links rigidly joined
+        to it that the pair's tree covers (:meth:`_body_pairs`)."""
+        spheres = self.spheres
+        out = []
+        for root in spheres.pair_root[p]:
+            rows, stack = [], [int(root)]
+            while stack:
+                i = stack.pop()
+                if spheres.child_count[i] == 0:
+                    rows.append(i)
+                else:
+                    stack.extend(range(spheres.first_child[i], spheres.first_child[i] + spheres.child_count[i]))
+            out.append(spheres.nodes[sorted(rows)])
+        return out[0], out[1]
 
     def table_room(self, q: np.ndarray) -> np.ndarray:
         """Per self pair, its joint-space table's entry at ``q`` (:meth:`_joint_tables`; -1: no table):

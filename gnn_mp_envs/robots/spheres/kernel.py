@@ -63,11 +63,15 @@ Kinematics = array_group("Kinematics", (("parent", np.int64, 1), ("origin_r", np
                                         ("origin_t", np.float64, 2),
                                    ("kind", np.int64, 1), ("axis", np.float64, 2), ("q_index", np.int64, 1),
                                    ("q_fixed", np.float64, 1)))
-#: The sphere trees (each link's two roots, -1: none), the self pairs checked (with the link that moves in
-#: the other's frame, -1: neither) and how far each joint can move a link's (a pair's) spheres.
-Spheres = array_group("Spheres", (("link_root", np.int64, 1), ("self_root", np.int64, 1), ("nodes", np.float64, 2),
+#: The sphere trees (each link's obstacle tree's root, -1: none), the self pairs checked (two links, the roots of
+#: their self-collision trees in those links' frames, and the link that moves in the other's frame, -1: neither)
+#: and how far each joint can move a link's (a pair's) spheres. A pair's tree may cover several links rigidly
+#: joined to its link
+#: (:meth:`SphereChecker._body_pairs <gnn_mp_envs.robots.spheres.checker.SphereChecker._body_pairs>`).
+Spheres = array_group("Spheres", (("link_root", np.int64, 1), ("nodes", np.float64, 2),
                              ("first_child", np.int64, 1), ("child_count", np.int64, 1), ("pairs", np.int64, 2),
-                             ("pair_moving", np.int64, 1), ("reach", np.float64, 2), ("pair_reach", np.float64, 2)))
+                             ("pair_root", np.int64, 2), ("pair_moving", np.int64, 1), ("reach", np.float64, 2),
+                             ("pair_reach", np.float64, 2)))
 #: The wrist pairs' joint-space tables: per pair its offset in ``cells`` (-1: no table), joints, grid.
 Tables = array_group("Tables", (("at", np.int64, 1), ("joint", np.int64, 2), ("low", np.float64, 2),
                                 ("step", np.float64, 2),
@@ -387,6 +391,7 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
     links = spheres.link_root.shape[0]
     for p in range(spheres.pairs.shape[0]):
         la, lb = spheres.pairs[p, 0], spheres.pairs[p, 1]
+        root_a, root_b = spheres.pair_root[p, 0], spheres.pair_root[p, 1]
         row = links + p
         if track:
             bound = _carried(gaps, scratch.known, row, k, left, right)
@@ -407,7 +412,7 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
             tau = REFINE * scratch.pair_delta[p]
             moving = spheres.pair_moving[p]
             if moving >= 0:                     # one link below the other: it moves in the other's frame
-                speed = rate(moving, la + lb - moving, spheres.self_root[moving], spheres.nodes, scratch.rot,
+                speed = rate(moving, la + lb - moving, root_a if moving == la else root_b, spheres.nodes, scratch.rot,
                              scratch.trans, scratch.omega, scratch.vel)
                 bend = scratch.pair_curve[p]
                 quadratic = REFINE * speed + 0.5 * REFINE * REFINE * bend
@@ -415,7 +420,7 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
         if use >= 0 and memo.clear[use, row] >= 0.0:
             least = memo.clear[use, row]
         else:
-            hit, least = _pair_walk(la, lb, spheres.self_root[la], spheres.self_root[lb], tau, 0.0, spheres.nodes,
+            hit, least = _pair_walk(la, lb, root_a, root_b, tau, 0.0, spheres.nodes,
                                     spheres.first_child, spheres.child_count, scratch.rot, scratch.trans,
                                     scratch.pair_stack, scratch.pair_point)
             if hit:
