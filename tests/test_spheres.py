@@ -102,14 +102,9 @@ def test_self_collision_of_rigid_bodies_answers_as_every_checked_link_pair(world
     self-collision leaves in its own frame, brute force; and a pair that cannot move apart is dropped."""
     checker = sphere_checker(world, ())
     assert len(checker.spheres.pairs) <= len(checker.self_pairs)        # the xArm6 has no links to merge
-    rng = np.random.default_rng(11)
-    states = rng.uniform(world.low, world.high, (80, len(world.low)))
-    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
-    self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
-    got = ~checker.valid(states)
-    want = np.array([_brute_force_collides(checker, leaves, self_leaves, q) for q in states])
+    got, want = _kernel_and_brute_force(checker, np.random.default_rng(11), world, 80)
     np.testing.assert_array_equal(got, want)
-    assert 0 < got.sum() < len(states)         # both answers occur
+    assert 0 < got.sum() < len(got)            # both answers occur
 
 
 def test_rigidly_joined_links_whose_spheres_touch_are_refused_in_one_line(monkeypatch):
@@ -247,14 +242,18 @@ def test_the_tree_walk_equals_brute_force(world):
                  Obstacle("cylinder", (0.05, 0.5), _around(world, (0.1, -0.3, -0.1))),
                  Obstacle("sphere", (0.08,), _around(world, (0.0, 0.35, 0.2))))
     checker = sphere_checker(world, obstacles)
-    rng = np.random.default_rng(3)
-    states = rng.uniform(world.low, world.high, (60, len(world.low)))
-    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
-    self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
-    got = ~checker.valid(states)
-    want = np.array([_brute_force_collides(checker, leaves, self_leaves, q) for q in states])
+    got, want = _kernel_and_brute_force(checker, np.random.default_rng(3), world, 60)
     np.testing.assert_array_equal(got, want)
     assert 5 < got.sum() < 55            # both answers occur
+
+
+def _kernel_and_brute_force(checker, rng, world, count):
+    """Whether each of ``count`` uniform configurations collides, by the kernel and by brute force."""
+    states = rng.uniform(world.low, world.high, (count, len(world.low)))
+    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    self_leaves = {link: checker.model.leaves(link, True) for link in checker.model.roots}
+    want = np.array([_brute_force_collides(checker, leaves, self_leaves, q) for q in states])
+    return ~checker.valid(states), want
 
 
 def _object_collides(checker, obstacles, exempt, leaves, q):

@@ -26,7 +26,7 @@ from gnn_mp_envs.robots.spheres import kernel, kinematics
 from gnn_mp_envs.robots.spheres.kernel import (BOX, COLUMNS, CYLINDER, KINDS, SPHERE, Kinematics, Memo, Obstacles,
                                                Scratch, Spheres, Tables, check_edge, check_states, free_cells,
                                                goal_distance, planner_motion, planner_steer, steer_edge, table_room)
-from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, load_sphere_model
+from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, leaf_rows, load_sphere_model
 from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, URDFRobot, read_urdf
 
 #: Joint-space tables of the wrist's self pairs (:meth:`SphereChecker._joint_tables`): a cell is free
@@ -508,18 +508,9 @@ class SphereChecker:
         """The leaves ``(k, 4)`` of the kernel's self pair ``p``'s two trees, each in the frame of its link
         (``spheres.pairs[p]``): a link's own self-collision spheres, or those of the links rigidly joined
         to it that the pair's tree covers (:meth:`_body_pairs`)."""
-        spheres = self.spheres
-        out = []
-        for root in spheres.pair_root[p]:
-            rows, stack = [], [int(root)]
-            while stack:
-                i = stack.pop()
-                if spheres.child_count[i] == 0:
-                    rows.append(i)
-                else:
-                    stack.extend(range(spheres.first_child[i], spheres.first_child[i] + spheres.child_count[i]))
-            out.append(spheres.nodes[sorted(rows)])
-        return out[0], out[1]
+        s = self.spheres
+        a, b = (s.nodes[leaf_rows(root, s.first_child, s.child_count)] for root in s.pair_root[p])
+        return a, b
 
     def table_room(self, q: np.ndarray) -> np.ndarray:
         """Per self pair, its joint-space table's entry at ``q`` (:meth:`_joint_tables`; -1: no table):

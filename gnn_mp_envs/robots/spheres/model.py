@@ -32,6 +32,18 @@ class SphereModelError(ValueError):
     """A sphere model file that cannot be used; the message is one line naming the file."""
 
 
+def leaf_rows(root: int, first_child: np.ndarray, child_count: np.ndarray) -> list[int]:
+    """The rows of the leaves of the sphere tree at ``root``, in increasing order."""
+    out, stack = [], [int(root)]
+    while stack:
+        i = stack.pop()
+        if child_count[i] == 0:
+            out.append(i)
+        else:
+            stack.extend(range(first_child[i], first_child[i] + child_count[i]))
+    return sorted(out)
+
+
 @dataclass(frozen=True)
 class SphereModel:
     """Per-link sphere trees of one robot, in link frames: two per link, one tested against
@@ -59,14 +71,8 @@ class SphereModel:
     def leaves(self, link: str, self_collision: bool = False) -> np.ndarray:
         """The fine spheres ``(k, 4)`` of ``link``: the leaves of its obstacle tree (or of its
         self-collision tree)."""
-        out, stack = [], [(self.self_roots if self_collision else self.roots)[link]]
-        while stack:
-            i = stack.pop()
-            if self.child_count[i] == 0:
-                out.append(i)
-            else:
-                stack.extend(range(self.first_child[i], self.first_child[i] + self.child_count[i]))
-        return self.nodes[sorted(out)]
+        root = (self.self_roots if self_collision else self.roots)[link]
+        return self.nodes[leaf_rows(root, self.first_child, self.child_count)]
 
     def save(self, path: str | Path) -> None:
         names = sorted(self.roots, key=self.roots.get)
