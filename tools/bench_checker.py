@@ -84,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         spheres = checker.spheres
         try:
             parts["whole"] += _time(lambda: checker.valid(states))
-            checker.spheres = spheres._replace(pairs=spheres.pairs[:0], pair_moving=spheres.pair_moving[:0],
+            checker.spheres = spheres._replace(pairs=spheres.pairs[:0], pair_root=spheres.pair_root[:0],
+                                               pair_moving=spheres.pair_moving[:0],
                                                pair_reach=spheres.pair_reach[:0])
             checker._pack()
             parts["obstacles"] += _time(lambda: checker.valid(states))
