@@ -149,7 +149,7 @@ class SphereChecker:
                           if frozenset((a, b)) not in skip], dtype=np.int64).reshape(-1, 2)
         #: The checked self pairs, by link name.
         self.self_pairs = [(self.links[a], self.links[b]) for a, b in pairs]
-        reach = self._joint_reach(robot, index, held, link_root, self_root)
+        reach = self._joint_reach(robot, held, link_root, self_root)
         nodes, first_child, child_count, pairs, pair_root, pair_own = self._body_pairs(pairs, self_root)
         # a self pair moves relative to itself only through the joints that move one link and not the other
         ra, rb = (np.array([reach[link] if own is None else self._levers(robot, link, own, held) for link, own in
@@ -305,7 +305,7 @@ class SphereChecker:
         groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
         for a, b in pairs:
             if body[a] == body[b]:
-                self._check_rigid_pair(a, b, self_root, rot, trans)
+                self._check_rigid_pair(a, b, rot, trans)
                 continue
             groups.setdefault((body[a], body[b]) if body[a] < body[b] else (body[b], body[a]), []).append((a, b))
         out_pairs, out_roots, out_own = [], [], ([], [])
@@ -349,7 +349,7 @@ class SphereChecker:
         return (nodes, first_child, child_count, np.array(out_pairs, dtype=np.int64).reshape(-1, 2),
                 np.array(out_roots, dtype=np.int64).reshape(-1, 2), out_own)
 
-    def _check_rigid_pair(self, a: int, b: int, self_root: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> None:
+    def _check_rigid_pair(self, a: int, b: int, rot: np.ndarray, trans: np.ndarray) -> None:
         """Links ``a`` and ``b`` never move relative to each other: their spheres must be apart."""
         from scipy.spatial import cKDTree
         la, lb = (self.model.leaves(self.links[i], True) for i in (a, b))
@@ -377,7 +377,7 @@ class SphereChecker:
             name = joint.parent
         return out
 
-    def _joint_reach(self, robot: URDFRobot, index: dict[str, int], held: dict[str, float], link_root: np.ndarray,
+    def _joint_reach(self, robot: URDFRobot, held: dict[str, float], link_root: np.ndarray,
                      self_root: np.ndarray) -> np.ndarray:
         """``(links, dof)``: how far any point of each link's spheres can lie from each planned joint's
         axis (0 where the joint does not move the link; 1 for a prismatic joint: its motion), for
@@ -386,7 +386,7 @@ class SphereChecker:
         ``sum_j |dq_j| reach[link, j]``."""
         nodes = self.model.nodes
         reach = np.zeros((len(self.links), self.dof))
-        for i in index.values():
+        for i in range(len(self.links)):
             own = max([float(np.linalg.norm(nodes[r, :3]) + nodes[r, 3])
                        for r in (link_root[i], self_root[i]) if r >= 0], default=0.0)
             reach[i] = self._levers(robot, i, own, held)
