@@ -180,7 +180,9 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
     """Whether a leaf under ``root_a`` (of link ``la``) and one under ``root_b`` (of ``lb``) are at most
     ``floor`` apart (``(True, ...)``), else ``(False, least)``: the least gap of the node pairs the walk
     pruned, a lower bound of every leaf pair's. Simultaneous descent from the roots, splitting the
-    larger of two nodes nearer than ``tau`` (at least ``floor``).
+    larger of two nodes nearer than ``tau`` (at least ``floor``) and than the least so far: the leaves
+    under a node are no nearer than it, so one no nearer than the least can neither touch (the least
+    is above ``floor``) nor lower it: the least stays a lower bound, no lower than without that test.
 
     The walk measures in ``la``'s frame: ``lb``'s node centres are moved into it once, when pushed
     (``pair_point``, beside ``pair_stack``), and ``la``'s are used as stored, so a node pair costs a
@@ -215,7 +217,7 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
         ra, rb = nodes[na_, 3], nodes[nb_, 3]
         g = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
         ca, cb = child_count[na_], child_count[nb_]
-        if g > tau or (g > floor and ca == 0 and cb == 0):
+        if g > tau or g >= least or (g > floor and ca == 0 and cb == 0):
             least = g if g < least else least
             continue
         if ca == 0 and cb == 0:
@@ -280,16 +282,19 @@ def _node_verdict(d2, r, adds, tau, least, leaf):
     ``(TOUCHES, least)`` for a touching leaf, ``(DESCEND, least)`` for a node nearer than ``tau``. Squares
     first, the root (a long-latency instruction, a tenth of the kernel's time) only where needed: farther
     than tau by a margin far above rounding, the node is pruned; its distance counts only if it may be the
-    least so far."""
+    least so far. A node no nearer than the least so far (which is above 0) is pruned too: the leaves under
+    it can neither touch nor lower the least: it stays a lower bound, no lower than without that test."""
     reach = tau + r + adds
+    near = least + r + adds
     if d2 > reach * reach * SQUARES_MARGIN:
-        near = least + r + adds
         if d2 < near * near * SQUARES_MARGIN:
             g = math.sqrt(d2) - r - adds
             least = g if g < least else least
         return PRUNED, least
+    if d2 > near * near * SQUARES_MARGIN:
+        return PRUNED, least
     g = math.sqrt(d2) - r - adds
-    if g > tau or (g > 0.0 and leaf):
+    if g > tau or g >= least or (g > 0.0 and leaf):
         return PRUNED, (g if g < least else least)
     return (TOUCHES if leaf else DESCEND), least
 
