@@ -184,9 +184,10 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
     under a node are no nearer than it, so one no nearer than the least can neither touch (the least
     is above ``floor``) nor lower it: the least stays a lower bound, no lower than without that test.
 
-    The walk measures in ``la``'s frame: ``lb``'s node centres are moved into it once, when pushed
-    (``pair_point``, beside ``pair_stack``), and ``la``'s are used as stored, so a node pair costs a
-    subtraction and a root (the distance is the world one's: frames are rigid motions)."""
+    A node pair's children are tested when it is split (:func:`_node_verdict`: squares first), and only
+    those to split in turn are pushed. The walk measures in ``la``'s frame: ``lb``'s node centres are
+    moved into it once, when tested (``pair_point``, beside ``pair_stack``), and ``la``'s are used as
+    stored (the distance is the world one's: frames are rigid motions)."""
     # lb's frame in la's: m = R_a^T R_b, u = R_a^T (t_b - t_a)
     ex, ey, ez = trans[lb, 0] - trans[la, 0], trans[lb, 1] - trans[la, 1], trans[lb, 2] - trans[la, 2]
     u0 = rot[la, 0, 0] * ex + rot[la, 1, 0] * ey + rot[la, 2, 0] * ez
@@ -201,42 +202,49 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
     m20 = rot[la, 0, 2] * rot[lb, 0, 0] + rot[la, 1, 2] * rot[lb, 1, 0] + rot[la, 2, 2] * rot[lb, 2, 0]
     m21 = rot[la, 0, 2] * rot[lb, 0, 1] + rot[la, 1, 2] * rot[lb, 1, 1] + rot[la, 2, 2] * rot[lb, 2, 1]
     m22 = rot[la, 0, 2] * rot[lb, 0, 2] + rot[la, 1, 2] * rot[lb, 1, 2] + rot[la, 2, 2] * rot[lb, 2, 2]
-    least = UNBOUNDED
-    top = 0
-    pair_stack[0, 0] = root_a
-    pair_stack[0, 1] = root_b
     x, y, z = nodes[root_b, 0], nodes[root_b, 1], nodes[root_b, 2]
-    pair_point[0, 0] = u0 + m00 * x + m01 * y + m02 * z
-    pair_point[0, 1] = u1 + m10 * x + m11 * y + m12 * z
-    pair_point[0, 2] = u2 + m20 * x + m21 * y + m22 * z
-    while top >= 0:
+    px, py, pz = u0 + m00 * x + m01 * y + m02 * z, u1 + m10 * x + m11 * y + m12 * z, u2 + m20 * x + m21 * y + m22 * z
+    dx, dy, dz = nodes[root_a, 0] - px, nodes[root_a, 1] - py, nodes[root_a, 2] - pz
+    verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, nodes[root_a, 3], nodes[root_b, 3], tau, floor,
+                                   UNBOUNDED, child_count[root_a] == 0 and child_count[root_b] == 0)
+    if verdict != DESCEND:
+        return verdict == TOUCHES, least
+    top = 0
+    pair_stack[0, 0], pair_stack[0, 1] = root_a, root_b
+    pair_point[0, 0], pair_point[0, 1], pair_point[0, 2] = px, py, pz
+    while top >= 0:                         # pairs nearer than tau and the least: split the larger node
         na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
         px, py, pz = pair_point[top, 0], pair_point[top, 1], pair_point[top, 2]
         top -= 1
-        dx, dy, dz = nodes[na_, 0] - px, nodes[na_, 1] - py, nodes[na_, 2] - pz
-        ra, rb = nodes[na_, 3], nodes[nb_, 3]
-        g = math.sqrt(dx * dx + dy * dy + dz * dz) - ra - rb
         ca, cb = child_count[na_], child_count[nb_]
-        if g > tau or g >= least or (g > floor and ca == 0 and cb == 0):
-            least = g if g < least else least
-            continue
-        if ca == 0 and cb == 0:
-            return True, least
+        ra, rb = nodes[na_, 3], nodes[nb_, 3]
         if cb == 0 or (ca > 0 and ra >= rb):
             for c in range(first_child[na_], first_child[na_] + ca):
-                top += 1
-                pair_stack[top, 0] = c
-                pair_stack[top, 1] = nb_
-                pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = px, py, pz
+                dx, dy, dz = nodes[c, 0] - px, nodes[c, 1] - py, nodes[c, 2] - pz
+                verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, nodes[c, 3], rb, tau, floor, least,
+                                               child_count[c] == 0 and cb == 0)
+                if verdict == TOUCHES:
+                    return True, least
+                if verdict == DESCEND:
+                    top += 1
+                    pair_stack[top, 0], pair_stack[top, 1] = c, nb_
+                    pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = px, py, pz
         else:
+            xa, ya, za = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
             for c in range(first_child[nb_], first_child[nb_] + cb):
-                top += 1
-                pair_stack[top, 0] = na_
-                pair_stack[top, 1] = c
                 x, y, z = nodes[c, 0], nodes[c, 1], nodes[c, 2]
-                pair_point[top, 0] = u0 + m00 * x + m01 * y + m02 * z
-                pair_point[top, 1] = u1 + m10 * x + m11 * y + m12 * z
-                pair_point[top, 2] = u2 + m20 * x + m21 * y + m22 * z
+                qx = u0 + m00 * x + m01 * y + m02 * z
+                qy = u1 + m10 * x + m11 * y + m12 * z
+                qz = u2 + m20 * x + m21 * y + m22 * z
+                dx, dy, dz = xa - qx, ya - qy, za - qz
+                verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, ra, nodes[c, 3], tau, floor, least,
+                                               ca == 0 and child_count[c] == 0)
+                if verdict == TOUCHES:
+                    return True, least
+                if verdict == DESCEND:
+                    top += 1
+                    pair_stack[top, 0], pair_stack[top, 1] = na_, c
+                    pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = qx, qy, qz
     return False, least
 
 
@@ -276,13 +284,14 @@ PRUNED, TOUCHES, DESCEND = 0, 1, 2
 
 
 @jit(inline=True)
-def _node_verdict(d2, r, adds, tau, least, leaf):
+def _node_verdict(d2, r, adds, tau, floor, least, leaf):
     """A walk's step at a node of radius ``r`` whose centre is at squared distance ``d2`` from an obstacle's
-    core (which ``adds`` to it): ``(PRUNED, least)`` with the node's gap taken into the least so far,
-    ``(TOUCHES, least)`` for a touching leaf, ``(DESCEND, least)`` for a node nearer than ``tau``. Squares
+    core (which ``adds`` to it), or from another node's centre (of radius ``adds``): ``(PRUNED, least)``
+    with the node's gap taken into the least so far, ``(TOUCHES, least)`` for a leaf at most ``floor``
+    away (0 for obstacles), ``(DESCEND, least)`` for a node nearer than ``tau`` (at least ``floor``). Squares
     first, the root (a long-latency instruction, a tenth of the kernel's time) only where needed: farther
     than tau by a margin far above rounding, the node is pruned; its distance counts only if it may be the
-    least so far. A node no nearer than the least so far (which is above 0) is pruned too: the leaves under
+    least so far. A node no nearer than the least so far (above ``floor``) is pruned too: the leaves under
     it can neither touch nor lower the least: it stays a lower bound, no lower than without that test."""
     reach = tau + r + adds
     near = least + r + adds
@@ -294,7 +303,7 @@ def _node_verdict(d2, r, adds, tau, least, leaf):
     if d2 > near * near * SQUARES_MARGIN:
         return PRUNED, least
     g = math.sqrt(d2) - r - adds
-    if g > tau or g >= least or (g > 0.0 and leaf):
+    if g > tau or g >= least or (g > floor and leaf):
         return PRUNED, (g if g < least else least)
     return (TOUCHES if leaf else DESCEND), least
 
@@ -321,7 +330,8 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
         if obstacles.exempt[o, link]:
             continue
         adds = ob_size[o, 0] if ob_kind[o] == SPHERE else 0.0
-        verdict, clearance = _node_verdict(obstacles.root_d2[o], r, adds, tau, clearance, child_count[root] == 0)
+        verdict, clearance = _node_verdict(obstacles.root_d2[o], r, adds, tau, 0.0, clearance,
+                                           child_count[root] == 0)
         if verdict == TOUCHES:
             return True, clearance
         if verdict == PRUNED:
@@ -340,7 +350,7 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
                                   ob_rot[o, 0, 0], ob_rot[o, 0, 1], ob_rot[o, 0, 2], ob_rot[o, 1, 0],
                                   ob_rot[o, 1, 1], ob_rot[o, 1, 2], ob_rot[o, 2, 0], ob_rot[o, 2, 1],
                                   ob_rot[o, 2, 2], ob_size[o, 0], ob_size[o, 1], ob_size[o, 2])
-                verdict, least = _node_verdict(d2, r_node, adds, tau, least, child_count[c] == 0)
+                verdict, least = _node_verdict(d2, r_node, adds, tau, 0.0, least, child_count[c] == 0)
                 if verdict == TOUCHES:
                     return True, clearance
                 if verdict == DESCEND:
