@@ -314,6 +314,48 @@ def test_obstacles_of_mixed_kinds_in_any_order_answer_as_each_obstacle_alone(wor
     assert 5 < (~want).sum() < 55                 # both answers occur
 
 
+#: The moving rigid bodies whose links' obstacle trees the checker merges: head link -> links with spheres
+#: (the xArm6's links with spheres each have a joint of their own; bodies fixed to the world stay per link).
+RIGID_BODIES = {"panda_link7": 4, "wrist_3_link": 12, "wrist_roll_link": 4, "torso_lift_link": 3}
+
+
+def test_a_scene_that_excuses_part_of_a_rigid_body_answers_link_by_link(world):
+    """A moving rigid body (a gripper and the wrist link it hangs from) is one obstacle tree to the kernel
+    where a scene excuses each obstacle for all of its links or none; a scene that excuses one for some
+    of them gets the links' own trees for that body. Either way the answers are the leaves' against
+    each obstacle as given."""
+    checker = sphere_checker(world, ())
+    assert {checker.links[h]: len(m) for h, (m, _, _) in checker.bodies.items()} == {
+        name: k for name, k in RIGID_BODIES.items() if name in checker.links}
+    obstacles = [Obstacle("sphere", (0.08,), _around(world, (0.0, 0.35, 0.2))),
+                 Obstacle("box", (0.1, 0.3, 0.02), _around(world, (0.25, 0.0, 0.0)), yaw=0.3),
+                 Obstacle("box", (0.05, 0.05, 0.05), _around(world, (0.0, 0.0, 0.0)))]
+    leaves = {link: checker.model.leaves(link) for link in checker.model.roots}
+    states = np.random.default_rng(17).uniform(world.low, world.high, (60, len(world.low)))
+    scenes = [{}, {2: list(checker.links)}]
+    for head, (members, _, _) in checker.bodies.items():
+        scenes.append({2: [checker.links[members[-1]]]})        # the body's last link only
+    try:
+        checker.set_obstacles(())
+        alone = checker.valid(states)
+        for exempt in scenes:
+            checker.set_obstacles(obstacles, exempt)
+            roots = checker.spheres.link_root
+            for head, (members, merged, _) in checker.bodies.items():
+                names = [checker.links[m] for m in members]
+                if 0 < len(set(exempt.get(2, ())) & set(names)) < len(members):
+                    np.testing.assert_array_equal(roots[members], [checker.model.roots[name] for name in names])
+                else:
+                    assert roots[head] == merged and (roots[members[members != head]] == -1).all()
+            want = np.array([free and not _object_collides(checker, obstacles, exempt, leaves, q)
+                             for free, q in zip(alone, states)])
+            np.testing.assert_array_equal(checker.valid(states), want)
+            assert 5 < (~want).sum() < 55             # both answers occur
+    finally:
+        checker.set_obstacles(())
+        _CHECKERS.pop(id(world))                  # the next test loads its own scene
+
+
 def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
     """The edge kernel skips states and pairs that its distance bounds vouch for; the answer and the
     count must be those of checking every state in order (the oracle: ``valid`` state by state, and
@@ -479,46 +521,57 @@ def test_exactly_the_listed_problems_are_invalid_under_the_sphere_model(robot):
     assert 700 - len(set(INVALID_PROBLEMS[robot]) | set(SPHERE_INVALID_PROBLEMS[robot])) >= 665   # 95%
 
 
-def _world_leaves(checker, q, self_collision=False):
-    """Every link's leaves (centres) in the world at ``q``: link name -> ``(k, 3)``."""
-    rot, trans = checker.link_frames(q)
-    return {link: checker.model.leaves(link, self_collision)[:, :3] @ rot[i].T + trans[i]
-            for i, link in enumerate(checker.links) if link in checker.model.roots}
+def _row_leaves(checker, frames):
+    """Per link row of the kernel with an obstacle tree: the world centres of that tree's leaves, and of the
+    link's own self tree's where the tree is the link's own (its levers cover both)."""
+    rot, trans = frames
+    out = {}
+    for i, link in enumerate(checker.links):
+        leaves = checker.link_leaves(i)[:, :3]
+        if not len(leaves):
+            continue
+        if checker.spheres.link_root[i] == checker.model.roots.get(link, -1):
+            leaves = np.vstack([leaves, checker.model.leaves(link, True)[:, :3]])
+        out[i] = leaves @ rot[i].T + trans[i]
+    return out
 
 
 def test_the_motion_bounds_hold_along_edges(world):
     """What lets the edge check skip states: over ``s`` states from state ``k`` of an edge, every leaf
-    of a link moves at most ``s delta`` and at most ``s rate + s^2 curve / 2`` (``rate`` measured at
-    state ``k``), and a link below another moves at most the pair's bounds in that link's frame. The
-    oracle: the leaves' positions from forward kinematics at both states."""
+    of a link's obstacle tree (a rigid body's, where the kernel merges them) and of its own self tree
+    moves at most ``s delta`` and at most ``s rate + s^2 curve / 2`` (``rate`` measured at state ``k``),
+    and a link below another moves at most the pair's bounds in that link's frame. The oracle: the
+    leaves' positions from forward kinematics at both states."""
     checker = sphere_checker(world, ())
     rng = np.random.default_rng(5)
     tighter = []
-    for _ in range(40):
+    dof = len(world.low)
+    for trial in range(40 + 2 * dof):
         a = rng.uniform(world.low, world.high)
-        d = rng.normal(size=len(a))
+        # random directions, then each joint alone (twice): a lever that misses a leaf shows there
+        d = rng.normal(size=dof) if trial < 40 else np.eye(dof)[(trial - 40) % dof]
         b = a + d / np.linalg.norm(d) * rng.uniform(0.2, 1.5)
         n = int(rng.integers(20, 150))
         k = int(rng.integers(0, n))
         bounds = checker.motion_rates(a, b, n, k)
-        here = {t: _world_leaves(checker, a + (k / n) * (b - a), t) for t in (False, True)}
         frames_here = checker.link_frames(a + (k / n) * (b - a))
+        here = _row_leaves(checker, frames_here)
         for s in (1, 3, 10, 40):
             for sign in (1, -1):
                 j = k + sign * s
                 if not 0 <= j <= n:
                     continue
-                there = {t: _world_leaves(checker, a + (j / n) * (b - a), t) for t in (False, True)}
+                frames_there = checker.link_frames(a + (j / n) * (b - a))
+                there = _row_leaves(checker, frames_there)
                 for i, link in enumerate(checker.links):
-                    if link not in checker.model.roots:
+                    if i not in here:
                         continue
-                    moved = max(float(np.linalg.norm(there[t][link] - here[t][link], axis=1).max()) for t in (False, True))
+                    moved = float(np.linalg.norm(there[i] - here[i], axis=1).max())
                     curved = s * bounds["rate"][i] + 0.5 * s * s * bounds["curve"][i]
                     assert moved <= s * bounds["delta"][i] + 1e-9, (link, s)
                     assert moved <= curved + 1e-9, (link, s, moved, curved)
                     if moved > 1e-6:
                         tighter.append(min(curved, s * bounds["delta"][i]) / (s * bounds["delta"][i]))
-                frames_there = checker.link_frames(a + (j / n) * (b - a))
                 for p, ((la, lb), m) in enumerate(zip(checker.spheres.pairs, checker.spheres.pair_moving)):
                     if m < 0:
                         continue

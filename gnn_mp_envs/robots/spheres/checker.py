@@ -158,8 +158,15 @@ class SphereChecker:
         # per self pair, the link that moves in the other's frame (-1: neither): the one below the other, else
         # the one moved by every planned joint that moves the other (-1: each has a joint of its own)
         pair_moving = np.array([self._moving(a_, b_, reach) for a_, b_ in pairs], dtype=np.int64)
+        nodes, first_child, child_count, bodies = self._body_trees(robot, held, link_root, reach, nodes, first_child,
+                                                                   child_count)
+        #: The moving rigid bodies whose links' obstacle trees are one tree: head link -> (members, that tree's
+        #: root, the head's levers for it); a scene uses it where it exempts every member alike (set_obstacles).
+        self.bodies = bodies
+        self._own_roots, self._own_reach = link_root, reach
         #: The sphere trees, the self pairs and the joints' levers.
-        self.spheres = Spheres(link_root, nodes, first_child, child_count, pairs, pair_root, pair_moving, reach,
+        roots, levers = self._scene_roots(np.zeros((0, n), dtype=np.bool_))
+        self.spheres = Spheres(roots, nodes, first_child, child_count, pairs, pair_root, pair_moving, levers,
                                pair_reach)
         # depth-first stacks: at most (children per node) entries per level of the deepest tree
         # (two trees for pairs)
@@ -349,6 +356,58 @@ class SphereChecker:
         return (nodes, first_child, child_count, np.array(out_pairs, dtype=np.int64).reshape(-1, 2),
                 np.array(out_roots, dtype=np.int64).reshape(-1, 2), out_own)
 
+    def _body_trees(self, robot: URDFRobot, held: dict[str, float], link_root: np.ndarray, reach: np.ndarray,
+                    nodes: np.ndarray, first_child: np.ndarray, child_count: np.ndarray) -> tuple:
+        """One obstacle tree per moving rigid body of several links with trees (a gripper's parts and the
+        wrist link they hang from): the members' trees under one root in the body's frame
+        (:func:`_merged_tree`), the same leaves, so a link far from everything costs one root test per
+        obstacle for the whole body. Bodies fixed to the world keep their links' trees (they never move,
+        so their walks are carried along every edge anyway). Returns the nodes, ``first_child`` and
+        ``child_count`` with the merged trees appended, and :attr:`bodies`."""
+        body = np.array([self._body(i) for i in range(len(self.links))], dtype=np.int64)
+        kin, n = self.kinematics, len(self.links)
+        rot, trans = np.zeros((n, 3, 3)), np.zeros((n, 3))       # any configuration: the bodies are rigid
+        kinematics.forward_kinematics(np.zeros(self.dof), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis,
+                                      kin.q_index, kin.q_fixed, rot, trans)
+        bodies: dict[int, tuple[np.ndarray, int, np.ndarray]] = {}
+        extra, size = [], len(nodes)
+        for head in np.unique(body):
+            members = np.flatnonzero((body == head) & (link_root >= 0))
+            if len(members) < 2 or not self._moves(int(head)):
+                continue
+            tree = _merged_tree(nodes, first_child, child_count, size,
+                                [(link_root[m], rot[head].T @ rot[m], rot[head].T @ (trans[m] - trans[head]))
+                                 for m in members])
+            own = float(np.linalg.norm(tree[0][0, :3]) + tree[0][0, 3])
+            bodies[int(head)] = (members, size, np.maximum(reach[head], self._levers(robot, int(head), own, held)))
+            extra.append(tree)
+            size += len(tree[0])
+        if extra:
+            nodes = np.vstack([nodes, *(t[0] for t in extra)])
+            first_child = np.concatenate([first_child, *(t[1] for t in extra)])
+            child_count = np.concatenate([child_count, *(t[2] for t in extra)])
+        return nodes, first_child, child_count, bodies
+
+    def _moves(self, link: int) -> bool:
+        """Whether a planned joint moves ``link`` (one on its way up to the root)."""
+        parent, q_index = self.kinematics.parent, self.kinematics.q_index
+        while link >= 0:
+            if q_index[link] >= 0:
+                return True
+            link = parent[link]
+        return False
+
+    def _scene_roots(self, excused: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each link's obstacle tree root and levers for a scene whose exemptions are ``excused``
+        (obstacles x links): a body's merged tree (:meth:`_body_trees`) where every obstacle exempts all
+        of its members or none, else the members' own trees."""
+        roots, levers = self._own_roots.copy(), self._own_reach.copy()
+        for head, (members, root, reach) in self.bodies.items():
+            if (excused[:, members] == excused[:, members[:1]]).all():
+                roots[members] = -1
+                roots[head], levers[head] = root, reach
+        return roots, levers
+
     def _check_rigid_pair(self, a: int, b: int, rot: np.ndarray, trans: np.ndarray) -> None:
         """Links ``a`` and ``b`` never move relative to each other: their spheres must be apart."""
         from scipy.spatial import cKDTree
@@ -416,6 +475,8 @@ class SphereChecker:
             for name in links:
                 excused[o, index[name]] = True
         self.obstacles = _obstacle_arrays(kind, centre, rot, size, excused)
+        roots, levers = self._scene_roots(excused)
+        self.spheres = self.spheres._replace(link_root=roots, reach=levers)
         self.memo.meta[:] = 0           # clearances of the last scene's states
         self.memo.q[:] = np.nan
         self._grow(max(self.scratch.known.shape[0], 130))
@@ -503,6 +564,14 @@ class SphereChecker:
                                      if m >= 0 else 0.0 for (la, lb), (ra, rb), m in
                                      zip(spheres.pairs, spheres.pair_root, spheres.pair_moving)])
         return out
+
+    def link_leaves(self, link: int) -> np.ndarray:
+        """The leaves ``(k, 4)`` of the kernel's obstacle tree of ``link`` (index) in its frame, for the scene
+        loaded: the link's own, or those of every link of its rigid body (:meth:`_body_trees`); empty
+        where the link has none (no spheres, or its body's tree holds them)."""
+        s = self.spheres
+        root = s.link_root[link]
+        return s.nodes[leaf_rows(root, s.first_child, s.child_count)] if root >= 0 else np.zeros((0, 4))
 
     def pair_leaves(self, p: int) -> tuple[np.ndarray, np.ndarray]:
         """The leaves ``(k, 4)`` of the kernel's self pair ``p``'s two trees, each in the frame of its link
