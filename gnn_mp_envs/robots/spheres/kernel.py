@@ -218,33 +218,28 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
         top -= 1
         ca, cb = child_count[na_], child_count[nb_]
         ra, rb = nodes[na_, 3], nodes[nb_, 3]
-        if cb == 0 or (ca > 0 and ra >= rb):
-            for c in range(first_child[na_], first_child[na_] + ca):
-                dx, dy, dz = nodes[c, 0] - px, nodes[c, 1] - py, nodes[c, 2] - pz
-                verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, nodes[c, 3], rb, tau, floor, least,
-                                               child_count[c] == 0 and cb == 0)
-                if verdict == TOUCHES:
-                    return True, least
-                if verdict == DESCEND:
-                    top += 1
-                    pair_stack[top, 0], pair_stack[top, 1] = c, nb_
-                    pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = px, py, pz
-        else:
-            xa, ya, za = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
-            for c in range(first_child[nb_], first_child[nb_] + cb):
-                x, y, z = nodes[c, 0], nodes[c, 1], nodes[c, 2]
+        split_a = cb == 0 or (ca > 0 and ra >= rb)
+        split = na_ if split_a else nb_
+        xa, ya, za = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
+        for c in range(first_child[split], first_child[split] + child_count[split]):
+            if split_a:                     # a child of a's node against b's (its point as pushed)
+                xa, ya, za, ra = nodes[c, 0], nodes[c, 1], nodes[c, 2], nodes[c, 3]
+                qx, qy, qz = px, py, pz
+                leaves = child_count[c] == 0 and cb == 0
+            else:                           # a's node against a child of b's, moved into a's frame
+                x, y, z, rb = nodes[c, 0], nodes[c, 1], nodes[c, 2], nodes[c, 3]
                 qx = u0 + m00 * x + m01 * y + m02 * z
                 qy = u1 + m10 * x + m11 * y + m12 * z
                 qz = u2 + m20 * x + m21 * y + m22 * z
-                dx, dy, dz = xa - qx, ya - qy, za - qz
-                verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, ra, nodes[c, 3], tau, floor, least,
-                                               ca == 0 and child_count[c] == 0)
-                if verdict == TOUCHES:
-                    return True, least
-                if verdict == DESCEND:
-                    top += 1
-                    pair_stack[top, 0], pair_stack[top, 1] = na_, c
-                    pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = qx, qy, qz
+                leaves = ca == 0 and child_count[c] == 0
+            dx, dy, dz = xa - qx, ya - qy, za - qz
+            verdict, least = _node_verdict(dx * dx + dy * dy + dz * dz, ra, rb, tau, floor, least, leaves)
+            if verdict == TOUCHES:
+                return True, least
+            if verdict == DESCEND:
+                top += 1
+                pair_stack[top, 0], pair_stack[top, 1] = (c, nb_) if split_a else (na_, c)
+                pair_point[top, 0], pair_point[top, 1], pair_point[top, 2] = qx, qy, qz
     return False, least
 
 
