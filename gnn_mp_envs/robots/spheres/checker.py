@@ -290,6 +290,15 @@ class SphereChecker:
             link = parent[link]
         return link
 
+    def _rigid_bodies(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each link's body (:meth:`_body`) and the link frames at one configuration (any: bodies are rigid)."""
+        body = np.array([self._body(i) for i in range(len(self.links))], dtype=np.int64)
+        kin, n = self.kinematics, len(self.links)
+        rot, trans = np.zeros((n, 3, 3)), np.zeros((n, 3))
+        kinematics.forward_kinematics(np.zeros(self.dof), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis,
+                                      kin.q_index, kin.q_fixed, rot, trans)
+        return body, rot, trans
+
     def _body_pairs(self, pairs: np.ndarray, self_root: np.ndarray) -> tuple:
         """The self pairs as the kernel checks them, with the same answers and less work: links rigidly
         joined (fixed or held joints: a gripper's parts, a torso and its head) are one rigid body.
@@ -304,11 +313,7 @@ class SphereChecker:
         (``None``: a link's own trees, whose levers :meth:`_joint_reach` gives)."""
         model = self.model
         nodes, first_child, child_count = model.nodes, model.first_child, model.child_count
-        body = np.array([self._body(i) for i in range(len(self.links))], dtype=np.int64)
-        kin, n = self.kinematics, len(self.links)
-        rot, trans = np.zeros((n, 3, 3)), np.zeros((n, 3))       # any configuration: the bodies are rigid
-        kinematics.forward_kinematics(np.zeros(self.dof), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis,
-                                      kin.q_index, kin.q_fixed, rot, trans)
+        body, rot, trans = self._rigid_bodies()
         groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
         for a, b in pairs:
             if body[a] == body[b]:
@@ -364,16 +369,12 @@ class SphereChecker:
         obstacle for the whole body. Bodies fixed to the world keep their links' trees (they never move,
         so their walks are carried along every edge anyway). Returns the nodes, ``first_child`` and
         ``child_count`` with the merged trees appended, and :attr:`bodies`."""
-        body = np.array([self._body(i) for i in range(len(self.links))], dtype=np.int64)
-        kin, n = self.kinematics, len(self.links)
-        rot, trans = np.zeros((n, 3, 3)), np.zeros((n, 3))       # any configuration: the bodies are rigid
-        kinematics.forward_kinematics(np.zeros(self.dof), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis,
-                                      kin.q_index, kin.q_fixed, rot, trans)
+        body, rot, trans = self._rigid_bodies()
         bodies: dict[int, tuple[np.ndarray, int, np.ndarray]] = {}
         extra, size = [], len(nodes)
         for head in np.unique(body):
             members = np.flatnonzero((body == head) & (link_root >= 0))
-            if len(members) < 2 or not self._moves(int(head)):
+            if len(members) < 2 or self.kinematics.q_index[head] < 0:     # one link, or fixed to the world
                 continue
             tree = _merged_tree(nodes, first_child, child_count, size,
                                 [(link_root[m], rot[head].T @ rot[m], rot[head].T @ (trans[m] - trans[head]))
@@ -387,15 +388,6 @@ class SphereChecker:
             first_child = np.concatenate([first_child, *(t[1] for t in extra)])
             child_count = np.concatenate([child_count, *(t[2] for t in extra)])
         return nodes, first_child, child_count, bodies
-
-    def _moves(self, link: int) -> bool:
-        """Whether a planned joint moves ``link`` (one on its way up to the root)."""
-        parent, q_index = self.kinematics.parent, self.kinematics.q_index
-        while link >= 0:
-            if q_index[link] >= 0:
-                return True
-            link = parent[link]
-        return False
 
     def _scene_roots(self, excused: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each link's obstacle tree root and levers for a scene whose exemptions are ``excused``
