@@ -395,6 +395,11 @@ def solve_problem(problem: Any, planner: str = "rrtconnect", time_limit: float =
 
     setup = SETUP_BUILDERS[bool(problem.geometric)](problem, planner)
     ss, plan = setup.ss, setup.planner
+    # the problem's checks once before the clock: a process's first check may build its checker or compile it
+    # (numba, where its cache is stale: tens of seconds), which is not planning (uncounted: reset below)
+    problem.is_state_valid(np.asarray(problem.start, dtype=np.float64)[None])
+    if problem.geometric:
+        problem.check_motion(problem.start, problem.goal)
     ss.setup()
     problem.reset_counters()
     setup.reset_counters()
