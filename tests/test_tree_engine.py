@@ -415,6 +415,38 @@ def test_compiled_causal_knn_is_the_brute_force_answer(planner_metric):
                 np.testing.assert_array_equal(got[0][r, :got[1][r]], want[0][r, :want[1][r]])
 
 
+def test_compiled_draw_is_the_numpy_search_and_gaussian():
+    """:func:`draw_around_nodes` (a batch's samples from its node mixtures, one compiled call) against the
+    numpy it replaced: per sample ``searchsorted(running sums, r (1 - 1e-12), "right")`` capped at the last
+    node, then ``states + offsets + shift + sigma_scale exp(log_sigma) z``; exactly the node (with
+    ``sigma_scale`` 0 the sample is the node's mean, bit for bit), the Gaussian to rounding. Draws land on
+    running sums exactly, between them, past the last one and below the first."""
+    from agents.tree.compiled import draw_around_nodes
+    rng = np.random.default_rng(4)
+    n, d, T, m = 30, 3, 2, 400
+    p = rng.random((2, n))
+    p[:, 7] = 0.0                                            # a node of no weight: never drawn
+    cumulative = np.cumsum(p / p.sum(1, keepdims=True), axis=1)
+    cumulative[:, -1] = 1.0 - 1e-13                          # r (1 - 1e-12) can pass the last running sum
+    states, offsets = rng.normal(size=(n + 5, d)), rng.normal(size=(n + 5, T, d))
+    log_sigma, shifts = rng.normal(size=(n + 5, T, d)), rng.normal(size=(2, d))
+    trees = rng.integers(0, 2, m)
+    rows = trees.copy()
+    r = rng.random(m)
+    r[:40] = cumulative[rows[:40], rng.integers(0, n, 40)] / (1 - 1e-12)   # onto a running sum
+    r[40:45], r[45:50] = 1.0 - 1e-16, 0.0
+    z = rng.normal(size=(m, d))
+    nodes = np.array([min(int(np.searchsorted(cumulative[row], v * (1 - 1e-12), "right")), n - 1)
+                      for row, v in zip(rows, r)])
+    assert 7 not in nodes and (nodes == n - 1).any() and (nodes == 0).any()
+    mean = states[nodes] + offsets[nodes, trees] + shifts[rows]
+    out = np.empty((m, d))
+    draw_around_nodes(cumulative, shifts, rows, trees, r, z, states, offsets, log_sigma, 0.0, out)
+    np.testing.assert_array_equal(out, mean + 0.0 * z)
+    draw_around_nodes(cumulative, shifts, rows, trees, r, z, states, offsets, log_sigma, 0.7, out)
+    np.testing.assert_allclose(out, mean + 0.7 * np.exp(log_sigma[nodes, trees]) * z, rtol=1e-13, atol=1e-13)
+
+
 def test_compiled_gelu_over_many_rows_equals_one_call_per_row():
     """The kernels take a batch's message GELUs in one call (:func:`_gelu_with` with a shared
     scratch): each value's result depends on that value only, so it is bit for bit one call per

@@ -165,12 +165,12 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
     ``planner_metric`` ``sum((min(|d|, 2 pi - |d|) * unit) ** 2)`` (the planner's weighted metric,
     the scorer's).
 
-    Two passes per row: every earlier node's distance into a buffer, one coordinate at a time over
-    a column copy of the states (contiguous and branch-free, so the loop over nodes pipelines; about
-    twice as fast as one pass), then the selection scan. The same floats as
-    one pass: each distance is the same operations in the same order (``_wrapped``'s single-step
-    case written as selects; a difference outside it, never made by wrapped angles, is recomputed
-    by :func:`_wrapped` itself)."""
+    Two passes per row over the earlier nodes of its tree only: each one's distance into a buffer, one
+    coordinate at a time over a column copy of that tree's states (contiguous and branch-free, so the
+    loop over nodes pipelines; about twice as fast as one pass), then the selection scan in node
+    order. The same floats as one pass over every node: each distance is the same operations in the
+    same order (``_wrapped``'s single-step case written as selects; a difference outside it, never
+    made by wrapped angles, is recomputed by :func:`_wrapped` itself)."""
     B, d = x.shape
     kk = max(knn, 1)
     best_d = np.empty(kk)
@@ -180,52 +180,73 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
     if knn <= 0:
         return near, found
     M = i0 + B
-    cols = np.empty((d, M))                          # the states column by column: contiguous passes
+    T = 0
     for j in range(M):
+        T = max(T, tree_id[j] + 1)
+    for r in range(B):
+        T = max(T, tid[r] + 1)
+    size = np.zeros(T, dtype=np.int64)              # each tree's nodes among the first M, in node order
+    for j in range(M):
+        size[tree_id[j]] += 1
+    first = np.zeros(T + 1, dtype=np.int64)
+    for t in range(T):
+        first[t + 1] = first[t] + size[t]
+    index = np.empty(M, dtype=np.int64)
+    cols = np.empty((d, M))                          # tree by tree, column by column: contiguous passes
+    fill = first[:T].copy()
+    for j in range(M):
+        t = tree_id[j]
+        slot = fill[t]
+        fill[t] += 1
+        index[slot] = j
         for c in range(d):
-            cols[c, j] = states[j, c]
+            cols[c, slot] = states[j, c]
     dist = np.empty(M)
     for r in range(B):
         t = tid[r]
         m = i0 + r
-        dist[:m] = 0.0
+        lo = first[t]
+        hi = lo                                      # the tree's nodes before node m: slots lo..hi-1
+        while hi < first[t + 1] and index[hi] < m:
+            hi += 1
+        mt = hi - lo
+        dt = dist[lo:hi]                             # (views from 0: the loops below vectorise)
+        dt[:] = 0.0
         outside = False
         for c in range(d):
             xc = x[r, c]
             uc = unit[c]
-            col = cols[c]
+            col = cols[c, lo:hi]
             if planner_metric:
                 if periodic[c]:
-                    for j in range(m):
+                    for j in range(mt):
                         v = abs(xc - col[j])
                         v = min(v, two_pi - v) * uc
-                        dist[j] += v * v
+                        dt[j] += v * v
                 else:
-                    for j in range(m):
+                    for j in range(mt):
                         v = abs(xc - col[j]) * uc
-                        dist[j] += v * v
+                        dt[j] += v * v
             elif periodic[c]:
-                for j in range(m):
+                for j in range(mt):
                     a = (col[j] - xc) + math.pi
                     outside |= (a >= 2.0 * _TWO_PI) | (a < -_TWO_PI)
                     a = a - _TWO_PI if a >= _TWO_PI else (a + _TWO_PI if a < 0.0 else a)
                     v = (a - math.pi) / uc
-                    dist[j] += v * v
+                    dt[j] += v * v
             else:
-                for j in range(m):
+                for j in range(mt):
                     v = (col[j] - xc) / uc
-                    dist[j] += v * v
+                    dt[j] += v * v
         if outside:                                  # not two wrapped angles: the exact wrap, node by node
-            for j in range(m):
+            for j in range(lo, hi):
                 total = 0.0
                 for c in range(d):
-                    v = _wrapped(states[j, c] - x[r, c], periodic[c]) / unit[c]
+                    v = _wrapped(states[index[j], c] - x[r, c], periodic[c]) / unit[c]
                     total += v * v
                 dist[j] = total
         n_found = 0
-        for j in range(m):
-            if tree_id[j] != t:
-                continue
+        for j in range(lo, hi):
             dj = dist[j]
             if n_found < knn:
                 pos = n_found
@@ -239,7 +260,7 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
                 near[r, pos] = near[r, pos - 1]
                 pos -= 1
             best_d[pos] = dj
-            near[r, pos] = j
+            near[r, pos] = index[j]
         found[r] = n_found
     return near, found
 
@@ -418,6 +439,31 @@ def node_mixture(keys, q, active, inv_temperature, shift_w, shift_b, step):
     for c in range(d):
         out[c] = shift[active * d + c] * step[c]
     return logits, cumulative, out
+
+
+@jit
+def draw_around_nodes(cumulative, shifts, rows, trees, r, z, states, offsets, log_sigma, sigma_scale, out):
+    """The GNN's samples from node mixtures, per sample ``j``: the node of mixture ``rows[j]`` whose running
+    sum first exceeds ``r[j] (1 - 1e-12)`` (numpy's ``searchsorted(..., "right")``, at most the last node),
+    then ``out[j] = states[node] + offsets[node, trees[j]] + shifts[rows[j]] + sigma z[j]`` with ``sigma =
+    sigma_scale exp(log_sigma[node, trees[j]])`` (per coordinate), summed in that order (numpy's,
+    elementwise). One call for a batch: those numpy operations' floats without their dispatch."""
+    m, d = z.shape
+    n = cumulative.shape[1]
+    for j in range(m):
+        row, tree = rows[j], trees[j]
+        v = r[j] * (1 - 1e-12)
+        lo, hi = 0, n
+        while lo < hi:                  # the number of running sums <= v
+            mid = (lo + hi) >> 1
+            if cumulative[row, mid] <= v:
+                lo = mid + 1
+            else:
+                hi = mid
+        node = lo if lo < n - 1 else n - 1
+        for c in range(d):
+            sigma = sigma_scale * math.exp(log_sigma[node, tree, c])
+            out[j, c] = states[node, c] + offsets[node, tree, c] + shifts[row, c] + sigma * z[j, c]
 
 
 # ---------------------------------------------------------------------------- one call per step
