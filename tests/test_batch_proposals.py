@@ -44,6 +44,31 @@ def test_a_batch_of_one_is_one_act(task, name, settings):
     assert step > 5
 
 
+@pytest.mark.parametrize("task, settings", [("panda-mbm", {"goal_bias": 0.1}), ("maze2d", {"adaptive": False}),
+                                            ("fetch-mbm", {"uniform_mix": 0.0})])
+def test_the_gnn_samplers_compiled_batches_are_the_general_paths(task, settings):
+    """The GNN sampler's batches (choices, forward and samples in compiled calls) against the general numpy
+    path of :class:`~agents.samplers.base.ModelSampler` it replaces (``act_batch`` and ``model_batch``):
+    the same samples, bit for bit, at every step of a growing tree, for batches of 1 to 64 (uniform, target
+    and model samples; BiRRT's two trees, RRT's one; a batch of model samples only)."""
+    from agents.samplers.base import ModelSampler
+    env = _env(task)
+    obs, _ = env.reset(seed=0, options={"index": 2})
+    fast, general = (load_sampler("gnn", task=task, seed=9, **settings) for _ in range(2))
+    for sampler in (fast, general):
+        sampler.reset(9)
+    sizes = [1, 2, 5, 16, 64]
+    for step in range(40):
+        k = sizes[step % len(sizes)]
+        a, b = fast.act_batch(obs, k), ModelSampler.act_batch(general, obs, k)
+        assert a.dtype == b.dtype == np.float32
+        np.testing.assert_array_equal(a, b, err_msg=f"step {step}, batch of {k}")
+        obs, _, terminated, truncated, _ = env.step(a[0])
+        if terminated or truncated:
+            obs, _ = env.reset(seed=step, options={"index": 3})
+    assert fast.forward_calls > 10
+
+
 def test_a_batch_forward_over_both_trees_is_each_trees_forward():
     """:meth:`IncrementalTreeGNN.grown_mixtures` of trees (0, 1) in one call gives, row by row, the floats
     of :meth:`grown_mixture` for each tree alone (fresh engines, the same grown BiRRT tree)."""

@@ -466,6 +466,72 @@ def draw_around_nodes(cumulative, shifts, rows, trees, r, z, states, offsets, lo
             out[j, c] = states[node, c] + offsets[node, tree, c] + shifts[row, c] + sigma * z[j, c]
 
 
+#: What each sample of a batch is (:func:`split_batch`): a uniform state, its tree's target, the model's.
+UNIFORM_SAMPLE, TARGET_SAMPLE, MODEL_SAMPLE = 0, 1, 2
+
+
+@jit
+def split_batch(u, p_uniform, goal_bias, active, two_trees, kinds, trees):
+    """The one mixture's choices for a batch: sample ``j`` is uniform when ``u[j] < p_uniform``, its tree's
+    target below ``p_uniform + goal_bias``, else the model's (``kinds[j]``), for tree ``trees[j]``: BiRRT
+    (``two_trees``) alternates from ``active``, RRT extends tree 0 (``batch_active_trees``' rule). Returns
+    ``(uniform count, model count, whether tree 0's mixture is needed, whether tree 1's is)``."""
+    k = u.shape[0]
+    nu, nm, need0, need1 = 0, 0, False, False
+    for j in range(k):
+        t = (active + j) % 2 if two_trees else 0
+        trees[j] = t
+        if u[j] < p_uniform:
+            kinds[j] = UNIFORM_SAMPLE
+            nu += 1
+        elif u[j] < p_uniform + goal_bias:
+            kinds[j] = TARGET_SAMPLE
+        else:
+            kinds[j] = MODEL_SAMPLE
+            nm += 1
+            if t == 0:
+                need0 = True
+            else:
+                need1 = True
+    return nu, nm, need0, need1
+
+
+@jit
+def assemble_batch(kinds, trees, uniform, r, z, cumulative, shifts, mixture_of_tree, states, offsets, log_sigma,
+                   sigma_scale, low, span, high, periodic, start, goal, out):
+    """A GNN sampler's batch ``out`` ``(k, d)`` float32 in one call, in sample order: a uniform sample takes the
+    next row of ``uniform`` (``low + span u``), a target sample its tree's target (the goal for tree 0, the
+    start for tree 1), a model sample the next of ``r``/``z`` through :func:`draw_around_nodes` with its tree's
+    mixture (``mixture_of_tree[tree]``: the row of ``cumulative``/``shifts``), then the periodic coordinates
+    wrapped and the state clipped to ``[low, high]`` (``ModelSampler.finish``). The floats of the numpy steps
+    of ``ModelSampler.act_batch`` and ``TreeGNNSampler.model_batch``."""
+    k, d = out.shape
+    iu, im = 0, 0
+    x = np.empty((1, d))
+    one = np.zeros(1, dtype=np.int64)
+    tree = np.zeros(1, dtype=np.int64)
+    for j in range(k):
+        kind, t = kinds[j], trees[j]
+        if kind == UNIFORM_SAMPLE:
+            for c in range(d):
+                out[j, c] = np.float32(low[c] + span[c] * uniform[iu, c])
+            iu += 1
+        elif kind == TARGET_SAMPLE:
+            for c in range(d):
+                out[j, c] = np.float32(goal[c] if t == 0 else start[c])
+        else:
+            one[0] = mixture_of_tree[t]
+            tree[0] = t
+            draw_around_nodes(cumulative, shifts, one, tree, r[im:im + 1], z[im:im + 1], states, offsets, log_sigma,
+                              sigma_scale, x)
+            im += 1
+            for c in range(d):
+                v = _wrapped(x[0, c], True) if periodic[c] else x[0, c]
+                v = v if v >= low[c] or v != v else low[c]    # np.maximum, then np.minimum (NaN kept)
+                v = v if v <= high[c] or v != v else high[c]
+                out[j, c] = np.float32(v)
+
+
 # ---------------------------------------------------------------------------- one call per step
 #: The order of the weights packed by :func:`pack_weights` for :func:`mixture_after_rows` (the arguments
 #: of :func:`embed_rows` after ``periodic``, then those of :func:`tree_context` and :func:`node_mixture`).

@@ -28,13 +28,18 @@ import numpy as np
 import torch
 
 from agents.samplers.base import ModelSampler
-from agents.tree.compiled import draw_around_nodes
+from agents.samplers.trees import tree_size
+from agents.tree.compiled import assemble_batch, draw_around_nodes, split_batch
 from agents.tree.engine import IncrementalTreeGNN, IncrementalTreeScorer
 from agents.tree.models import TreeCVAE, TreeGNN, TreeGNNCVAE
 from agents.tree.scorer import TreeGNNScorer
 
 
 _ZERO = np.zeros(1, dtype=np.int64)
+#: The mixtures of a batch without model samples (never read), and each tree's row in a batch's
+#: mixtures: ``[tree 0's, tree 1's]``, whether tree 0's mixture was computed or not.
+_NO_MIXTURE = np.zeros((1, 1))
+_MIXTURE_ROWS = {True: np.array([0, 1], dtype=np.int64), False: np.array([0, 0], dtype=np.int64)}
 
 
 class _EngineSampler(ModelSampler):
@@ -126,6 +131,49 @@ class TreeGNNSampler(_EngineSampler):
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self._mixture_of: tuple | None = None
+
+    def act(self, obs: Mapping) -> np.ndarray:
+        if self.adaptive is not None or self.proposals != 1:
+            return super().act(obs)
+        return self.act_batch(obs, 1)[0]
+
+    def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
+        """:meth:`ModelSampler.act_batch <agents.samplers.base.ModelSampler.act_batch>`'s draws and floats,
+        with the choices, the forward and the samples in three compiled calls (:func:`split_batch`,
+        :meth:`IncrementalTreeGNN.grown_mixtures`, :func:`assemble_batch`) instead of a few dozen numpy
+        operations: after the planner's loop has run, the interpreter's and numpy's code and data are out of
+        the caches and each operation costs several microseconds. The adaptive share and ``proposals`` > 1
+        take the general path."""
+        if self.adaptive is not None or self.proposals != 1:
+            return super().act_batch(obs, k)
+        d = self.state_dim
+        start, goal = obs["start"], obs["goal"]
+        if np.shape(start)[-1] != d:
+            self.check_observation(obs)
+        k = int(k)
+        n = tree_size(obs)
+        two_trees = n >= 2 and obs["node_features"][1, -1] == 1
+        kinds, trees = np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64)
+        nu, nm, need0, need1 = split_batch(self.rng.random(k), self.uniform_mix, self.goal_bias, self.active(obs),
+                                           two_trees, kinds, trees)
+        uniform = self.rng.random((nu, d))
+        e = self.engine
+        cumulative = shifts = _NO_MIXTURE
+        if nm:
+            rows = e.new_rows(obs)
+            needed = (0, 1) if need0 and need1 else ((0,) if need0 else (1,))
+            key = (e.generation, rows[1], needed)
+            if key != self._mixture_of:     # the tree and the trees asked for as at the last forward: its result
+                self._mixture = self.timed(lambda o: self.mixtures(o, np.array(needed, dtype=np.int64)), obs)
+                self._mixture_of = key
+            cumulative, shifts = self._mixture
+        r = self.rng.random(nm)
+        z = self.rng.standard_normal((nm, e.d))
+        out = np.empty((k, d), dtype=np.float32)
+        assemble_batch(kinds, trees, uniform, r, z, cumulative, shifts, _MIXTURE_ROWS[need0], e.states, e.offsets,
+                       e.log_sigma, self.sigma_scale, self.low, self._range, self.high, self.periodic,
+                       np.asarray(start, np.float32), np.asarray(goal, np.float32), out)
+        return out
 
     def model_sample(self, obs: Mapping) -> np.ndarray:
         active, cumulative, shift = self.refreshed(obs, self.mixture)
