@@ -42,7 +42,8 @@ def _load_vector_erf() -> bool:
     """Whether glibc's vector math library (libmvec, glibc 2.35+) and AVX2 are here, and numba builds
     for this CPU: then the GELUs take its ``erf`` of four doubles at a time (~5 ns a value against
     libm's 15-25 ns on this project's 2-core Xeon; the same values to a few ulp, see
-    ``tests/test_tree_engine.py``). Else libm's scalar ``erf``, four calls per group."""
+    ``tests/test_tree_engine.py``), and the node mixtures its ``exp``. Else libm's scalar ``erf`` and
+    ``exp``, four calls per group."""
     try:
         import llvmlite.binding as llvm
         from numba.core import config
@@ -51,7 +52,7 @@ def _load_vector_erf() -> bool:
         if not llvm.get_host_cpu_features().get("avx2", False):
             return False
         path = ctypes.util.find_library("mvec")
-        if path is None or not hasattr(ctypes.CDLL(path), "_ZGVdN4v_erf"):
+        if path is None or not all(hasattr(ctypes.CDLL(path), f"_ZGVdN4v_{f}") for f in ("erf", "exp")):
             return False
         llvm.load_library_permanently(path)
         return True
@@ -63,30 +64,39 @@ def _load_vector_erf() -> bool:
 VECTOR_ERF = _load_vector_erf()
 
 
-@intrinsic
-def _erf4_inplace(typingctx, a, i):
-    """``a[i:i+4] = erf(a[i:i+4])`` (``a``: a 1-D contiguous float64 array with four values from ``i``):
-    one call of libmvec's ``_ZGVdN4v_erf``, or four of libm's ``erf`` without it."""
-    if not (isinstance(a, types.Array) and a.dtype == types.float64 and a.ndim == 1 and isinstance(i, types.Integer)):
-        return None
+def _four_in_place(name: str):
+    """An intrinsic ``f(a, i)``: ``a[i:i+4] = name(a[i:i+4])`` (``a``: a 1-D contiguous float64 array with
+    four values from ``i``): one call of libmvec's ``_ZGVdN4v_<name>`` (:data:`VECTOR_ERF`), or four of
+    libm's ``name`` without it."""
+    @intrinsic
+    def four_in_place(typingctx, a, i):
+        if not (isinstance(a, types.Array) and a.dtype == types.float64 and a.ndim == 1
+                and isinstance(i, types.Integer)):
+            return None
 
-    def codegen(context, builder, signature, args):
-        arr, idx = args
-        data = context.make_array(signature.args[0])(context, builder, arr).data
-        ptr = builder.gep(data, [idx])
-        double = ir.DoubleType()
-        if VECTOR_ERF:
-            vec = ir.VectorType(double, 4)
-            vptr = builder.bitcast(ptr, vec.as_pointer())
-            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec]), "_ZGVdN4v_erf")
-            builder.store(builder.call(fn, [builder.load(vptr, align=8)]), vptr, align=8)
-        else:
-            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(double, [double]), "erf")
-            for lane in range(4):
-                p = builder.gep(ptr, [ir.Constant(ir.IntType(64), lane)])
-                builder.store(builder.call(fn, [builder.load(p)]), p)
-        return context.get_dummy_value()
-    return types.void(a, i), codegen
+        def codegen(context, builder, signature, args):
+            arr, idx = args
+            data = context.make_array(signature.args[0])(context, builder, arr).data
+            ptr = builder.gep(data, [idx])
+            double = ir.DoubleType()
+            if VECTOR_ERF:
+                vec = ir.VectorType(double, 4)
+                vptr = builder.bitcast(ptr, vec.as_pointer())
+                fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec]), f"_ZGVdN4v_{name}")
+                builder.store(builder.call(fn, [builder.load(vptr, align=8)]), vptr, align=8)
+            else:
+                fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(double, [double]), name)
+                for lane in range(4):
+                    p = builder.gep(ptr, [ir.Constant(ir.IntType(64), lane)])
+                    builder.store(builder.call(fn, [builder.load(p)]), p)
+            return context.get_dummy_value()
+        return types.void(a, i), codegen
+    return four_in_place
+
+
+#: ``a[i:i+4] = erf(a[i:i+4])`` and ``exp``, four values a call (:func:`_four_in_place`).
+_erf4_inplace = _four_in_place("erf")
+_exp4_inplace = _four_in_place("exp")
 
 
 @jit(inline=True)
@@ -423,9 +433,17 @@ def node_mixture(keys, q, active, inv_temperature, shift_w, shift_b, step):
     for i in range(n):
         logits[i] *= scale
         top = max(top, logits[i])
+    m4 = n + (-n) % 4
+    e = np.empty(m4)                    # the exps four at a time (:func:`_exp4_inplace`)
+    for i in range(n):
+        e[i] = logits[i] - top
+    for i in range(n, m4):
+        e[i] = 0.0
+    for i in range(0, m4, 4):
+        _exp4_inplace(e, i)
     total = 0.0
     for i in range(n):
-        logits[i] = math.exp(logits[i] - top)
+        logits[i] = e[i]
         total += logits[i]
     cumulative = np.empty(n)
     run = 0.0
