@@ -415,6 +415,36 @@ def test_compiled_causal_knn_is_the_brute_force_answer(planner_metric):
                 np.testing.assert_array_equal(got[0][r, :got[1][r]], want[0][r, :want[1][r]])
 
 
+def test_the_engines_kd_tree_knn_is_the_brute_force_scan():
+    """The engine's causal k-NN from its incremental k-d trees (:func:`_kd_causal_knn`) against the brute-force
+    scan (:func:`_causal_knn`), batch after batch of a growing two-tree graph: the same nodes in the same
+    order, exact ties (repeated states, equal distances on a grid) to the earlier node, a wrapped angle and
+    angles outside [-pi, pi) (never split on; the exact wrap), fewer earlier nodes than ``knn``."""
+    from agents.tree.compiled import _causal_knn, _kd_causal_knn
+    rng = np.random.default_rng(8)
+    n, d = 700, 4
+    states = np.concatenate([rng.uniform(-np.pi, np.pi, (n, 1)), rng.integers(-3, 4, (n, 2)).astype(float),
+                             rng.uniform(-1.0, 1.0, (n, 1))], axis=1)
+    states[::9] = states[4]                                  # exact ties
+    states[6::40, 0] += 4 * np.pi                            # not wrapped
+    tree_id = (rng.random(n) < 0.3).astype(np.int64)
+    periodic = np.array([True, False, False, False])
+    unit = np.array([0.4, 0.5, 0.5, 0.25])
+    kd = (np.full((n, 3), -1, dtype=np.int32), np.zeros(n), np.full(2, -1, dtype=np.int64),
+          np.zeros((n + 1, 2), dtype=np.int64), np.zeros((n + 1, 2)), np.zeros(d))
+    i0 = 0
+    for B in [1, 3, 40, 1, 150, 5, 300, 200]:
+        x, tid = states[i0:i0 + B].copy(), tree_id[i0:i0 + B].copy()
+        for knn in (6,):
+            want = _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, False)
+            got = _kd_causal_knn(i0, x, tid, states, knn, periodic, unit, kd)
+            np.testing.assert_array_equal(got[1], want[1])
+            for r in range(B):
+                np.testing.assert_array_equal(got[0][r, :got[1][r]], want[0][r, :want[1][r]], err_msg=f"row {i0 + r}")
+        i0 += B
+    assert i0 == n and (kd[2] >= 0).all()
+
+
 def test_compiled_draw_is_the_numpy_search_and_gaussian():
     """:func:`draw_around_nodes` (a batch's samples from its node mixtures, one compiled call) against the
     numpy it replaced: per sample ``searchsorted(running sums, r (1 - 1e-12), "right")`` capped at the last

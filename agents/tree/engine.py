@@ -103,7 +103,7 @@ class _Engine:
 class IncrementalTreeGNN(_Engine):
     """Numpy inference of a :class:`TreeGNN` that embeds each new tree node once."""
 
-    node_arrays = ("states", "tree_id", "keys", "offsets", "log_sigma")
+    node_arrays = ("states", "tree_id", "keys", "offsets", "log_sigma", "kd_links", "kd_cut")
     layered_arrays = ("sender",)
 
     def __init__(self, model: TreeGNN, capacity: int = 1024, *, heads: bool = True) -> None:
@@ -173,11 +173,24 @@ class IncrementalTreeGNN(_Engine):
         self.keys = np.zeros((capacity, H))
         self.offsets = np.zeros((capacity, T, d))
         self.log_sigma = np.zeros((capacity, T, d))
+        # the causal k-NN's k-d trees, one per GNN tree (gnn_mp_envs.core.nearest's arrays and scratch)
+        self.kd_links = np.full((capacity, 3), -1, dtype=np.int32)
+        self.kd_cut = np.zeros(capacity)
+        self.kd_stack = np.zeros((capacity + 1, 2), dtype=np.int64)
+        self.kd_bounds = np.zeros((capacity + 1, 2))
+        self.kd_cell = np.zeros(d)
+        if hasattr(self, "kd_root"):
+            self._pack_kd()
+
+    def _pack_kd(self) -> None:
+        self.kd = (self.kd_links, self.kd_cut, self.kd_root, self.kd_stack, self.kd_bounds, self.kd_cell)
 
     def clear(self) -> None:
         super().clear()
         self.sums = np.zeros((self.trees, self.H))
         self.counts = np.zeros(self.trees)
+        self.kd_root = np.full(self.trees, -1, dtype=np.int64)
+        self._pack_kd()
         self._ends_key = None
 
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:
@@ -194,7 +207,7 @@ class IncrementalTreeGNN(_Engine):
         # everything per new node, one node after the other (compiled): input MLP, causal k-NN,
         # message-passing layers, node heads, the per-tree embedding sums
         embed_rows(i0, x, feats, tid, parent, self.states, self.tree_id, self.sender, self.keys, self.offsets,
-                   self.log_sigma, self.sums, self.counts, *self.weights)
+                   self.log_sigma, self.sums, self.counts, self.kd, *self.weights)
         self.n = n
         return n
 
@@ -220,7 +233,7 @@ class IncrementalTreeGNN(_Engine):
         i0, n = rows
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
         q = context_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
-                               self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                               self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                self.periodic, self._flags, self._flat, self._layout, ends, int(active))
         self.n = n
         return q
@@ -236,7 +249,7 @@ class IncrementalTreeGNN(_Engine):
         start, goal = obs["start"], obs["goal"]
         ends = self._ends_of(start, goal, self._problem_key)
         out = mixture_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
-                                 self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                                 self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                  self.periodic, self._flags, self._flat, self._layout, ends, int(active),
                                  1.0 / float(temperature))
         self.n = n
@@ -252,7 +265,7 @@ class IncrementalTreeGNN(_Engine):
         i0, n = rows
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
         out = mixtures_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
-                                  self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts,
+                                  self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                   self.periodic, self._flags, self._flat, self._layout, ends,
                                   np.asarray(actives, dtype=np.int64), 1.0 / float(temperature))
         self.n = n
