@@ -29,12 +29,11 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from gnn_mp_envs.core.nearest import LEFT as KD_LEFT
 from gnn_mp_envs.core.nearest import PRUNE_FLOOR as KD_PRUNE_FLOOR
 from gnn_mp_envs.core.nearest import PRUNE_MARGIN as KD_PRUNE_MARGIN
 from gnn_mp_envs.core.nearest import RIGHT as KD_RIGHT
 from gnn_mp_envs.core.nearest import SPLIT as KD_SPLIT
-from gnn_mp_envs.core.nearest import kd_insert
+from gnn_mp_envs.core.nearest import kd_insert, kd_pop_cell, kd_stack_far_side
 from gnn_mp_envs.utils.compiled import jit
 
 _SQRT_HALF = 1.0 / math.sqrt(2.0)
@@ -321,30 +320,12 @@ def _kd_causal_knn(i0, x, tid, states, knn, periodic, unit, kd):
             stack[0, 0], stack[0, 1], bounds[0, 0], bounds[0, 1] = node, 0, 0.0, 0.0
             top = 1
             while top > 0:
-                e = top - 1
-                node, c = stack[e, 0], stack[e, 1]
-                if node < 0:                         # a mark: the cell's subtree is done
-                    cell[c] = bounds[e, 1]
-                    top = e
-                    continue
-                bound = bounds[e, 0]
-                if bound > limit:
-                    top = e
-                    continue
-                stack[e, 0] = -1
-                bounds[e, 1], cell[c] = cell[c], bounds[e, 1]
+                node, bound, top = kd_pop_cell(stack, bounds, cell, top, limit)
                 while node >= 0:                     # down toward the row, stacking the far sides
                     c = links[node, KD_SPLIT]
                     if c >= 0:
-                        gap = (x[r, c] - cut[node]) / unit[c]
-                        near_side = KD_RIGHT if gap >= 0.0 else KD_LEFT
-                        far = links[node, KD_RIGHT + KD_LEFT - near_side]
-                        gap_sq = gap * gap
-                        far_bound = bound - cell[c] + gap_sq
-                        stack[top, 0], stack[top, 1] = far, c
-                        bounds[top, 0], bounds[top, 1] = far_bound, gap_sq
-                        top += (far >= 0) & (far_bound <= limit)
-                        nxt = links[node, near_side]
+                        nxt, top = kd_stack_far_side(node, c, (x[r, c] - cut[node]) / unit[c], bound, limit, links,
+                                                     stack, bounds, cell, top)
                     else:
                         nxt = links[node, KD_RIGHT]
                     dj = _knn_distance(states, node, x, r, unit, periodic)

@@ -62,6 +62,40 @@ def _next_split(dim, periodic):
     return -1
 
 
+@jit(inline=True)
+def kd_pop_cell(stack, bounds, cell, top, limit):
+    """The next stacked cell of a query: ``(node, its squared distance, new top)``; node -1 when the top row
+    was a mark (the cell ``cell`` is restored) or a cell farther than ``limit`` (dropped). An entered
+    cell's row stays as a mark holding its coordinate's former gap (see :func:`kd_nearest`)."""
+    e = top - 1
+    node, c = stack[e, 0], stack[e, 1]
+    if node < 0:                                 # a mark: the cell's subtree is done
+        cell[c] = bounds[e, 1]
+        return -1, 0.0, e
+    bound = bounds[e, 0]
+    if bound > limit:                            # the cell already farther than the best
+        return -1, 0.0, e
+    stack[e, 0] = -1
+    bounds[e, 1], cell[c] = cell[c], bounds[e, 1]
+    return node, bound, top
+
+
+@jit(inline=True)
+def kd_stack_far_side(node, c, gap, bound, limit, links, stack, bounds, cell, top):
+    """At ``node`` (splitting coordinate ``c``; ``gap``: the query's signed, scaled gap to its plane): stack
+    the far side's cell (its squared distance ``bound`` with this coordinate's gap) and return ``(the
+    near child, new top)``. The row is written always and kept by the count, not by a branch (which far
+    sides are kept is too irregular for the branch predictor)."""
+    near_side = RIGHT if gap >= 0.0 else LEFT
+    far = links[node, RIGHT + LEFT - near_side]
+    gap_sq = gap * gap
+    far_bound = bound - cell[c] + gap_sq
+    stack[top, 0], stack[top, 1] = far, c
+    bounds[top, 0], bounds[top, 1] = far_bound, gap_sq
+    top += (far >= 0) & (far_bound <= limit)
+    return links[node, near_side], top
+
+
 @jit
 def kd_insert(i, tree, states, periodic, links, cut, root):
     """Add node ``i`` (a row of ``states``) to search tree ``tree``'s k-d tree."""
@@ -115,30 +149,12 @@ def kd_nearest(x, tree, states, weights, periodic, links, cut, root, stack, boun
     stack[0, 0], stack[0, 1], bounds[0, 0], bounds[0, 1] = node, 0, 0.0, 0.0
     top = 1
     while top > 0:
-        e = top - 1
-        node, c = stack[e, 0], stack[e, 1]
-        if node < 0:                                 # a mark: the cell's subtree is done
-            cell[c] = bounds[e, 1]
-            top = e
-            continue
-        bound = bounds[e, 0]
-        if bound > limit:                            # the cell already farther than the best
-            top = e
-            continue
-        stack[e, 0] = -1
-        bounds[e, 1], cell[c] = cell[c], bounds[e, 1]
+        node, bound, top = kd_pop_cell(stack, bounds, cell, top, limit)
         while node >= 0:                             # down toward x, stacking the far sides
             c = links[node, SPLIT]
             if c >= 0:
-                gap = (x[c] - cut[node]) * weights[c]
-                near_side = RIGHT if gap >= 0.0 else LEFT
-                far = links[node, RIGHT + LEFT - near_side]
-                gap_sq = gap * gap
-                far_bound = bound - cell[c] + gap_sq
-                stack[top, 0], stack[top, 1] = far, c
-                bounds[top, 0], bounds[top, 1] = far_bound, gap_sq
-                top += (far >= 0) & (far_bound <= limit)
-                near = links[node, near_side]
+                near, top = kd_stack_far_side(node, c, (x[c] - cut[node]) * weights[c], bound, limit, links, stack,
+                                              bounds, cell, top)
             else:                                    # no splitting coordinate: a chain on the right
                 near = links[node, RIGHT]
             acc = _squared_distance(states, node, x, weights, periodic)
