@@ -111,3 +111,30 @@ def test_a_batched_learned_sampler_plans_with_its_batch_and_repeats_itself(task)
 def test_a_bad_batch_size_is_refused_in_one_line(bad):
     with pytest.raises(ValueError, match="samples_per_step must be an integer"):
         load_sampler("gnn", task="maze2d", seed=0, samples_per_step=bad)
+
+
+def test_refresh_growth_reads_the_tree_again_only_after_it_grew_by_that_fraction():
+    """``refresh_growth``: a forward serves later batches until the tree has more than ``(1 + f)`` times the
+    nodes it read; 0 (the default) reads it whenever it grew. On one problem the forwards are those of the
+    rule: with 0.5, a tree of 40 nodes is read again only at more than 60."""
+    env = evaluation_env("panda-mbm", "val", samples_per_step=4)
+    seen = {}
+    for growth in (0.0, 0.5):
+        sampler = load_sampler("gnn", task="panda-mbm", seed=0, samples_per_step=4, uniform_mix=0.0,
+                               refresh_growth=growth)
+        reads = []
+        original = sampler.mixtures
+        sampler.mixtures = lambda obs, trees, original=original, reads=reads: (
+            reads.append(int(obs["num_nodes"][0])) or original(obs, trees))
+        plan_problem(env, sampler, 4, 0)
+        seen[growth] = reads
+        assert reads[0] == 2 and all(b > a for a, b in zip(reads, reads[1:]))
+    assert len(seen[0.5]) < len(seen[0.0])
+    assert all(b > 1.5 * a for a, b in zip(seen[0.5], seen[0.5][1:]))
+    env.close()
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), True, "0.1"])
+def test_a_bad_refresh_growth_is_refused_in_one_line(bad):
+    with pytest.raises(ValueError, match="refresh_growth must be a finite number >= 0"):
+        load_sampler("gnn", task="panda-mbm", seed=0, refresh_growth=bad)

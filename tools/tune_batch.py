@@ -10,7 +10,9 @@ process, beside the reference rows (uniform and goal-bias at their own batch). W
 included, is each problem's fastest of ``--repeats`` runs (the counters of a seed do not change between
 repeats). Among the pairs whose success rate is no lower than uniform's, the one with the lowest median
 wall time wins; pairs within 5% of it are a tie, broken by the smaller ``K``, then the larger
-``uniform_mix``. ``--write`` stores the choice in the shipped checkpoint's ``meta["sampler"]`` and its
+``uniform_mix`` (then the smaller ``refresh_growth``). With ``--refresh-growth`` (the tree GNN's: how
+far the tree may grow before a batch reads it again) each pair is tried with each of its values too.
+``--write`` stores the choice in the shipped checkpoint's ``meta["sampler"]`` and its
 sidecar, with this table and its command (``batch_tuning``).
 
     .venv/bin/python -m tools.tune_batch --sampler gnn --task panda-mbm --problems 50 --batches 1,4,16,64 \\
@@ -20,6 +22,7 @@ sidecar, with this table and its command (``batch_tuning``).
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +35,13 @@ from tools.shipped_settings import store_tuned_setting, tool_command
 
 #: Pairs within this factor of the fastest median wall time are a tie.
 TIE = 1.05
+
+
+def _growths(text: str) -> list[float]:
+    values = [float(v) for v in str(text).split(",") if v.strip()]
+    if not values or not all(math.isfinite(v) and v >= 0.0 for v in values):
+        raise ValueError(f"--refresh-growth takes finite fractions >= 0, got {text!r}")
+    return values
 
 
 def _floats(text: str) -> list[float]:
@@ -49,6 +59,8 @@ class Args:
     task: str = arg("panda-mbm", "task")
     batches: list[int] = arg([1, 4, 16, 64], "samples_per_step values to try")
     uniform_mix: str = arg("", "uniform_mix values to try, comma-separated (default: the stored one)")
+    refresh_growth: str = arg("", "refresh_growth values to try (the tree GNN's), comma-separated (default: not "
+                                  "varied)")
     problems: int = arg(50, "validation problems 0..N-1", parse=positive_int)
     seed: int = arg(0, "root seed of the problems' sampler seeds", parse=seed_int)
     repeats: int = arg(1, "timing repeats per problem (the fastest counts)", parse=positive_int)
@@ -86,12 +98,12 @@ def measure(env_cache: dict, name: str, task: str, problems: int, seed: int, rep
             "forward_s": (getattr(sampler, "forward_time_s", 0.0) - forward0) / repeats}
 
 
-def choose(rows: dict[str, dict[str, Any]], pairs: dict[str, tuple[int, float]], floor: float) -> str:
+def choose(rows: dict[str, dict[str, Any]], pairs: dict[str, tuple[int, float, float | None]], floor: float) -> str:
     """The rule of the module docstring: the label of the chosen pair."""
     allowed = [label for label in pairs if rows[label]["success_rate"] >= floor] or list(pairs)
     fastest = min(rows[label]["median_wall_ms"] for label in allowed)
     tied = [label for label in allowed if rows[label]["median_wall_ms"] <= TIE * fastest]
-    return min(tied, key=lambda label: (pairs[label][0], -pairs[label][1]))
+    return min(tied, key=lambda label: (pairs[label][0], -pairs[label][1], pairs[label][2] or 0.0))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -108,10 +120,13 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, dict[str, Any]] = {}
     for name in [r for r in args.references.split(",") if r]:
         rows[name] = measure(envs, name, args.task, args.problems, args.seed, args.repeats, None)
-    pairs = {f"K={k} uniform_mix={mix:g}": (int(k), float(mix)) for k, mix in itertools.product(args.batches, mixes)}
-    for label, (k, mix) in pairs.items():
+    growths = _growths(args.refresh_growth) if args.refresh_growth else [None]
+    pairs = {f"K={k} uniform_mix={mix:g}" + ("" if f is None else f" refresh_growth={f:g}"): (int(k), float(mix), f)
+             for k, mix, f in itertools.product(args.batches, mixes, growths)}
+    for label, (k, mix, f) in pairs.items():
+        extra = {} if f is None else {"refresh_growth": f}
         rows[label] = measure(envs, args.sampler, args.task, args.problems, args.seed, args.repeats, args.checkpoint,
-                              samples_per_step=k, uniform_mix=mix)
+                              samples_per_step=k, uniform_mix=mix, **extra)
     floor = rows["uniform"]["success_rate"] if "uniform" in rows else 0.0
     print(f"{args.sampler} on {args.task}, {args.problems} val problems, seed {args.seed}, fastest of {args.repeats} "
           f"(medians; sampler: its share of the wall time, inference included)")
@@ -122,13 +137,15 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['mean_iterations']:,.0f} | {r['median_collision_checks']:,.0f} | {r['median_wall_ms']:.2f} | "
               f"{r['total_wall_s']:.2f} | {r['sampler_share']:.0%} |")
     chosen = choose(rows, pairs, floor)
-    k, mix = pairs[chosen]
-    print(f"chosen: samples_per_step={k} uniform_mix={mix:g}")
+    k, mix, growth = pairs[chosen]
+    setting = {"samples_per_step": k, "uniform_mix": mix, **({} if growth is None else {"refresh_growth": growth})}
+    print("chosen: " + " ".join(f"{key}={value:g}" for key, value in setting.items()))
     if args.write:
-        store_tuned_setting(args.sampler, args.task, {"samples_per_step": k, "uniform_mix": mix}, "batch_tuning",
+        store_tuned_setting(args.sampler, args.task, setting, "batch_tuning",
                             {"command": tool_command("tools.tune_batch", argv), "val_problems": args.problems,
                              "rule": "lowest median wall time (fastest of the repeats per problem) among the pairs "
-                                     "with success no lower than uniform's; within 5%: smaller K, then more uniform",
+                                     "with success no lower than uniform's; within 5%: smaller K, then more uniform"
+                                     + ("" if growth is None else ", then the smaller refresh_growth"),
                              "rows": rows})
     for env in envs.values():
         env.close()
