@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from agents.registry import load_sampler
+from agents.samplers.base import ModelSampler
 from gnn_mp_envs.evaluation import evaluation_env, plan_problem
 from gnn_mp_envs.registration import task_spec
 
@@ -24,7 +25,8 @@ def _env(task: str, **kwargs):
     ("maze2d", "gnn", {}), ("maze2d", "gnn", {"adaptive": True}), ("maze2d", "gnn-cvae", {"proposals": 4}),
     ("maze2d", "cvae", {}), ("panda-mbm", "gnn", {"goal_bias": 0.05}), ("arm", "gnn", {"adaptive": True})])
 def test_a_batch_of_one_is_one_act(task, name, settings):
-    """Two envs plan the same problem, one driven by ``act``, one by ``act_batch(obs, 1)`` of a sampler
+    """Two envs plan the same problem, one driven by the general ``ModelSampler.act``, one by
+    ``act_batch(obs, 1)`` of a sampler
     with the same seed: the same actions at every step (so the same trees), the adaptive share's
     scoring of a batch of one included."""
     envs = [_env(task), _env(task)]
@@ -33,7 +35,7 @@ def test_a_batch_of_one_is_one_act(task, name, settings):
     for sampler in samplers:
         sampler.reset(5)
     for step in range(60):
-        a = samplers[0].act(obs[0])
+        a = ModelSampler.act(samplers[0], obs[0])        # the general path (a GNN's own act is a batch of one)
         b = samplers[1].act_batch(obs[1], 1)
         assert b.shape == (1, len(a)) and b.dtype == np.float32
         np.testing.assert_array_equal(a, b[0], err_msg=f"step {step}")
@@ -138,3 +140,10 @@ def test_refresh_growth_reads_the_tree_again_only_after_it_grew_by_that_fraction
 def test_a_bad_refresh_growth_is_refused_in_one_line(bad):
     with pytest.raises(ValueError, match="refresh_growth must be a finite number >= 0"):
         load_sampler("gnn", task="panda-mbm", seed=0, refresh_growth=bad)
+
+
+@pytest.mark.parametrize("settings", [{"adaptive": True}, {"proposals": 4}])
+def test_refresh_growth_is_refused_where_it_would_be_ignored(settings):
+    with pytest.raises(ValueError, match="refresh_growth applies to batches with fixed shares and proposals=1"):
+        load_sampler("gnn", task="panda-mbm", seed=0, refresh_growth=0.1, **settings)
+    assert load_sampler("gnn", task="panda-mbm", seed=0, refresh_growth=np.float32(0.0), **settings)

@@ -337,6 +337,20 @@ def test_a_one_tree_gnn_refuses_a_birrt_observation():
         engine.ingest(obs)
     with pytest.raises(ValueError, match="no slot"):
         engine.context(obs["start"].astype(np.float64), obs["goal"].astype(np.float64), 1)
+    # a forward asked for tree 1 of an RRT observation is refused before it embeds anything: a retry for
+    # tree 0 gives a fresh engine's floats (the rows were not embedded, nor joined the k-NN's k-d tree, twice)
+    env = gym.make("GNNMP/Maze2DRRT-v0", split="val", disable_env_checker=True)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    for _ in range(30):
+        obs, *_ = env.step(env.action_space.sample())
+    tried, fresh = IncrementalTreeGNN(sampler.model), IncrementalTreeGNN(sampler.model)
+    for method, tree in (("grown_mixture", 1), ("grown_mixtures", np.array([0, 1]))):
+        with pytest.raises(ValueError, match="no slot"):
+            getattr(tried, method)(obs, tried.new_rows(obs), tree, 0.7)
+    want = fresh.grown_mixture(obs, fresh.new_rows(obs), 0, 0.7)
+    got = tried.grown_mixture(obs, tried.new_rows(obs), 0, 0.7)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_a_compilation_is_announced_once_and_never_when_cached(tmp_path):

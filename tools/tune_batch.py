@@ -116,11 +116,13 @@ def main(argv: list[str] | None = None) -> int:
         raise ValueError(f"--batches takes integers >= 1, got {args.batches}")
     stored = load_sampler(args.sampler, task=args.task, seed=0, checkpoint=args.checkpoint)
     mixes = _floats(args.uniform_mix) if args.uniform_mix else [stored.uniform_mix]
+    growths = _growths(args.refresh_growth) if args.refresh_growth else [None]
+    if args.refresh_growth:                              # refused here, before any row is measured
+        load_sampler(args.sampler, task=args.task, seed=0, checkpoint=args.checkpoint, refresh_growth=max(growths))
     envs: dict[int, Any] = {}
     rows: dict[str, dict[str, Any]] = {}
     for name in [r for r in args.references.split(",") if r]:
         rows[name] = measure(envs, name, args.task, args.problems, args.seed, args.repeats, None)
-    growths = _growths(args.refresh_growth) if args.refresh_growth else [None]
     pairs = {f"K={k} uniform_mix={mix:g}" + ("" if f is None else f" refresh_growth={f:g}"): (int(k), float(mix), f)
              for k, mix, f in itertools.product(args.batches, mixes, growths)}
     for label, (k, mix, f) in pairs.items():

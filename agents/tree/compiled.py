@@ -536,7 +536,9 @@ def draw_around_nodes(cumulative, shifts, rows, trees, r, z, states, offsets, lo
     sum first exceeds ``r[j] (1 - 1e-12)`` (numpy's ``searchsorted(..., "right")``, at most the last node),
     then ``out[j] = states[node] + offsets[node, trees[j]] + shifts[rows[j]] + sigma z[j]`` with ``sigma =
     sigma_scale exp(log_sigma[node, trees[j]])`` (per coordinate), summed in that order (numpy's,
-    elementwise). One call for a batch: those numpy operations' floats without their dispatch."""
+    elementwise). One call for a batch, without numpy's dispatch: the node exactly numpy's, the state to
+    an ulp (this ``exp`` is libm's; numpy's own vector ``exp``, on CPUs with AVX-512, can differ from it
+    in the last bit), so the float32 actions made of it are numpy's but for a rounding boundary."""
     m, d = z.shape
     n = cumulative.shape[1]
     for j in range(m):
@@ -593,7 +595,8 @@ def assemble_batch(kinds, trees, uniform, r, z, cumulative, shifts, mixture_of_t
     start for tree 1), a model sample the next of ``r``/``z`` through :func:`draw_around_nodes` with its tree's
     mixture (``mixture_of_tree[tree]``: the row of ``cumulative``/``shifts``), then the periodic coordinates
     wrapped and the state clipped to ``[low, high]`` (``ModelSampler.finish``). The floats of the numpy steps
-    of ``ModelSampler.act_batch`` and ``TreeGNNSampler.model_batch``."""
+    of ``ModelSampler.act_batch`` and ``TreeGNNSampler.model_batch`` (the model's samples through
+    :func:`draw_around_nodes`, as the general path's)."""
     k, d = out.shape
     iu, im = 0, 0
     x = np.empty((1, d))

@@ -27,6 +27,7 @@ from typing import Mapping
 import numpy as np
 
 from agents.tree.compiled import (
+    _UNTRAINED_TREE,
     PACKED_WEIGHTS,
     announce_compilation,
     context_after_rows,
@@ -211,6 +212,13 @@ class IncrementalTreeGNN(_Engine):
         self.n = n
         return n
 
+    def _check_trees(self, actives) -> None:
+        """Refuse a tree this model has no slot for before a compiled forward embeds anything (the forward
+        would embed the new rows, then stop at the context: the rows would be embedded twice by a retry)."""
+        for active in actives:
+            if not 0 <= int(active) < self.trees:
+                raise ValueError(_UNTRAINED_TREE)
+
     def _ends_of(self, start: np.ndarray, goal: np.ndarray, key: bytes) -> np.ndarray:
         """The context's start-and-goal inputs, kept per problem (``key``: its start and goal bytes)."""
         if key != self._ends_key:
@@ -231,6 +239,7 @@ class IncrementalTreeGNN(_Engine):
         """:meth:`ingest` and :meth:`context` in one compiled call (the GNN-CVAE's forward up to its
         decoder; the same floats). ``rows`` is what :meth:`new_rows` just returned for ``obs``."""
         i0, n = rows
+        self._check_trees((active,))
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
         q = context_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
                                self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
@@ -246,6 +255,7 @@ class IncrementalTreeGNN(_Engine):
         if not self.heads:
             raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
         i0, n = rows
+        self._check_trees((active,))
         start, goal = obs["start"], obs["goal"]
         ends = self._ends_of(start, goal, self._problem_key)
         out = mixture_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
@@ -263,11 +273,13 @@ class IncrementalTreeGNN(_Engine):
         if not self.heads:
             raise RuntimeError("this engine was built with heads=False (no node keys): it gives the context only")
         i0, n = rows
+        actives = np.asarray(actives, dtype=np.int64)
+        self._check_trees(actives.tolist())
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
         out = mixtures_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
                                   self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                   self.periodic, self._flags, self._flat, self._layout, ends,
-                                  np.asarray(actives, dtype=np.int64), 1.0 / float(temperature))
+                                  actives, 1.0 / float(temperature))
         self.n = n
         return out
 

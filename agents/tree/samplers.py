@@ -21,6 +21,7 @@ observation with cleared caches (the same distribution).
 
 from __future__ import annotations
 
+import numbers
 from pathlib import Path
 from typing import Mapping
 
@@ -101,7 +102,8 @@ class TreeGNNSampler(_EngineSampler):
     after it until the tree has grown by more than that fraction of the nodes it had (0: a forward
     whenever the tree has grown). A forward costs in proportion to the tree (the node mixture is over
     every node), while a batch's new nodes change the mixture of a large tree little: with 0.02 a tree
-    of 4,000 nodes is read again every 80 new nodes, one of 40 after each batch that adds one."""
+    of 4,000 nodes is read again once more than 80 nodes were added, one of 40 after each batch that adds
+    one. Only with fixed shares and ``proposals=1`` (refused otherwise)."""
 
     settings = ("uniform_mix", "goal_bias", "temperature", "sigma_scale", "proposals", "adaptive", "samples_per_step",
                 "refresh_growth")
@@ -112,9 +114,13 @@ class TreeGNNSampler(_EngineSampler):
                  samples_per_step: int = 1, refresh_growth: float = 0.0) -> None:
         if not (np.isfinite(temperature) and temperature > 0 and np.isfinite(sigma_scale) and sigma_scale > 0):
             raise ValueError(f"temperature and sigma_scale must be finite and > 0, got {temperature}, {sigma_scale}")
-        if isinstance(refresh_growth, bool) or not (isinstance(refresh_growth, (int, float))
-                                                    and np.isfinite(refresh_growth) and refresh_growth >= 0):
+        if isinstance(refresh_growth, (bool, np.bool_)) or not (isinstance(refresh_growth, numbers.Real)
+                                                                and np.isfinite(refresh_growth) and refresh_growth >= 0):
             raise ValueError(f"refresh_growth must be a finite number >= 0, got {refresh_growth!r}")
+        if refresh_growth > 0 and (adaptive or proposals != 1):
+            raise ValueError("refresh_growth applies to batches with fixed shares and proposals=1 (the adaptive share "
+                             "and proposals > 1 read the tree their own way); set it to 0 or adaptive=False, "
+                             "proposals=1")
         self.refresh_growth = float(refresh_growth)
         super().__init__(low, high, seed, uniform_mix=uniform_mix, goal_bias=goal_bias,
                          periodic=model.periodic.numpy(), proposals=proposals, adaptive=adaptive,
@@ -142,6 +148,8 @@ class TreeGNNSampler(_EngineSampler):
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
         self._mixture_of: tuple | None = None
+        #: The batches' last forward: ``(engine generation, nodes, trees)`` and its ``(cumulative, shifts)``.
+        self._batch_mixture_of: tuple | None = None
 
     def act(self, obs: Mapping) -> np.ndarray:
         if self.adaptive is not None or self.proposals != 1:
@@ -173,12 +181,12 @@ class TreeGNNSampler(_EngineSampler):
         if nm:
             rows = e.new_rows(obs)
             needed = (0, 1) if need0 and need1 else ((0,) if need0 else (1,))
-            last = self._mixture_of         # (generation, nodes, trees) of the last forward
+            last = self._batch_mixture_of
             if (last is None or last[0] != e.generation or last[2] != needed or rows[1] < last[1]
                     or rows[1] > last[1] * (1.0 + self.refresh_growth)):
-                self._mixture = self.timed(lambda o: self.mixtures(o, np.array(needed, dtype=np.int64)), obs)
-                self._mixture_of = (e.generation, rows[1], needed)
-            cumulative, shifts = self._mixture
+                self._batch_mixture = self.timed(lambda o: self.mixtures(o, np.array(needed, dtype=np.int64)), obs)
+                self._batch_mixture_of = (e.generation, rows[1], needed)
+            cumulative, shifts = self._batch_mixture
         r = self.rng.random(nm)
         z = self.rng.standard_normal((nm, e.d))
         out = np.empty((k, d), dtype=np.float32)

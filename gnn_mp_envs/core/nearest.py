@@ -98,14 +98,17 @@ def kd_stack_far_side(node, c, gap, bound, limit, links, stack, bounds, cell, to
 
 @jit
 def kd_insert(i, tree, states, periodic, links, cut, root):
-    """Add node ``i`` (a row of ``states``) to search tree ``tree``'s k-d tree."""
-    links[i, LEFT], links[i, RIGHT] = -1, -1
+    """Add node ``i`` (a row of ``states``) to search tree ``tree``'s k-d tree; nothing when it is there
+    already (the descent meets it: its place is where its state leads), so a repeated insert cannot link a
+    node under itself."""
     node = root[tree]
     if node < 0:
         root[tree] = i
         c = _next_split(-1, periodic)
     else:
         while True:
+            if node == i:
+                return
             c = links[node, SPLIT]
             side = RIGHT if c < 0 or states[i, c] >= cut[node] else LEFT   # no split: a chain on the right
             child = links[node, side]
@@ -114,6 +117,7 @@ def kd_insert(i, tree, states, periodic, links, cut, root):
                 break
             node = child
         c = _next_split(c, periodic) if c >= 0 else -1
+    links[i, LEFT], links[i, RIGHT] = -1, -1
     links[i, SPLIT] = c
     cut[i] = states[i, c] if c >= 0 else 0.0
 
