@@ -37,17 +37,11 @@ from tools.shipped_settings import store_tuned_setting, tool_command
 TIE = 1.05
 
 
-def _growths(text: str) -> list[float]:
+def _floats(text: str, flag: str = "--uniform-mix", high: float = 1.0, what: str = "shares in [0, 1]") -> list[float]:
+    """The comma-separated values of ``flag``, each finite and in ``[0, high]`` (refused in one line otherwise)."""
     values = [float(v) for v in str(text).split(",") if v.strip()]
-    if not values or not all(math.isfinite(v) and v >= 0.0 for v in values):
-        raise ValueError(f"--refresh-growth takes finite fractions >= 0, got {text!r}")
-    return values
-
-
-def _floats(text: str) -> list[float]:
-    values = [float(v) for v in str(text).split(",") if v.strip()]
-    if not values or not all(0.0 <= v <= 1.0 for v in values):
-        raise ValueError(f"--uniform-mix takes shares in [0, 1], got {text!r}")
+    if not values or not all(math.isfinite(v) and 0.0 <= v <= high for v in values):
+        raise ValueError(f"{flag} takes {what}, got {text!r}")
     return values
 
 
@@ -116,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         raise ValueError(f"--batches takes integers >= 1, got {args.batches}")
     stored = load_sampler(args.sampler, task=args.task, seed=0, checkpoint=args.checkpoint)
     mixes = _floats(args.uniform_mix) if args.uniform_mix else [stored.uniform_mix]
-    growths = _growths(args.refresh_growth) if args.refresh_growth else [None]
+    growths = (_floats(args.refresh_growth, "--refresh-growth", math.inf, "finite fractions >= 0")
+               if args.refresh_growth else [None])
     if args.refresh_growth:                              # refused here, before any row is measured
         load_sampler(args.sampler, task=args.task, seed=0, checkpoint=args.checkpoint, refresh_growth=max(growths))
     envs: dict[int, Any] = {}

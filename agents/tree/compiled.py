@@ -172,6 +172,17 @@ def _first_layer(pre, rel, sender_j, bias, state_j, x_i, periodic, w_rel):
 
 
 @jit(inline=True)
+def _knn_distance(states, j, x, r, unit, periodic):
+    """The causal k-NN's squared distance from node ``j`` to row ``r`` of ``x``: :func:`_causal_knn`'s floats
+    (each coordinate's ``wrap(x_j - x_i) / unit`` squared, summed in order)."""
+    acc = 0.0
+    for c in range(x.shape[1]):
+        v = _wrapped(states[j, c] - x[r, c], periodic[c]) / unit[c]
+        acc += v * v
+    return acc
+
+
+@jit(inline=True)
 def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric):
     """Each row's ``knn`` nearest earlier nodes of its own tree (row ``r`` is node ``i0 + r``; the
     batch's own earlier rows included), nearest first, the earlier node first on ties (a stable
@@ -180,12 +191,13 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
     ``planner_metric`` ``sum((min(|d|, 2 pi - |d|) * unit) ** 2)`` (the planner's weighted metric,
     the scorer's).
 
-    Two passes per row over the earlier nodes of its tree only: each one's distance into a buffer, one
-    coordinate at a time over a column copy of that tree's states (contiguous and branch-free, so the
-    loop over nodes pipelines; about twice as fast as one pass), then the selection scan in node
-    order. The same floats as one pass over every node: each distance is the same operations in the
-    same order (``_wrapped``'s single-step case written as selects; a difference outside it, never
-    made by wrapped angles, is recomputed by :func:`_wrapped` itself)."""
+    Two passes per row: every earlier node's distance into a buffer, one coordinate at a time over
+    a column copy of the states (contiguous and branch-free, so the loop over nodes pipelines; about
+    twice as fast as one pass), then the selection scan. The same floats as
+    one pass: each distance is the same operations in the same order (``_wrapped``'s single-step
+    case written as selects; a difference outside it, never made by wrapped angles, is recomputed
+    by :func:`_wrapped` itself). The pendulum's scorer reads it; the tree GNN's engine takes the same
+    answer from its k-d trees (:func:`_kd_causal_knn`, held to this scan by the tests)."""
     B, d = x.shape
     kk = max(knn, 1)
     best_d = np.empty(kk)
@@ -195,73 +207,48 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
     if knn <= 0:
         return near, found
     M = i0 + B
-    T = 0
+    cols = np.empty((d, M))                          # the states column by column: contiguous passes
     for j in range(M):
-        T = max(T, tree_id[j] + 1)
-    for r in range(B):
-        T = max(T, tid[r] + 1)
-    size = np.zeros(T, dtype=np.int64)              # each tree's nodes among the first M, in node order
-    for j in range(M):
-        size[tree_id[j]] += 1
-    first = np.zeros(T + 1, dtype=np.int64)
-    for t in range(T):
-        first[t + 1] = first[t] + size[t]
-    index = np.empty(M, dtype=np.int64)
-    cols = np.empty((d, M))                          # tree by tree, column by column: contiguous passes
-    fill = first[:T].copy()
-    for j in range(M):
-        t = tree_id[j]
-        slot = fill[t]
-        fill[t] += 1
-        index[slot] = j
         for c in range(d):
-            cols[c, slot] = states[j, c]
+            cols[c, j] = states[j, c]
     dist = np.empty(M)
     for r in range(B):
         t = tid[r]
         m = i0 + r
-        lo = first[t]
-        hi = lo                                      # the tree's nodes before node m: slots lo..hi-1
-        while hi < first[t + 1] and index[hi] < m:
-            hi += 1
-        mt = hi - lo
-        dt = dist[lo:hi]                             # (views from 0: the loops below vectorise)
-        dt[:] = 0.0
+        dist[:m] = 0.0
         outside = False
         for c in range(d):
             xc = x[r, c]
             uc = unit[c]
-            col = cols[c, lo:hi]
+            col = cols[c]
             if planner_metric:
                 if periodic[c]:
-                    for j in range(mt):
+                    for j in range(m):
                         v = abs(xc - col[j])
                         v = min(v, two_pi - v) * uc
-                        dt[j] += v * v
+                        dist[j] += v * v
                 else:
-                    for j in range(mt):
+                    for j in range(m):
                         v = abs(xc - col[j]) * uc
-                        dt[j] += v * v
+                        dist[j] += v * v
             elif periodic[c]:
-                for j in range(mt):
+                for j in range(m):
                     a = (col[j] - xc) + math.pi
                     outside |= (a >= 2.0 * _TWO_PI) | (a < -_TWO_PI)
                     a = a - _TWO_PI if a >= _TWO_PI else (a + _TWO_PI if a < 0.0 else a)
                     v = (a - math.pi) / uc
-                    dt[j] += v * v
+                    dist[j] += v * v
             else:
-                for j in range(mt):
+                for j in range(m):
                     v = (col[j] - xc) / uc
-                    dt[j] += v * v
+                    dist[j] += v * v
         if outside:                                  # not two wrapped angles: the exact wrap, node by node
-            for j in range(lo, hi):
-                total = 0.0
-                for c in range(d):
-                    v = _wrapped(states[index[j], c] - x[r, c], periodic[c]) / unit[c]
-                    total += v * v
-                dist[j] = total
+            for j in range(m):
+                dist[j] = _knn_distance(states, j, x, r, unit, periodic)
         n_found = 0
-        for j in range(lo, hi):
+        for j in range(m):
+            if tree_id[j] != t:
+                continue
             dj = dist[j]
             if n_found < knn:
                 pos = n_found
@@ -275,20 +262,9 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
                 near[r, pos] = near[r, pos - 1]
                 pos -= 1
             best_d[pos] = dj
-            near[r, pos] = index[j]
+            near[r, pos] = j
         found[r] = n_found
     return near, found
-
-
-@jit(inline=True)
-def _knn_distance(states, j, x, r, unit, periodic):
-    """The causal k-NN's squared distance from node ``j`` to row ``r`` of ``x``: :func:`_causal_knn`'s floats
-    (each coordinate's ``wrap(x_j - x_i) / unit`` squared, summed in order)."""
-    acc = 0.0
-    for c in range(x.shape[1]):
-        v = _wrapped(states[j, c] - x[r, c], periodic[c]) / unit[c]
-        acc += v * v
-    return acc
 
 
 @jit(inline=True)

@@ -180,18 +180,17 @@ class IncrementalTreeGNN(_Engine):
         self.kd_stack = np.zeros((capacity + 1, 2), dtype=np.int64)
         self.kd_bounds = np.zeros((capacity + 1, 2))
         self.kd_cell = np.zeros(d)
-        if hasattr(self, "kd_root"):
-            self._pack_kd()
 
-    def _pack_kd(self) -> None:
-        self.kd = (self.kd_links, self.kd_cut, self.kd_root, self.kd_stack, self.kd_bounds, self.kd_cell)
+    @property
+    def kd(self) -> tuple:
+        """The k-d trees' arrays as the compiled k-NN takes them (``_kd_causal_knn``)."""
+        return self.kd_links, self.kd_cut, self.kd_root, self.kd_stack, self.kd_bounds, self.kd_cell
 
     def clear(self) -> None:
         super().clear()
         self.sums = np.zeros((self.trees, self.H))
         self.counts = np.zeros(self.trees)
         self.kd_root = np.full(self.trees, -1, dtype=np.int64)
-        self._pack_kd()
         self._ends_key = None
 
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:
