@@ -199,6 +199,7 @@ def test_spheres_say_collision_wherever_pybullet_does(world):
 def _brute_force_collides(checker, leaves, self_leaves, q):
     """Every obstacle-tree leaf against every obstacle and every self-tree leaf of every checked pair,
     no tree: the oracle of the walk."""
+    from scipy.spatial import cKDTree
     from scipy.spatial.distance import cdist
     rot, trans = checker.link_frames(q)
     world_leaves, world_self = {}, {}
@@ -225,8 +226,12 @@ def _brute_force_collides(checker, leaves, self_leaves, q):
                 return True
     for a, b in checker.self_pairs:
         la, lb = world_self[a], world_self[b]
-        if (cdist(la[:, :3], lb[:, :3]) <= la[:, None, 3] + lb[None, :, 3]).any():
-            return True
+        # scipy's k-d tree picks the candidates (within the largest radius sum, grown far above
+        # rounding); every candidate pair is then compared as the full distance matrix would
+        near = cKDTree(lb[:, :3]).query_ball_point(la[:, :3], la[:, 3] + lb[:, 3].max() + 1e-9)
+        for i, js in enumerate(near):
+            if js and (cdist(la[i:i + 1, :3], lb[js, :3])[0] <= la[i, 3] + lb[js, 3]).any():
+                return True
     return False
 
 
