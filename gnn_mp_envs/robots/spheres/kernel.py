@@ -356,12 +356,26 @@ def _link_walk(link, root, tau, spheres, obstacles, scratch):
 
 
 @jit(inline=True)
-def _obstacles_hit(k, left, right, track, use, rec, spheres, obstacles, scratch, memo):
-    """Whether a link's spheres touch an obstacle at the configuration whose frames ``scratch`` holds.
-    ``track``: state ``k`` of an edge (neighbours ``left``, ``right``), whose clearances in states go to
-    ``gaps[k]``; ``use`` / ``rec``: the memo row whose clearances stand in for the walks / receive them
-    (-1: none)."""
+def _frames(ready, track, a, b, n, kinematics, scratch):
+    """The link frames of ``scratch.q`` and, along the edge ``a -> b`` of ``n`` states (``track``), their
+    velocities, unless ``ready`` (computed already for this configuration); True."""
+    if not ready:
+        forward_kinematics(scratch.q, kinematics.parent, kinematics.origin_r, kinematics.origin_t, kinematics.kind,
+                           kinematics.axis, kinematics.q_index, kinematics.q_fixed, scratch.rot, scratch.trans)
+        if track:
+            velocities(a, b, n, kinematics.parent, kinematics.kind, kinematics.axis, kinematics.q_index, scratch.rot,
+                       scratch.trans, scratch.omega, scratch.vel)
+    return True
+
+
+@jit(inline=True)
+def _obstacles_hit(k, left, right, track, use, rec, a, b, n, kinematics, spheres, obstacles, scratch, memo):
+    """Whether a link's spheres touch an obstacle at the configuration ``scratch.q``, and whether its frames
+    are computed (:func:`_frames`, on the first link that needs them). ``track``: state ``k`` of the edge
+    ``a -> b`` of ``n`` states (neighbours ``left``, ``right``), whose clearances in states go to ``gaps[k]``;
+    ``use`` / ``rec``: the memo row whose clearances stand in for the walks / receive them (-1: none)."""
     gaps, curve, delta = scratch.gaps, scratch.curve, scratch.delta
+    ready = False
     for link in range(spheres.link_root.shape[0]):
         root = spheres.link_root[link]
         if root < 0:
@@ -371,6 +385,7 @@ def _obstacles_hit(k, left, right, track, use, rec, spheres, obstacles, scratch,
             if bound > 0.0:
                 gaps[k, link] = bound
                 continue
+        ready = _frames(ready, track, a, b, n, kinematics, scratch)
         # along an edge, walks go on below nodes nearer than tau: the bound they leave then vouches
         # for about REFINE states on either side
         speed = 0.0
@@ -385,18 +400,19 @@ def _obstacles_hit(k, left, right, track, use, rec, spheres, obstacles, scratch,
             continue
         hit, clearance = _link_walk(link, root, tau, spheres, obstacles, scratch)
         if hit:
-            return True
+            return True, ready
         if rec >= 0:
             memo.clear[rec, link] = clearance
         if track:
             gaps[k, link] = states_clear(clearance, speed, curve[link], delta[link])
-    return False
+    return False, ready
 
 
 @jit(inline=True)
-def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
+def _self_hit(k, left, right, track, use, rec, a, b, n, kinematics, spheres, tables, scratch, memo, ready):
     """Whether a checked pair of links touch each other (simultaneous descent of their self-collision
-    trees, or their joint-space table); the rest as :func:`_obstacles_hit`."""
+    trees, or their joint-space table); the rest as :func:`_obstacles_hit` (``ready``: its frames are
+    computed)."""
     gaps, q = scratch.gaps, scratch.q
     links = spheres.link_root.shape[0]
     for p in range(spheres.pairs.shape[0]):
@@ -415,6 +431,7 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
                     cell = scratch.pair_cell[p]
                     gaps[k, row] = (room - 1) / cell * ROUND_DOWN if cell > 0.0 else UNBOUNDED
                 continue
+        ready = _frames(ready, track, a, b, n, kinematics, scratch)
         speed = 0.0
         bend = 0.0                              # no speed measured: the global bound only
         tau = 0.0
@@ -444,17 +461,18 @@ def _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo):
 
 @jit(inline=True)
 def _collides(k, left, right, track, use, rec, a, b, n, kinematics, spheres, tables, obstacles, scratch, memo):
-    """Whether the configuration ``scratch.q`` collides (see :func:`_obstacles_hit` for the rest)."""
-    forward_kinematics(scratch.q, kinematics.parent, kinematics.origin_r, kinematics.origin_t, kinematics.kind,
-                       kinematics.axis, kinematics.q_index, kinematics.q_fixed, scratch.rot, scratch.trans)
+    """Whether the configuration ``scratch.q`` collides (see :func:`_obstacles_hit` for the rest). The link
+    frames (and velocities) are computed when a link or pair first needs them: along an edge about a quarter
+    of the tested states have every link and pair vouched for by their checked neighbours or a joint-space
+    table, and need none."""
     if track:
-        velocities(a, b, n, kinematics.parent, kinematics.kind, kinematics.axis, kinematics.q_index, scratch.rot,
-                   scratch.trans, scratch.omega, scratch.vel)
         for row in range(scratch.gaps.shape[1]):      # pairs never tested (exempt, no spheres) bound nothing
             scratch.gaps[k, row] = UNBOUNDED
-    if _obstacles_hit(k, left, right, track, use, rec, spheres, obstacles, scratch, memo):
+    hit, ready = _obstacles_hit(k, left, right, track, use, rec, a, b, n, kinematics, spheres, obstacles, scratch,
+                                memo)
+    if hit:
         return True
-    return _self_hit(k, left, right, track, use, rec, spheres, tables, scratch, memo)
+    return _self_hit(k, left, right, track, use, rec, a, b, n, kinematics, spheres, tables, scratch, memo, ready)
 
 
 # ---------------------------------------------------------------------- the entry points
