@@ -397,6 +397,28 @@ def test_vamp_table_ratios_per_scene():
     assert rows["all scenes", "uniform"] == ["3/4", "8.00", "4/4", "0.400", "20x", "180 / 500", "1 / 2 of 4"]
 
 
+def test_vamp_table_puts_the_held_out_scenes_together():
+    """Hand-computed: with a ``bookshelf_thin`` problem beside ``box`` and ``cage``, the held-out row takes the
+    ``cage`` and ``bookshelf_thin`` runs (ours 30, 10 (not solved) and 4 ms: median 10; VAMP 0.5, 1.5 and 0.5 ms:
+    median 0.5; iterations 900, 300, 100 and 700, 900, 500; VAMP's ``cage`` path failing both) and no other."""
+    from tools.vamp_table import ratio_table
+    report = _report()
+    thin = {**report["runs"]["uniform"][0], "problem": 4, "family": "bookshelf_thin", "wall_time_s": 4e-3,
+            "iterations": 100}
+    report["runs"]["uniform"].append(thin)
+    report["runs"]["vamp-rrtconnect"].append({**thin, "sampler": "vamp-rrtconnect", "wall_time_s": 0.5e-3,
+                                              "iterations": 500})
+    report["problems"] = 5
+    rows = {tuple(c.strip() for c in line.split("|")[1:3]): [c.strip() for c in line.split("|")[3:-1]]
+            for line in ratio_table(report).splitlines() if line.startswith("| ") and "---" not in line}
+    assert rows["held-out (bookshelf_thin, cage)", "uniform"] == ["2/3", "10.00", "3/3", "0.500", "20x",
+                                                                  "300 / 700", "1 / 1 of 3"]
+    labels = [key[0] for key in rows]
+    assert labels.index("held-out (bookshelf_thin, cage)") == len(labels) - 2       # before all scenes
+    report["runs"] = {k: [r for r in v if r["family"] == "cage"] for k, v in report["runs"].items()}
+    assert "held-out" not in ratio_table(report)          # one scene: its own row and all scenes say it
+
+
 def test_vamp_table_refuses_reports_without_the_row(tmp_path, capsys):
     from tools.vamp_table import main
     report = _report()

@@ -12,7 +12,9 @@ meaning, :func:`train.benchmark.stats.solved`; VAMP: its own word, a path return
 planning time of each (ours: the planning loop's wall time; VAMP: its own planning time, measured
 inside its C++ planner) and their ratio ours / VAMP, median iterations of each, and how many of
 VAMP's returned paths fail the benchmark's re-check: at the planner's resolution with the report's
-checker, and at 10x finer with pybullet (``path_valid``, ``path_valid_fine``); then all scenes.
+checker, and at 10x finer with pybullet (``path_valid``, ``path_valid_fine``); then the scenes the learned
+rows never trained on together (``bookshelf_thin`` and ``cage``, where the report holds other scenes too), then
+all scenes.
 Medians over every run with a time (failed runs included, as the benchmark's tables count them).
 """
 
@@ -26,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from gnn_mp_envs.tasks.mbm import HELD_OUT_SCENES
 from train.benchmark.stats import solved
 
 VAMP_ROW = "vamp-rrtconnect"
@@ -71,15 +74,19 @@ def ratio_table(report: dict[str, Any]) -> str:
     if not ours:
         raise ValueError(f"the {report.get('task')} report has no row of ours beside {VAMP_ROW}")
     scenes = list(dict.fromkeys(r.get("family") for r in runs[VAMP_ROW]))
+    groups: list[tuple[str, set | None]] = [(scene, {scene}) for scene in scenes]
+    held_out = [s for s in scenes if s in HELD_OUT_SCENES]
+    if held_out and len(held_out) < len(scenes):          # the learned rows' held-out scenes together
+        groups.append((f"held-out ({', '.join(HELD_OUT_SCENES)})", set(HELD_OUT_SCENES)))
+    groups.append(("all scenes", None))
     out = [f"{report['task']}: {report['problems']} {report.get('split', 'test')} problems, seed {report['seed']} "
            f"(times: medians in ms; ratio = ours / VAMP; VAMP's paths failing the re-check: at the planner's "
            f"resolution ({report.get('checker') or 'the task checker'}) / 10x finer (pybullet))", "",
            "| scene | row of ours | solved | time | VAMP: paths returned | VAMP: time | ours / VAMP | "
            "iterations (ours / VAMP) | VAMP's paths failing the re-check |",
            "|---|---|---|---|---|---|---|---|---|"]
-    for scene in [*scenes, None]:
-        label = scene if scene is not None else "all scenes"
-        pick = (lambda rows: rows) if scene is None else (lambda rows: [r for r in rows if r.get("family") == scene])
+    for label, members in groups:
+        pick = (lambda rows: rows) if members is None else (lambda rows: [r for r in rows if r.get("family") in members])
         v = vamp_figures(pick(runs[VAMP_ROW]))
         for name in ours:
             o = our_figures(pick(runs[name]), max_nodes)
