@@ -73,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
             prob.is_state_valid(states[:1])                          # load the scene (and compile) first
             per_state[c] += _time(lambda: prob.is_state_valid(states), repeat=1 if c == "pybullet" else 3)
             valid[c] += int(prob.is_state_valid(states).sum())
+            if len(starts):                                          # the edge check compiled before its timing
+                prob.check_motion(starts[0], ends[0])
             prob.reset_counters()
 
             def edges(prob=prob):
