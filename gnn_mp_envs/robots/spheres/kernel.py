@@ -462,9 +462,8 @@ def _self_hit(k, left, right, track, use, rec, a, b, n, kinematics, spheres, tab
 @jit(inline=True)
 def _collides(k, left, right, track, use, rec, a, b, n, kinematics, spheres, tables, obstacles, scratch, memo):
     """Whether the configuration ``scratch.q`` collides (see :func:`_obstacles_hit` for the rest). The link
-    frames (and velocities) are computed when a link or pair first needs them: along an edge about a quarter
-    of the tested states have every link and pair vouched for by their checked neighbours or a joint-space
-    table, and need none."""
+    frames (and velocities) are computed when a link or pair first needs them: along an edge, a tested state
+    whose links and pairs are all vouched for by its checked neighbours or a joint-space table needs none."""
     if track:
         for row in range(scratch.gaps.shape[1]):      # pairs never tested (exempt, no spheres) bound nothing
             scratch.gaps[k, row] = UNBOUNDED
