@@ -6,6 +6,7 @@ check's order and count)."""
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from gnn_mp_envs.robots.catalog import fetch_model, panda_model, ur5_model, xarm
 from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres.build import BULLET_MARGIN, COVER_TOLERANCE, coverage_gaps, max_overshoot
 from gnn_mp_envs.robots.spheres.checker import SphereCollisionChecker
+from gnn_mp_envs.robots.spheres.kernel import joint_distance
 from gnn_mp_envs.robots.spheres.model import load_sphere_model
 from gnn_mp_envs.robots.urdf import read_urdf
 from gnn_mp_envs.robots.world import CONTACT_DISTANCE, RobotWorld
@@ -399,6 +401,30 @@ def test_edge_check_answers_and_counts_as_a_state_by_state_loop(world):
     assert min(outcomes.values()) >= 60, outcomes
 
 
+def _fused_distance(a, b):
+    """``|a - b|`` with each square added to the sum so far in one rounding (a fused multiply-add, in
+    order), in exact rational arithmetic: ``float`` of a ``Fraction`` rounds once, to nearest."""
+    s = 0.0
+    for x, y in zip(a, b):
+        d = Fraction(float(x)) - Fraction(float(y))     # rounded once, as the float subtraction is
+        s = float(Fraction(float(d)) ** 2 + Fraction(s))
+    return math.sqrt(s)
+
+
+def test_joint_distance_sums_fused_squares_in_order_on_every_cpu():
+    """The arms' one joint-space distance (steering, goal connections; compiled and Python): each square
+    added in one rounding, in order, whatever numpy's ``d @ d`` does on this CPU's BLAS kernel: vectors
+    of 6 to 8 joints, among them many where rounding each product before the sum gives another float."""
+    rng = np.random.default_rng(3)
+    unfused_differs = 0
+    for dof in (6, 7, 8):
+        for _ in range(2000):
+            a, b = rng.uniform(-3, 3, (2, dof))
+            assert joint_distance(a, b) == _fused_distance(a, b)
+            unfused_differs += math.sqrt(sum(float(v) * float(v) for v in a - b)) != _fused_distance(a, b)
+    assert unfused_differs > 100
+
+
 def _oracle_edge(checker, a, b, resolution, low, high):
     """``(valid, checks)`` of the edge ``a -> b`` in bisection order, state by state (``valid``, the box)."""
     n = max(1, math.ceil(math.sqrt(sum(v * v for v in (b - a).tolist())) / resolution))
@@ -428,9 +454,9 @@ def test_growing_a_tree_answers_as_state_by_state_checks_whatever_the_checker_sa
             a = starts[int(rng.integers(len(starts)))]
             target = rng.uniform(low, high)
             d = target - a
-            dist = math.sqrt(float(d @ d))
+            dist = _fused_distance(target, a)
             x_new, distance, valid, checks = checker.steer(a, target, step, resolution, low, high)
-            assert distance == dist         # numpy's d @ d, to the last bit
+            assert distance == dist         # to the last bit
             np.testing.assert_array_equal(x_new, target if dist <= step else a + (step / dist) * d)
             assert (valid, checks) == _oracle_edge(checker, a, x_new, resolution, low, high)
             assert checker.check_motion(a, x_new, resolution, low, high) == (valid, checks)

@@ -24,6 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from gnn_mp_envs.core.problem import ZERO_LENGTH
+from gnn_mp_envs.robots.spheres.kernel import joint_distance
 from gnn_mp_envs.utils.imports import import_entry
 
 #: Checker name -> ``"module:class"`` (imported on first use: the sphere checker compiles with numba);
@@ -143,7 +144,7 @@ class PybulletChecker:
     def steer(self, scene: Any, a: np.ndarray, target: np.ndarray, step: float, resolution: float,
               low: np.ndarray, high: np.ndarray, bisection: bool) -> tuple[np.ndarray, float, bool, int]:
         d = target - a
-        dist = math.sqrt(float(d @ d))
+        dist = joint_distance(target, a)
         if dist < ZERO_LENGTH:
             return a, dist, False, 0
         x_new = np.array(target, dtype=np.float64) if dist <= step else a + (step / dist) * d

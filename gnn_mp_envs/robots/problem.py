@@ -8,7 +8,6 @@ rad (joint-space L2) and stop at the first invalid configuration.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from gnn_mp_envs.core.problem import ZERO_LENGTH, Edge, Problem
 from gnn_mp_envs.robots.checkers import Checker
 from gnn_mp_envs.robots.geometry import Obstacle, Scene
+from gnn_mp_envs.robots.spheres.kernel import joint_distance
 from gnn_mp_envs.robots.world import CONTACT_DISTANCE, RobotWorld
 
 #: Collision-checking resolution along edges (rad, joint-space L2), unless a task names another.
@@ -141,8 +141,7 @@ class JointSpaceProblem(Problem):
 
     def goal_connection(self, x: np.ndarray) -> Edge | None:
         x = self._state_arg(x, "x")
-        d = self.goal - x
-        dist = math.sqrt(float(d @ d))
+        dist = joint_distance(self.goal, x)
         if dist > self.step_size or not self.check_motion(x, self.goal):
             return None
         return Edge(self.goal.copy(), dist)

@@ -25,7 +25,7 @@ from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres import kernel, kinematics
 from gnn_mp_envs.robots.spheres.kernel import (BOX, COLUMNS, CYLINDER, KINDS, SPHERE, Kinematics, Memo, Obstacles,
                                                Scratch, Spheres, Tables, check_edge, check_states, free_cells,
-                                               goal_distance, planner_motion, planner_steer, steer_edge, table_room)
+                                               joint_distance, planner_motion, planner_steer, steer_edge, table_room)
 from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, leaf_rows, load_sphere_model
 from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, URDFRobot, read_urdf
 
@@ -682,6 +682,6 @@ class SphereCollisionChecker:
         if kernel is None or (kernel.context[0] is not checker._packed or kernel.context[1] is not low
                               or kernel.context[2] is not high or kernel.context[3] != resolution
                               or kernel.context[4] != bisection):
-            kernel = self._compiled = CompiledKernel("spheres", planner_steer, planner_motion, goal_distance,
+            kernel = self._compiled = CompiledKernel("spheres", planner_steer, planner_motion, joint_distance,
                                                      (checker._packed, low, high, float(resolution), bool(bisection)))
         return kernel

@@ -736,9 +736,7 @@ def check_edge(a, b, resolution, low, high, bisection, table):
 
 @intrinsic
 def _fma(typingctx, x, y, z):
-    """``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``: exact on every CPU, in hardware or not).
-    numpy's ``d @ d`` of a short vector sums so (OpenBLAS's ``ddot``: one fused multiply-add per
-    entry, in order); tests/test_spheres.py holds the two equal."""
+    """``x * y + z`` rounded once (LLVM's ``llvm.fma.f64``: exact on every CPU, in hardware or not)."""
     sig = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
@@ -750,19 +748,28 @@ def _fma(typingctx, x, y, z):
 
 
 @jit
+def joint_distance(a, b):
+    """``|a - b|`` (joint-space L2) of the arms' problems, the one definition their compiled and Python
+    steps share (steering, goal connections): the squares summed in order with one fused multiply-add
+    each (:func:`_fma`), so the same floats on every CPU. numpy's ``d @ d`` is not that: it rounds as
+    the BLAS kernel the CPU selects does (fused on some CPUs, a rounded product then a sum on others, such
+    as OpenBLAS's Haswell kernel)."""
+    s = 0.0
+    for j in range(a.shape[0]):
+        dj = a[j] - b[j]
+        s = _fma(dj, dj, s)
+    return math.sqrt(s)
+
+
+@jit
 def steer_edge(a, target, step, resolution, low, high, bisection, table, x_new, distance):
     """Steer from ``a`` toward ``target`` by at most ``step`` (joint-space L2) and check that edge, in
-    one call. ``distance[0]`` = ``|target - a|``, summed as numpy's ``d @ d`` sums (:func:`_fma`, in
-    order); below ``ZERO_LENGTH`` nothing else is done (answer 1). Else ``x_new`` = ``target`` when
-    the distance is at most ``step``, else ``a + (step / distance)(target - a)``, and the answer is
-    :func:`check_edge`'s for the edge ``a -> x_new``. The same floats as
-    :class:`~gnn_mp_envs.robots.checkers.PybulletChecker`'s ``steer``."""
+    one call. ``distance[0]`` = :func:`joint_distance` of the two; below ``ZERO_LENGTH`` nothing else
+    is done (answer 1). Else ``x_new`` = ``target`` when the distance is at most ``step``, else
+    ``a + (step / distance)(target - a)``, and the answer is :func:`check_edge`'s for the edge
+    ``a -> x_new``. The same floats as :class:`~gnn_mp_envs.robots.checkers.PybulletChecker`'s ``steer``."""
     dof = a.shape[0]
-    s = 0.0
-    for j in range(dof):
-        dj = target[j] - a[j]
-        s = _fma(dj, dj, s)
-    d = math.sqrt(s)
+    d = joint_distance(target, a)
     distance[0] = d
     if d < ZERO_LENGTH:
         return 1
@@ -790,17 +797,6 @@ def planner_motion(a, b, context):
     """:func:`check_edge` with the planning loop's context."""
     table, low, high, resolution, bisection = context
     return check_edge(a, b, resolution, low, high, bisection, table)
-
-
-@jit
-def goal_distance(a, b):
-    """``|a - b|`` summed as numpy's ``d @ d`` sums (:func:`_fma`, in order): the joint-space problem's
-    distance of a goal connection."""
-    s = 0.0
-    for j in range(a.shape[0]):
-        dj = a[j] - b[j]
-        s = _fma(dj, dj, s)
-    return math.sqrt(s)
 
 
 # ---------------------------------------------------------------------- building the tables
