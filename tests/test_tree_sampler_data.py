@@ -7,6 +7,7 @@ import pytest
 
 from gnn_mp_envs.utils.npz import DatasetCacheError
 from train.tree.data import TreeDataConfig, TreeDataset, generate, load, load_or_generate, save
+from train.tree.training import split_problems
 
 
 def hand_made(iterations=((1, 0), (2, 0), (3, 0), (4, 0), (5, 0))) -> TreeDataset:
@@ -21,6 +22,20 @@ def hand_made(iterations=((1, 0), (2, 0), (3, 0), (4, 0), (5, 0))) -> TreeDatase
         obstacles=np.zeros((1, 1, 1), np.float32), problem_index=np.array([0]), iter_ptr=np.array([0, len(it)]),
         iter_nodes=it[:, 0].astype(np.int32), iter_active=it[:, 1].astype(np.int8),
         iter_sample=np.zeros((len(it), 2), np.float32), iter_created=np.full(len(it), -1, np.int32))
+
+
+def test_a_split_holds_out_a_tenth_but_never_the_last_problem_to_train_on():
+    """A DAgger round splits the problems it solved: one is trained on, none adds nothing (a round that
+    solved one problem failed in ``np.concatenate`` before); the subsets' offsets and arrays match."""
+    one = hand_made()
+    for n, expected in [(0, (0, 0)), (1, (1, 0)), (2, (1, 1)), (25, (23, 2))]:
+        data = one.subset([0] * n)
+        assert len(data) == n and data.node_ptr.tolist() == [6 * k for k in range(n + 1)]
+        train, val = split_problems(data, seed=3)
+        assert (len(train), len(val)) == expected
+        for part in (train, val):
+            assert part.states.shape == (6 * len(part), 2) and part.iter_sample.shape == (5 * len(part), 2)
+            assert part.path_nodes.tolist() == [0, 2, 3, 5] * len(part)
 
 
 def test_grown_labels_are_the_next_path_node_beyond_the_tree():

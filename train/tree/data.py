@@ -91,9 +91,9 @@ class TreeDataset:
         return len(self.start)
 
     def subset(self, problems: list[int]) -> "TreeDataset":
-        """The dataset of the given problems only (offsets rebuilt)."""
+        """The dataset of the given problems only (offsets rebuilt; no problems: an empty dataset)."""
         def ragged(ptr: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-            pieces = [[a[ptr[p]:ptr[p + 1]] for p in problems] for a in arrays]
+            pieces = [[a[:0], *(a[ptr[p]:ptr[p + 1]] for p in problems)] for a in arrays]
             sizes = [ptr[p + 1] - ptr[p] for p in problems]
             return (np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
                     *[np.concatenate(ps) for ps in pieces])

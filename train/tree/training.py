@@ -124,9 +124,10 @@ def evaluate_loss(model: torch.nn.Module, adapter, items: list, batch_size: int 
 
 
 def split_problems(data: TreeDataset, seed: int) -> tuple[TreeDataset, TreeDataset]:
-    """(training, validation) problems: a fixed tenth (at least one) held out."""
+    """(training, validation) problems: a fixed tenth held out, at least one while at least one is left
+    to train on (a DAgger round that solved one problem trains on it; one that solved none adds nothing)."""
     order = np.random.default_rng(seed).permutation(len(data))
-    cut = max(1, len(data) // 10)
+    cut = max(1, len(data) // 10) if len(data) >= 2 else 0
     return data.subset(sorted(order[cut:].tolist())), data.subset(sorted(order[:cut].tolist()))
 
 
