@@ -353,6 +353,26 @@ def test_a_one_tree_gnn_refuses_a_birrt_observation():
         np.testing.assert_array_equal(a, b)
 
 
+def test_each_forward_asks_about_the_compiled_loop_it_calls(monkeypatch):
+    """The single-step and the batch forwards are separate compiled loops and a run uses one: each asks
+    about its own right before calling it (asked at construction about the single-step loop, a
+    benchmark whose batch loop was cached said "compiling ... about 40 s" on every run)."""
+    from agents.samplers import load_sampler
+    from agents.tree import compiled, engine as engine_module
+    asked = []
+    monkeypatch.setattr(engine_module, "announce_compilation", lambda dispatcher, what: asked.append(dispatcher))
+    model = load_sampler("gnn", task="maze2d", seed=0).model
+    env = gym.make("GNNMP/Maze2DRRT-v0", split="val", disable_env_checker=True)
+    obs, _ = env.reset(seed=0, options={"index": 0})
+    single, batch, context = (IncrementalTreeGNN(model), IncrementalTreeGNN(model),
+                              IncrementalTreeGNN(model, heads=False))
+    assert asked == []
+    single.grown_mixture(obs, single.new_rows(obs), 0, 0.7)
+    batch.grown_mixtures(obs, batch.new_rows(obs), np.array([0]), 0.7)
+    context.grown_context(obs, context.new_rows(obs), 0)
+    assert asked == [compiled.mixture_after_rows, compiled.mixtures_after_rows, compiled.context_after_rows]
+
+
 def test_a_compilation_is_announced_once_and_never_when_cached(tmp_path):
     """The ~40 s first compile prints one line (not a silent hang); a process that finds numba's cache
     for the current source prints nothing. node_mixture stands in for the big loops (it compiles fast)."""

@@ -101,6 +101,10 @@ class _Engine:
         return self.n, n
 
 
+#: What :func:`announce_compilation` names for the GNN's compiled forwards.
+GNN_LOOP = "the tree GNN's per-node loop"
+
+
 class IncrementalTreeGNN(_Engine):
     """Numpy inference of a :class:`TreeGNN` that embeds each new tree node once."""
 
@@ -163,7 +167,6 @@ class IncrementalTreeGNN(_Engine):
         self._flags = np.array([bool(self.relative_inputs), int(self.k) if self.use_knn else 0, bool(self.use_parent),
                                 self.heads, bool(self.use_context)], dtype=np.int64)
         super().__init__(m.state_dim, capacity)
-        announce_compilation(mixture_after_rows if self.heads else context_after_rows, "the tree GNN's per-node loop")
 
     def _allocate(self, capacity: int) -> None:
         d, H, L, T = self.d, self.H, self.L, self.trees
@@ -240,6 +243,7 @@ class IncrementalTreeGNN(_Engine):
         i0, n = rows
         self._check_trees((active,))
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
+        announce_compilation(context_after_rows, GNN_LOOP)
         q = context_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
                                self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                self.periodic, self._flags, self._flat, self._layout, ends, int(active))
@@ -257,6 +261,7 @@ class IncrementalTreeGNN(_Engine):
         self._check_trees((active,))
         start, goal = obs["start"], obs["goal"]
         ends = self._ends_of(start, goal, self._problem_key)
+        announce_compilation(mixture_after_rows, GNN_LOOP)
         out = mixture_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
                                  self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                  self.periodic, self._flags, self._flat, self._layout, ends, int(active),
@@ -275,6 +280,7 @@ class IncrementalTreeGNN(_Engine):
         actives = np.asarray(actives, dtype=np.int64)
         self._check_trees(actives.tolist())
         ends = self._ends_of(obs["start"], obs["goal"], self._problem_key)
+        announce_compilation(mixtures_after_rows, GNN_LOOP)
         out = mixtures_after_rows(i0, n, obs["nodes"], obs["node_features"], obs["parent"], self.states, self.tree_id,
                                   self.sender, self.keys, self.offsets, self.log_sigma, self.sums, self.counts, self.kd,
                                   self.periodic, self._flags, self._flat, self._layout, ends,
