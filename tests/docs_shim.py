@@ -27,6 +27,9 @@ BUDGET: dict[str, list[str]] = {
     "gnn-mp benchmark --suite": ["--suite", "smoke", "--workers", "1"],
     "gnn-mp train sampler": ["--problems", "6", "--minutes", "0.01", "--dagger-problems", "3",
                              "--dagger-minutes", "0.01", "--eval-problems", "1"],
+    # the Fetch's third DAgger problem, planned by the barely trained GNN, takes minutes: one problem
+    "gnn-mp train sampler --task fetch-mbm": ["--problems", "6", "--minutes", "0.01", "--dagger-problems", "1",
+                                              "--dagger-minutes", "0.01", "--eval-problems", "1"],
     "gnn-mp train rl": ["--total-steps", "32", "--n-envs", "2", "--n-steps", "16", "--batch-size", "16",
                         "--eval-every", "32", "--eval-problems", "1", "--eval-max-steps", "100",
                         "--learning-starts", "16", "--buffer-size", "256"],

@@ -11,6 +11,7 @@ shared floor imports no job (``docs/architecture.md``)."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import networkx as nx
@@ -59,7 +60,10 @@ def imported_names(name: str, path: Path) -> set[str]:
     return names
 
 
+@functools.cache
 def import_graph(root: Path = ROOT) -> tuple[nx.DiGraph, dict[str, set[str]]]:
+    """The modules' import graph and, per module, the first part of every name it imports; read once
+    per root (the tests only read them)."""
     mods = modules(root)
     graph = nx.DiGraph()
     graph.add_nodes_from(mods)

@@ -18,7 +18,7 @@ from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres.build import BULLET_MARGIN, COVER_TOLERANCE, coverage_gaps, max_overshoot
 from gnn_mp_envs.robots.spheres.checker import SphereCollisionChecker
 from gnn_mp_envs.robots.spheres.kernel import joint_distance
-from gnn_mp_envs.robots.spheres.model import load_sphere_model
+from gnn_mp_envs.robots.spheres.model import leaf_rows, load_sphere_model
 from gnn_mp_envs.robots.urdf import read_urdf
 from gnn_mp_envs.robots.world import CONTACT_DISTANCE, RobotWorld
 
@@ -48,6 +48,15 @@ def sphere_checker(world, scene):
 def _names(world):
     p, cid, r = world.p, world.client, world.robot
     return {j: p.getJointInfo(r, j, physicsClientId=cid)[12].decode() for j in range(p.getNumJoints(r, physicsClientId=cid))}
+
+
+def test_leaf_rows_are_the_leaves_under_a_node_in_increasing_order():
+    """A hand-made tree (children are consecutive rows after their parent, not a subtree's rows):
+    0 -> 1, 2; 1 -> 3, 4; 4 -> 5, 6 (2, 3, 5, 6 are leaves)."""
+    first_child = np.array([1, 3, 0, 0, 5, 0, 0])
+    child_count = np.array([2, 2, 0, 0, 2, 0, 0])
+    assert [leaf_rows(r, first_child, child_count).tolist() for r in range(7)] == [
+        [2, 3, 5, 6], [3, 5, 6], [2], [3], [5, 6], [5], [6]]
 
 
 def test_the_shipped_model_exists_and_matches_the_robot(world):
@@ -202,7 +211,6 @@ def _brute_force_collides(checker, leaves, self_leaves, q):
     """Every obstacle-tree leaf against every obstacle and every self-tree leaf of every checked pair,
     no tree: the oracle of the walk."""
     from scipy.spatial import cKDTree
-    from scipy.spatial.distance import cdist
     rot, trans = checker.link_frames(q)
     world_leaves, world_self = {}, {}
     for i, link in enumerate(checker.links):
@@ -226,14 +234,19 @@ def _brute_force_collides(checker, leaves, self_leaves, q):
                 gap = np.maximum(np.linalg.norm(d, axis=1) - size[0], 0.0)
             if (gap <= lv[:, 3]).any():
                 return True
+    trees: dict[str, cKDTree] = {}
     for a, b in checker.self_pairs:
         la, lb = world_self[a], world_self[b]
-        # scipy's k-d tree picks the candidates (within the largest radius sum, grown far above
-        # rounding); every candidate pair is then compared as the full distance matrix would
-        near = cKDTree(lb[:, :3]).query_ball_point(la[:, :3], la[:, 3] + lb[:, 3].max() + 1e-9)
-        for i, js in enumerate(near):
-            if js and (cdist(la[i:i + 1, :3], lb[js, :3])[0] <= la[i, 3] + lb[js, 3]).any():
-                return True
+        for link in (a, b):
+            if link not in trees:
+                trees[link] = cKDTree(world_self[link][:, :3])
+        # scipy's k-d trees pick the candidates (within the largest radius sum, grown far above
+        # rounding); every candidate pair is then compared exactly, as the full distance matrix would
+        near = trees[a].sparse_distance_matrix(trees[b], la[:, 3].max() + lb[:, 3].max() + 1e-9,
+                                               output_type="ndarray")
+        i, j = near["i"], near["j"]
+        if (np.linalg.norm(la[i, :3] - lb[j, :3], axis=1) <= la[i, 3] + lb[j, 3]).any():
+            return True
     return False
 
 
@@ -552,10 +565,9 @@ def test_exactly_the_listed_problems_are_invalid_under_the_sphere_model(robot):
     assert 700 - len(set(INVALID_PROBLEMS[robot]) | set(SPHERE_INVALID_PROBLEMS[robot])) >= 665   # 95%
 
 
-def _row_leaves(checker, frames):
-    """Per link row of the kernel with an obstacle tree: the world centres of that tree's leaves, and of the
-    link's own self tree's where the tree is the link's own (its levers cover both)."""
-    rot, trans = frames
+def _row_leaves(checker):
+    """Per link row of the kernel with an obstacle tree: the centres of that tree's leaves, and of the
+    link's own self tree's where the tree is the link's own (its levers cover both), in the link's frame."""
     out = {}
     for i, link in enumerate(checker.links):
         leaves = checker.link_leaves(i)[:, :3]
@@ -563,8 +575,14 @@ def _row_leaves(checker, frames):
             continue
         if checker.spheres.link_root[i] == checker.model.roots.get(link, -1):
             leaves = np.vstack([leaves, checker.model.leaves(link, True)[:, :3]])
-        out[i] = leaves @ rot[i].T + trans[i]
+        out[i] = leaves
     return out
+
+
+def _in_world(rows, frames):
+    """``rows`` (:func:`_row_leaves`) moved by the link frames ``frames``."""
+    rot, trans = frames
+    return {i: leaves @ rot[i].T + trans[i] for i, leaves in rows.items()}
 
 
 def test_the_motion_bounds_hold_along_edges(world):
@@ -577,6 +595,8 @@ def test_the_motion_bounds_hold_along_edges(world):
     rng = np.random.default_rng(5)
     tighter = []
     dof = len(world.low)
+    rows = _row_leaves(checker)
+    pair_leaves = [checker.pair_leaves(p) for p in range(len(checker.spheres.pairs))]
     for trial in range(40 + 2 * dof):
         a = rng.uniform(world.low, world.high)
         # random directions, then each joint alone (twice): a lever that misses a leaf shows there
@@ -586,14 +606,14 @@ def test_the_motion_bounds_hold_along_edges(world):
         k = int(rng.integers(0, n))
         bounds = checker.motion_rates(a, b, n, k)
         frames_here = checker.link_frames(a + (k / n) * (b - a))
-        here = _row_leaves(checker, frames_here)
+        here = _in_world(rows, frames_here)
         for s in (1, 3, 10, 40):
             for sign in (1, -1):
                 j = k + sign * s
                 if not 0 <= j <= n:
                     continue
                 frames_there = checker.link_frames(a + (j / n) * (b - a))
-                there = _row_leaves(checker, frames_there)
+                there = _in_world(rows, frames_there)
                 for i, link in enumerate(checker.links):
                     if i not in here:
                         continue
@@ -607,7 +627,7 @@ def test_the_motion_bounds_hold_along_edges(world):
                     if m < 0:
                         continue
                     f = la + lb - m
-                    own = checker.pair_leaves(p)[0 if m == la else 1][:, :3]   # the moving side's, in m's frame
+                    own = pair_leaves[p][0 if m == la else 1][:, :3]   # the moving side's, in m's frame
 
                     def local(frames):     # the moving side's self leaves in the other link's frame
                         rot, trans = frames
