@@ -42,8 +42,8 @@ def cached_env(task: str, env_kwargs: dict[str, Any], render: bool = False):
 
 def warmed_up(env: Any) -> Any:
     """``env`` after one untimed step of its first problem: a process's first step loads the planner's
-    compiled loop and checker from numba's cache (30 to 75 ms on the Panda), which would otherwise land
-    in the first timed run of the first row. Every run resets the env with its own seed. A step that
+    compiled loop and checker from numba's cache (or compiles them), which would otherwise land in the
+    first timed run of the first row. Every run resets the env with its own seed. A step that
     fails here fails again in the timed run, which names the sampler and problem: nothing is lost."""
     try:
         env.reset(seed=0, options={"index": 0})

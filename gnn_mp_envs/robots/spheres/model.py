@@ -33,8 +33,8 @@ class SphereModelError(ValueError):
 
 
 def leaf_rows(root: int, first_child: np.ndarray, child_count: np.ndarray) -> np.ndarray:
-    """The rows of the leaves of the sphere tree at ``root``, in increasing order: one level of the tree
-    at a time (the UR5's forearm has tens of thousands of leaves; a node-by-node walk took milliseconds)."""
+    """The rows of the leaves of the sphere tree at ``root``, in increasing order, found one level of the
+    tree at a time with numpy (a link's tree can hold tens of thousands of leaves)."""
     found, level = [], np.array([int(root)], dtype=np.int64)
     while len(level):
         counts = child_count[level]
