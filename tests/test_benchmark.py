@@ -125,11 +125,18 @@ def test_ompl_rows_run_the_same_problems():
     assert report["results"]["ompl-rrtconnect"]["success_rate"] == 1.0
 
 
-def test_ray_actors_give_the_counters_of_local_workers():
-    """`--ray` (a local Ray instance) runs the same jobs as `--workers 2`: same counters."""
+def test_ray_actors_give_the_counters_of_local_workers(monkeypatch):
+    """`--ray` (a local Ray instance) runs the same jobs as `--workers 2`: same counters, and the same
+    verdicts of the re-check, which runs on the actors of the timed runs (Ray started once)."""
     pytest.importorskip("ray")
-    on_ray = bm.run_benchmark(tiny_args(workers=2, problems=3, ray="local"))
-    local = bm.run_benchmark(tiny_args(workers=2, problems=3))
+    import train.workers
+    starts = []
+    start_ray = train.workers.start_ray
+    monkeypatch.setattr(train.workers, "start_ray", lambda *a, **k: (starts.append(a), start_ray(*a, **k)))
+    on_ray = bm.run_benchmark(tiny_args(workers=2, problems=3, max_nodes=2000, ray="local"))
+    assert len(starts) == 1
+    assert any(r["path_valid_fine"] for row in on_ray["runs"].values() for r in row)   # the re-check ran
+    local = bm.run_benchmark(tiny_args(workers=2, problems=3, max_nodes=2000))
     assert without_wall_time(on_ray) == without_wall_time(local)
 
 

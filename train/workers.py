@@ -4,9 +4,8 @@ samplers' dataset collection both use.
 A job is a tuple; ``fn(job)`` (a module-level function, so it pickles) runs it in a worker and
 ``finished(result)`` is called in this process for every job, in completion order:
 
-    with WorkerPool(workers, modules) as pool:
+    with WorkerPool(workers, modules) as pool:      # or RayPool(address, workers, modules): Ray actors
         pool.run(jobs, finished, fn)
-    run_on_ray("local", workers, modules, jobs, finished, fn)
 
 Each worker imports the plugin modules of this process once (every ``--import`` module, a module
 of the current directory from the file this process loaded: :func:`train.args.plugin_sources`) and
@@ -163,40 +162,66 @@ def start_ray(address: str | None, **init: Any) -> None:
             signal.signal(signal.SIGTERM, sigterm)
 
 
-def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],
-               fn: Callable[[tuple], Any]) -> None:
-    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors: a local Ray
-    instance (``address="local"``, the flags' ``--ray``) or a cluster (``"auto"`` /
-    ``ray://HOST:10001``); ``fn`` a module-level function. Results equal a local run's for the same
-    seed. A job's :class:`~train.args.UsageError` is raised here as it was raised there. Every actor
-    imports this process's plugin modules (``modules`` among them)."""
-    try:
+class RayPool:
+    """Ray actors that run jobs, as :class:`WorkerPool`'s processes do, reused across calls (a
+    benchmark's timed runs, then the re-checks of their paths): Ray is started (or joined) once and
+    each actor pays its imports once. ``address``: ``"local"`` starts a local instance with
+    ``workers`` CPUs (the flags' ``--ray``), ``"auto"`` or ``ray://HOST:10001`` joins a cluster.
+    The actors are made by the first :meth:`run`, no more than its jobs. A local instance this pool
+    started is shut down on leaving it. A job's :class:`~train.args.UsageError` is raised here as it
+    was raised there."""
+
+    def __init__(self, address: str, workers: int, modules: list[str] = ()) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise UsageError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
+        self.workers, self.plugins, self.actors = workers, plugin_sources(modules), []
+        local = address == "local"
+        self.started = not ray.is_initialized()
+        if self.started:
+            try:
+                start_ray(None if local else address, num_cpus=workers if local else None, include_dashboard=False,
+                          log_to_driver=False, configure_logging=False)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                raise UsageError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
+
+    def run(self, jobs: list[tuple], finished: Callable[[Any], None], fn: Callable[[tuple], Any]) -> None:
+        """``finished(fn(job))`` for every job, in completion order (``fn``: a module-level function)."""
         import ray
         from ray.util import ActorPool
-    except ImportError:
-        raise UsageError("--ray needs Ray: pip install 'gnn-mp-envs[ray]'") from None
-    plugins = plugin_sources(modules)
-    local = address == "local"
-    started = not ray.is_initialized()
-    if started:
+        if not jobs:
+            return
         try:
-            start_ray(None if local else address, num_cpus=workers if local else None, include_dashboard=False,
-                      log_to_driver=False, configure_logging=False)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise UsageError(f"cannot reach Ray at {address}: {str(exc).splitlines()[0]}") from None
-    try:
-        actor = ray.remote(num_cpus=1)(_JobActor)
-        pool = ActorPool([actor.remote(plugins, os.getcwd()) for _ in range(max(1, min(workers, len(jobs))))])
-        for result in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
-            finished(result)
-    except ray.exceptions.RayTaskError as exc:
-        cause = exc.cause if isinstance(getattr(exc, "cause", None), UsageError) else None
-        raise cause or UsageError(f"a Ray task failed: {str(exc).splitlines()[0]}") from None
-    except ray.exceptions.RayActorError:
-        raise BrokenProcessPool("a Ray actor died") from None
-    finally:
-        if started:
+            if not self.actors:
+                actor = ray.remote(num_cpus=1)(_JobActor)
+                self.actors = [actor.remote(self.plugins, os.getcwd())
+                               for _ in range(max(1, min(self.workers, len(jobs))))]
+            pool = ActorPool(self.actors)
+            for result in pool.map_unordered(lambda a, job: a.run.remote(fn, job), jobs):
+                finished(result)
+        except ray.exceptions.RayTaskError as exc:
+            cause = exc.cause if isinstance(getattr(exc, "cause", None), UsageError) else None
+            raise cause or UsageError(f"a Ray task failed: {str(exc).splitlines()[0]}") from None
+        except ray.exceptions.RayActorError:
+            raise BrokenProcessPool("a Ray actor died") from None
+
+    def __enter__(self) -> "RayPool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.actors = []
+        if self.started:
+            import ray
             ray.shutdown()
+
+
+def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],
+               fn: Callable[[tuple], Any]) -> None:
+    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors of a
+    :class:`RayPool` made for this call. Results equal a local run's for the same seed."""
+    with RayPool(address, workers, modules) as pool:
+        pool.run(jobs, finished, fn)
 
 
 def worker_start_method() -> str:

@@ -23,7 +23,7 @@ from train.benchmark.args import (
     validate_args,
 )
 from train.args import UsageError
-from train.workers import WorkerPool, run_on_ray
+from train.workers import RayPool, WorkerPool
 
 #: Per-process caches of the worker state: one env per (id, kwargs), one sampler per (name, task,
 #: checkpoint); building the arm's simulator or a learned sampler is not free.
@@ -257,17 +257,16 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         row[next(k for k, r in enumerate(row) if r["problem"] == record["problem"])] = record
         bar.update(1)
 
-    def run_jobs(own: WorkerPool | None, todo: list[tuple], done, fn) -> None:
-        if args.ray is not None:
-            run_on_ray(args.ray, args.workers, args.modules, todo, done, fn)
-        elif own is not None:
+    def run_jobs(own: WorkerPool | RayPool | None, todo: list[tuple], done, fn) -> None:
+        if own is not None:
             own.run(todo, done, fn)
         else:
             for job in todo:
                 done(fn(job))
 
-    def dispatch(own: WorkerPool | None) -> None:
-        """Both phases on one set of workers: the timed runs, then the re-checks of their paths."""
+    def dispatch(own: WorkerPool | RayPool | None) -> None:
+        """Both phases on one set of workers (processes or Ray actors): the timed runs, then the
+        re-checks of their paths."""
         run_jobs(own, jobs, finished, _run_episode_job)
         rechecks = [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r]
         if rechecks and args.recheck:
@@ -281,7 +280,10 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
 
     reason, recheck_s = None, []
     try:
-        if pool is not None or args.ray is not None or min(args.workers, len(jobs)) <= 1:
+        if args.ray is not None:
+            with RayPool(args.ray, args.workers, args.modules) as own:
+                dispatch(own)
+        elif pool is not None or min(args.workers, len(jobs)) <= 1:
             dispatch(pool)
         else:                                    # never more processes than jobs
             with WorkerPool(min(args.workers, len(jobs)), args.modules) as own:
