@@ -21,7 +21,10 @@ def _gnn_mp(*argv: str) -> list[str]:
     return [sys.executable, "-c", "import sys; from train.cli import main; sys.exit(main())", *argv]
 
 
-def test_a_damaged_torchrl_resume_state_is_one_line(tmp_path):
+def test_a_damaged_torchrl_resume_state_is_one_line(tmp_path, capsys):
+    """The command's stderr is one line and its status 2 (a process, as a user runs it); the other
+    damages through the same ``main`` in this process."""
+    from train.rl.cli import main
     run = tmp_path / "run"
     first = subprocess.run(_gnn_mp("train", "rl", *TINY, "--total-steps", "32", "--eval-every", "32", "--out", str(run)),
                            cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -29,13 +32,18 @@ def test_a_damaged_torchrl_resume_state_is_one_line(tmp_path):
     state = run / "training_state.pt"
     whole = state.read_bytes()
     policy = (run / "best.pt").read_bytes()
+    resume = [*TINY, "--total-steps", "64", "--eval-every", "32", "--out", str(run), "--resume"]
     for damage, says in ((b"", "empty file"), (whole[: len(whole) // 2], "not a readable checkpoint"),
                          (policy, "not a training state")):
         state.write_bytes(damage)
-        again = subprocess.run(_gnn_mp("train", "rl", *TINY, "--total-steps", "64", "--eval-every", "32", "--out",
-                                       str(run), "--resume"), cwd=ROOT, capture_output=True, text=True, timeout=300)
-        lines = again.stderr.strip().splitlines()
-        assert again.returncode == 2 and len(lines) == 1, again.stderr[-3000:]
+        if not damage:
+            again = subprocess.run(_gnn_mp("train", "rl", *resume), cwd=ROOT, capture_output=True, text=True,
+                                   timeout=300)
+            code, err = again.returncode, again.stderr
+        else:
+            code, err = main(resume), capsys.readouterr().err
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1, err[-3000:]
         assert lines[0].startswith("gnn-mp train rl: error: --resume:") and str(state) in lines[0] and says in lines[0]
 
 

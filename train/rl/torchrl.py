@@ -186,7 +186,6 @@ def train(args: RLArgs) -> RunResult:
     probe = make_rl_env(args.task, split="train", **args.env_kwargs())
     observation_space, action_space = probe.observation_space, probe.action_space
     probe.close()
-    env = make_batched_env(args) if args.ray is None else None      # --ray: the actors build their own
 
     # 2. actor and critic, each over its own encoder: a categorical over the candidates (pick) or a
     #    TanhNormal on [-1, 1] over a TreeEncoder (box)
@@ -227,6 +226,9 @@ def train(args: RLArgs) -> RunResult:
                            f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
         print(f"resuming {run.dir} at step {steps:,}")
     total_frames = max(total_frames - steps, frames_per_batch)
+    # the environments' processes start once the networks (and a resumed state) are read: a damaged
+    # state is refused before them
+    env = make_batched_env(args) if args.ray is None else None      # --ray: the actors build their own
     collector = make_collector(args, env, actor, frames_per_batch, total_frames)
     # deactivate_vmap: the graph conversion has data-dependent shapes, which vmap cannot batch
     advantage = GAE(gamma=args.gamma, lmbda=args.gae_lambda, value_network=value, average_gae=True,
