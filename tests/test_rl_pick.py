@@ -152,10 +152,12 @@ def test_pick_sampler_numpy_twin_matches_the_torch_policy():
     env.close()
 
 
-def test_sb3_run_saves_a_zip_and_resumes(tmp_path):
-    """model.zip loads with PPO.load; --resume continues the run to --total-steps."""
+def test_sb3_run_saves_a_zip_and_resumes(tmp_path, monkeypatch, capsys):
+    """model.zip loads with PPO.load; --resume continues the run to --total-steps; a damaged model.zip is
+    refused in one line before any environment is made."""
     from stable_baselines3 import PPO
 
+    import train.rl.sb3
     from train.cli import main
     base = ["train", "rl", "--task", "maze2d", "--n-envs", "2", "--n-steps", "64", "--batch-size", "32",
             "--eval-problems", "1", "--eval-max-steps", "200", "--out", str(tmp_path / "run"), "--no-progress"]
@@ -167,6 +169,16 @@ def test_sb3_run_saves_a_zip_and_resumes(tmp_path):
         assert main(base + ["--total-steps", "256", "--resume"]) == 0
     assert PPO.load(tmp_path / "run" / "model.zip", device="cpu").num_timesteps == 256
     assert (tmp_path / "run" / "best_model.zip").is_file()
+    zipped = tmp_path / "run" / "model.zip"
+    zipped.write_bytes(zipped.read_bytes()[:100])
+
+    def no_envs(*args, **kwargs):
+        raise AssertionError("environments made before the resumed model was read")
+    monkeypatch.setattr(train.rl.sb3, "make_vec_env", no_envs)
+    capsys.readouterr()
+    assert main(base + ["--total-steps", "384", "--resume", "--parallel"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--resume:" in err[0] and "not a readable Stable-Baselines3 zip" in err[0], err
 
 
 @pytest.mark.parametrize("changed", [["--lr", "0.0005"], ["--gamma", "0.9"], ["--candidates", "12"],

@@ -29,7 +29,7 @@ from agents.checkpoints import CheckpointError
 from agents.rl.pick import set_prior_scale
 from agents.rl.policies import policy_from_sb3, warm_start_encoder
 from agents.rl.sb3 import CandidatePickPolicy
-from agents.rl.sb3_files import read_sb3_zip, sb3_policy_kwargs
+from agents.rl.sb3_files import SB3Zip, read_sb3_zip, sb3_policy_kwargs
 from gnn_mp_envs.envs.wrappers import make_rl_env
 from train.args import MAX_COUNT
 from train.rl.args import RESUME_FREE_FLAGS, RLArgs, RunResult, check_args, run_config, torch_device
@@ -96,15 +96,23 @@ def policy_kwargs_of(args: RLArgs) -> dict:
     return sb3_policy_kwargs(asdict(args))
 
 
-def load_weights_only(model: PPO | SAC, path: Path) -> None:
-    """Continue ``model`` from an SB3 ``.zip`` without unpickling anything: the policy's and the
-    optimizers' tensors and the step count from the plain JSON of its ``data`` member
-    (:func:`agents.rl.sb3_files.read_sb3_zip`); the pickled entries of ``data`` (policy keywords,
-    spaces, schedules), which could run code, are never loaded: the model was built from the run's
-    own flags, checked against its ``config.json``."""
+def read_resume_zip(path: Path, device: str) -> SB3Zip:
+    """The tensors and plain JSON of the run's ``model.zip`` (:func:`agents.rl.sb3_files.read_sb3_zip`),
+    read before the environments are made: a damaged file is refused before their processes start."""
+    try:
+        return read_sb3_zip(path, device=device)
+    except (CheckpointError, OSError, ValueError, KeyError, RuntimeError) as exc:
+        raise RunError(f"--resume: {path} does not hold this run's model ({str(exc).splitlines()[0]})") from None
+
+
+def load_weights_only(model: PPO | SAC, path: Path, contents: SB3Zip) -> None:
+    """Continue ``model`` from the SB3 ``.zip`` at ``path`` (read by :func:`read_resume_zip`) without
+    unpickling anything: the policy's and the optimizers' tensors and the step count from the plain JSON
+    of its ``data`` member; the pickled entries of ``data`` (policy keywords, spaces, schedules), which
+    could run code, are never loaded: the model was built from the run's own flags, checked against its
+    ``config.json``."""
     from stable_baselines3.common.save_util import recursive_setattr
     try:
-        contents = read_sb3_zip(path, device=model.device)
         model.set_parameters(contents.params, exact_match=True, device=model.device)
         for name, tensor in (contents.variables or {}).items():   # SAC's entropy coefficient, as SB3's load does
             recursive_setattr(model, f"{name}.data", tensor.data)
@@ -147,6 +155,7 @@ def train(args: RLArgs) -> RunResult:
     if args.resume:
         run.check_resumed_flags(asdict(args), RESUME_FREE_FLAGS)
     run.write_config(run_config(args), "config.json" if not args.resume else "config_resumed.json")
+    resumed = read_resume_zip(run.path("model.zip"), torch_device(args.device)) if args.resume else None
 
     # 1. environments: n_envs copies of make_rl_env (the registered RL ids' MDP), seeded
     env_kwargs = {"task": args.task, "split": "train", **args.env_kwargs()}
@@ -157,7 +166,7 @@ def train(args: RLArgs) -> RunResult:
     # 2. the agent (or the saved one, --resume), the optional warm start of its encoder(s)
     if args.resume:
         model = build_model(args, vec_env, run.dir)          # the run's architecture, from its (checked) flags
-        load_weights_only(model, run.path("model.zip"))
+        load_weights_only(model, run.path("model.zip"), resumed)
         print(f"resuming {run.dir} at step {model.num_timesteps:,}")
     else:
         model = build_model(args, vec_env, run.dir)
