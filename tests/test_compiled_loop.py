@@ -114,6 +114,23 @@ def test_the_compiled_loop_grows_the_reference_trees(task, planner, problems):
         t.close()
 
 
+def test_a_run_asks_about_compiling_the_loop_it_calls_right_before(monkeypatch):
+    """A first use compiles the loop with the problem's steer and checks (a minute or more for the sphere
+    checker): the planner asks whether to say so about the loop it then calls, and only then."""
+    import gnn_mp_envs.core.planners as planners
+    t = make_task("maze2d")
+    try:
+        planner = make_planner("rrt", t.problem("test", 0), 100)
+        asked, loop = [], planner._loop
+        monkeypatch.setattr(planners, "announce_compilation", lambda dispatcher, *words: asked.append(dispatcher))
+        planner.run(np.full((3, 2), 0.5))
+        assert loop is None and asked == [planner._loop] and planner._loop is not None
+        planner.run(np.full((3, 2), 0.4))
+        assert asked == [planner._loop]             # the same kernel: asked once per planner
+    finally:
+        t.close()
+
+
 def test_problems_without_compiled_checks_run_the_python_planner():
     for task, kwargs in (("pendulum", {}), ("panda-mbm", {"checker": "pybullet"})):
         t = make_task(task, **kwargs)

@@ -34,6 +34,7 @@ from gnn_mp_envs.core.nearest import PRUNE_MARGIN as KD_PRUNE_MARGIN
 from gnn_mp_envs.core.nearest import RIGHT as KD_RIGHT
 from gnn_mp_envs.core.nearest import SPLIT as KD_SPLIT
 from gnn_mp_envs.core.nearest import kd_insert, kd_pop_cell, kd_stack_far_side
+from gnn_mp_envs.utils.compiled import announce_compilation as announce_loop_compilation
 from gnn_mp_envs.utils.compiled import jit
 
 _SQRT_HALF = 1.0 / math.sqrt(2.0)
@@ -608,29 +609,10 @@ PACKED_WEIGHTS = ("step", "center", "scale", "feature_scale", "iw1", "ib1", "iw2
                   "norm_eps", "kw", "kb", "hw", "hb", "qw1", "qb1", "qw2", "qb2", "shift_w", "shift_b")
 
 
-#: Dispatchers :func:`announce_compilation` was asked about in this process (it looks once each).
-_ASKED: set = set()
-
-
 def announce_compilation(dispatcher, what: str) -> bool:
-    """Print one line to stderr when ``dispatcher``'s first call in this process will compile it
-    (no signature loaded yet and no cache for the current source on disk): about 40 s that would
-    otherwise look like a hang before a progress bar moves. Called right before the call (the
-    single-step and the batch loops are separate dispatchers: a run uses one of them), it looks once
-    per dispatcher and process; later calls cost a set lookup. Whether it printed; never raises (it
-    reads numba's cache index, an internal API: if that changes, it stays silent)."""
-    if dispatcher in _ASKED:
-        return False
-    _ASKED.add(dispatcher)
-    try:
-        if dispatcher.signatures or dispatcher._cache._cache_file._load_index():
-            return False
-    except Exception:       # noqa: BLE001  (a numba without these internals: no notice, nothing else changes)
-        return False
-    import sys
-    print(f"gnn-mp: compiling {what} (numba; first use of this checkout, about 40 s, then cached: "
-          "numba's cache, next to agents/tree/compiled.py by default)", file=sys.stderr, flush=True)
-    return True
+    """:func:`gnn_mp_envs.utils.compiled.announce_compilation` for this module's loops (about 40 s to
+    compile, cached next to this file)."""
+    return announce_loop_compilation(dispatcher, what, "about 40 s", "agents/tree/compiled.py")
 
 
 def pack_weights(arrays: dict) -> tuple[np.ndarray, np.ndarray]:

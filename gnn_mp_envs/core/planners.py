@@ -20,6 +20,7 @@ from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, 
                                    IndexArrays, LoopArrays, TreeArrays, compiled_loop)
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore
+from gnn_mp_envs.utils.compiled import announce_compilation
 
 
 #: The problem methods the compiled loop stands for: a subclass that overrides one of them in Python (a
@@ -130,6 +131,8 @@ class TreePlanner:
             return self._run_steps(samples, budget)
         if kernel is not self._kernel:              # a kernel object serves its problem until its context changes
             self._kernel, self._loop = kernel, compiled_loop(kernel)
+            announce_compilation(self._loop, f"the planning loop with its steer and checks, kind {kernel.tag!r}",
+                                 "a minute or two", "gnn_mp_envs/core/loop.py")
             if self._table is None:
                 self._pack()
         tree, problem, counters, result = self.tree, self.problem, self._counters, self._result

@@ -110,6 +110,29 @@ def jit(func: Callable | None = None, *, inline: bool = False) -> Any:
     return dispatcher
 
 
+#: Dispatchers :func:`announce_compilation` was asked about in this process (it looks once each).
+_ASKED: set = set()
+
+
+def announce_compilation(dispatcher: Any, what: str, duration: str, where: str) -> bool:
+    """Print one line to stderr when ``dispatcher``'s first call in this process will compile it (no
+    signature loaded yet and no cache for the current sources on disk): ``duration`` that would
+    otherwise look like a hang before a progress bar moves. Called right before the call, it looks once
+    per dispatcher and process; later calls cost a set lookup. Whether it printed; never raises (it
+    reads numba's cache index, an internal API: if that changes, it stays silent)."""
+    if dispatcher in _ASKED:
+        return False
+    _ASKED.add(dispatcher)
+    try:
+        if dispatcher.signatures or dispatcher._cache._cache_file._load_index():
+            return False
+    except Exception:       # noqa: BLE001  (a numba without these internals: no notice, nothing else changes)
+        return False
+    print(f"gnn-mp: compiling {what} (numba; first use of this checkout or install, {duration}, then cached: "
+          f"numba's cache, next to {where} by default)", file=sys.stderr, flush=True)
+    return True
+
+
 _SPECIALIZED: dict[tuple[Callable, str], Any] = {}
 
 
