@@ -72,3 +72,26 @@ def test_a_cached_function_is_used_only_while_the_package_sources_are_unchanged(
     run(code)                                        # compiled and cached
     assert run(code).startswith("42 Counter({(int64,): 1})")              # a cache hit
     assert run(changed).split(" Counter")[1:] == ["()", "({(int64,): 1})"]   # another stamp: no hit, compiled again
+
+
+def test_a_tables_describers_are_loaded_from_the_cache_in_a_fresh_process(tmp_path: Path):
+    """A table of addresses is written by compiled functions generated from its groups' specs
+    (``gnn_mp_envs.utils.array_groups``); the next process loads them from numba's cache, silently (a
+    generated function's cache entry must find its module again, or it reads as damaged every time)."""
+    code = ("import numpy as np\nfrom gnn_mp_envs.utils.array_groups import GroupTable, array_group\n"
+            "G = array_group('G', (('a', np.float64, 2), ('b', np.int64, 1)))\n"
+            "layout = GroupTable('probe', (G,))\n"
+            "a, b = np.zeros((3, 2)), np.arange(5)\n"
+            "table = layout.pack((G(a, b),))\n"
+            "print(table[0, 0, 0] == a.ctypes.data, table[0, 0, 1:3].tolist(), table[0, 1, 0] == b.ctypes.data,"
+            " table[0, 1, 1], sum(layout._describers[0].stats.cache_hits.values()))")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run() -> str:
+        out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                             env=env)
+        assert out.returncode == 0 and out.stderr == "", out.stderr
+        return out.stdout.strip()
+
+    assert run() == "True [3, 2] True 5 0"                           # compiled and cached
+    assert run() == "True [3, 2] True 5 1"                           # loaded

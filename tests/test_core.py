@@ -124,6 +124,31 @@ def test_cost_to_come_accumulates_along_parents():
     assert store.path_to_root(c) == [a, b, c]
 
 
+def test_a_solutions_nodes_are_the_walks_up_both_trees():
+    """``path_nodes`` (compiled) against walks in Python over a random forest: from a root down to ``head``,
+    then from ``tail``'s parent up to its root (``tail`` itself left out: BiRRT's meeting node)."""
+    from gnn_mp_envs.core.tree import path_nodes
+
+    rng = np.random.default_rng(3)
+    parent = np.full(300, -1, dtype=np.int64)
+    for i in range(300):
+        if i >= 2 and rng.random() > 0.02:          # a few more roots than the two trees'
+            parent[i] = rng.integers(0, i)
+
+    def up(i: int) -> list[int]:
+        out = []
+        while i >= 0:
+            out.append(i)
+            i = int(parent[i])
+        return out
+
+    for _ in range(200):
+        head, tail = (int(v) for v in rng.integers(0, 300, size=2))
+        assert path_nodes(parent, head, -1).tolist() == up(head)[::-1]
+        assert path_nodes(parent, head, tail).tolist() == up(head)[::-1] + up(tail)[1:]
+    assert path_nodes(parent, 0, 1).tolist() == [0]       # two roots meeting: the second is left out
+
+
 def test_segment_test_agrees_with_dense_sampling():
     rng = np.random.default_rng(1)
     maze = MazeMap(walls=[[0.4, 0.0, 0.45, 0.6], [0.1, 0.7, 0.3, 0.75]], blobs=[[0.7, 0.3, 0.08]])

@@ -19,7 +19,7 @@ import numpy as np
 from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, MEET_A, MEET_B, RRT_LOOP, SOLVED,
                                    IndexArrays, LoopArrays, TreeArrays, compiled_loop)
 from gnn_mp_envs.core.problem import Problem
-from gnn_mp_envs.core.tree import TreeStore
+from gnn_mp_envs.core.tree import TreeStore, path_nodes
 from gnn_mp_envs.utils.compiled import announce_compilation
 
 
@@ -98,11 +98,13 @@ class TreePlanner:
         added.append(i)
         return i
 
-    def _path(self, nodes: list[int]) -> Solution:
-        """The root-to-node path ``nodes``; its length is the last node's cost-to-come."""
+    def _path(self, head: int, tail: int = -1) -> Solution:
+        """The solution through node ``head`` (from its root) and, for BiRRT, from ``tail``'s parent to its
+        root (:func:`~gnn_mp_envs.core.tree.path_nodes`); its length is the two nodes' costs-to-come."""
         t = self.tree
-        return Solution(states=t.states[nodes].copy(), controls=t.controls[nodes].copy(),
-                        length=float(t.cost[nodes[-1]]), nodes=np.asarray(nodes, dtype=np.int64))
+        nodes = path_nodes(t.parent, head, tail)
+        length = float(t.cost[head]) + float(t.cost[tail]) if tail >= 0 else float(t.cost[head])
+        return Solution(states=t.states[nodes], controls=t.controls[nodes], length=length, nodes=nodes)
 
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -212,7 +214,7 @@ class RRT(TreePlanner):
 
     def _solve(self, i: int, j: int, tree: int) -> None:
         """The solution ends at node ``i`` (in the goal)."""
-        self.solution = self._path(self.tree.path_to_root(i))
+        self.solution = self._path(i)
 
 
 class BiRRT(TreePlanner):
@@ -269,15 +271,9 @@ class BiRRT(TreePlanner):
     def _solve(self, i: int, j: int, tree: int) -> None:
         """The trees meet: node ``i`` of ``tree`` (just extended) and node ``j`` of the other."""
         from_start, from_goal = (i, j) if tree == 0 else (j, i)
-        head = self._path(self.tree.path_to_root(from_start))
-        # The goal tree is walked from the meeting node toward its root; the meeting
-        # node itself duplicates the last state of ``head`` and is dropped.
-        tail = self.tree.path_to_root(from_goal)[::-1][1:]
-        self.solution = Solution(
-            np.vstack([head.states, self.tree.states[tail]]),
-            np.vstack([head.controls, self.tree.controls[tail]]),
-            head.length + float(self.tree.cost[from_goal]),
-            np.concatenate([head.nodes, np.asarray(tail, dtype=np.int64)]))
+        # The goal tree is walked from the meeting node toward its root; the meeting node itself
+        # duplicates the start side's last state and is left out.
+        self.solution = self._path(from_start, from_goal)
 
 
 PLANNERS: dict[str, type[TreePlanner]] = {"rrt": RRT, "birrt": BiRRT}

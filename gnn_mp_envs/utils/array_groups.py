@@ -59,15 +59,6 @@ def _view3(table, g, i, dtype):
     return carray(_voidptr(table[g, i, 0]), (table[g, i, 1], table[g, i, 2], table[g, i, 3]), dtype)
 
 
-@jit
-def _describe(table, g, i, array):
-    """Row ``(g, i)`` of a table: ``array``'s address and shape (one compiled call: numpy's ``ctypes.data``
-    and a slice assignment cost ten times more, and a checker packs about forty arrays per scene)."""
-    table[g, i, 0] = array.ctypes.data
-    for d in range(array.ndim):
-        table[g, i, 1 + d] = array.shape[d]
-
-
 class GroupTable:
     """The layout of a table: ``groups`` (classes of :func:`array_group`) in order; ``name`` names its
     viewers (``view_<name>_<group>``, and so their cache files)."""
@@ -76,6 +67,7 @@ class GroupTable:
         self.name = name
         self.groups = groups
         self.max_fields = max(len(group.spec) for group in groups)
+        self._describers = tuple(self._describer(group) for group in groups)
 
     def pack(self, instances: tuple) -> np.ndarray:
         """The table of ``instances`` (one of each group, in order): per array its address and shape."""
@@ -84,14 +76,29 @@ class GroupTable:
             if type(group) is not cls:
                 raise TypeError(f"the {self.name} table's group {g} must be a {cls.__name__}, "
                                 f"got {type(group).__name__}")
-            for i, (array, (name, dtype, ndim)) in enumerate(zip(group, cls.spec, strict=True)):
+            for array, (name, dtype, ndim) in zip(group, cls.spec, strict=True):
                 if not (type(array) is np.ndarray and array.dtype == dtype and array.ndim == ndim
                         and array.flags.c_contiguous):
                     raise TypeError(f"the {self.name} table's {cls.__name__}.{name} must be a C-contiguous {ndim}-D "
                                     f"{dtype.name} array, got {getattr(array, 'dtype', type(array))} "
                                     f"{getattr(array, 'shape', '')}")
-                _describe(table, g, i, array)
+            self._describers[g](table, *group)
         return table
+
+    def _describer(self, cls: type) -> Any:
+        """The compiled function writing group ``cls``'s rows of a table: per array its address and shape, in
+        one call (numpy's ``ctypes.data`` and a slice assignment cost ten times more per array, and a call per
+        array a microsecond: a checker packs about forty arrays per scene, a planner nineteen per problem)."""
+        g = self.groups.index(cls)
+        name = f"describe_{self.name}_{cls.__name__.lower()}"
+        args = ", ".join(f"a{i}" for i in range(len(cls.spec)))
+        lines = [f"def {name}(table, {args}):"]
+        for i, (_, _, ndim) in enumerate(cls.spec):
+            lines.append(f"    table[{g}, {i}, 0] = a{i}.ctypes.data")
+            lines.extend(f"    table[{g}, {i}, {1 + d}] = a{i}.shape[{d}]" for d in range(ndim))
+        namespace: dict[str, Any] = {"__name__": __name__}     # numba's cache finds the module by it
+        exec(compile("\n".join(lines) + "\n", __file__, "exec"), namespace)
+        return jit(namespace[name])
 
     def viewer(self, cls: type) -> Any:
         """The compiled (inlined) function viewing group ``cls`` of a table of this layout."""
