@@ -132,6 +132,47 @@ def test_ray_actors_make_the_same_dataset_file(tmp_path):
     assert one.read_bytes() == on_ray.read_bytes()
 
 
+def test_a_runs_batches_share_one_set_of_worker_processes(tmp_path, monkeypatch):
+    """A :class:`~train.workers.SharedPool` makes its processes on its first batch and keeps them for the next
+    (a tree sampler's data, then its DAgger rounds'); each batch's file is the one-process run's."""
+    import train.workers
+    from train.tree.data import TreeDataConfig, generate, save
+    made = []
+
+    class Counted(train.workers.WorkerPool):
+        def __init__(self, *args, **kwargs):
+            made.append(args)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(train.workers, "WorkerPool", Counted)
+    configs = (TreeDataConfig(task="maze2d", problems=4, max_nodes=800),
+               TreeDataConfig(task="maze2d", problems=3, max_nodes=800, first_problem=4, seed=7))
+    with train.workers.SharedPool(2) as pool:
+        shared = [save(generate(config, progress=False, pool=pool), tmp_path / f"shared{k}.npz")
+                  for k, config in enumerate(configs)]
+    assert made == [(2, [])]
+    for k, (config, file) in enumerate(zip(configs, shared)):
+        assert save(generate(config, progress=False), tmp_path / f"one{k}.npz").read_bytes() == file.read_bytes()
+
+
+def test_train_sampler_plans_its_data_and_dagger_rounds_on_one_pool(tmp_path, monkeypatch):
+    """`gnn-mp train sampler`: the initial data and each DAgger round are planned on the run's one pool
+    (with --ray, Ray started once; with --workers, the processes made once), not a pool per batch."""
+    import train.tree.data
+    from train.tree.cli import main
+    generate, pools = train.tree.data.generate, []
+
+    def recorded(config, *args, pool=None, **kwargs):
+        pools.append(pool)
+        return generate(config, *args, pool=pool, **kwargs)
+
+    monkeypatch.setattr(train.tree.data, "generate", recorded)
+    main(["--task", "maze2d", "--model", "gnn", "--problems", "4", "--minutes", "0.005", "--dagger-rounds", "2",
+          "--dagger-problems", "2", "--dagger-minutes", "0.005", "--eval-problems", "0", "--max-snapshots", "4",
+          "--out", str(tmp_path / "run"), "--data-dir", str(tmp_path / "data"), "--no-progress"])
+    assert len(pools) == 3 and pools[0] is not None and all(p is pools[0] for p in pools)
+
+
 def test_train_sampler_refuses_an_unreachable_ray_address_in_one_line(capsys):
     from train.tree.cli import main
     with pytest.raises(SystemExit):

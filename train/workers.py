@@ -216,12 +216,36 @@ class RayPool:
             ray.shutdown()
 
 
-def run_on_ray(address: str, workers: int, modules: list[str], jobs: list[tuple], finished: Callable[[Any], None],
-               fn: Callable[[tuple], Any]) -> None:
-    """``finished(fn(job))`` for every job, in completion order, on ``workers`` Ray actors of a
-    :class:`RayPool` made for this call. Results equal a local run's for the same seed."""
-    with RayPool(address, workers, modules) as pool:
-        pool.run(jobs, finished, fn)
+class SharedPool:
+    """The workers of a run whose job batches come apart in time (a tree sampler's training data, then each
+    DAgger round's): a :class:`RayPool` (``ray``: an address or ``"local"``) or a :class:`WorkerPool` of
+    ``workers`` processes (none for one worker: jobs run here), made by the first :meth:`run` and reused by
+    the next, so Ray starts and each worker pays its imports once per run, not once per batch."""
+
+    def __init__(self, workers: int, ray: str | None = None, modules: list[str] = ()) -> None:
+        self.workers, self.ray, self.modules = int(workers), ray, list(modules)
+        self.pool: WorkerPool | RayPool | None = None
+
+    def run(self, jobs: list[tuple], finished: Callable[[Any], None], fn: Callable[[tuple], Any]) -> None:
+        """``finished(fn(job))`` for every job, in completion order (here, in order, without workers)."""
+        if not jobs:
+            return
+        if self.pool is None and self.ray is None and min(self.workers, len(jobs)) <= 1:
+            for job in jobs:
+                finished(fn(job))
+            return
+        if self.pool is None:                    # never more processes than the first batch's jobs
+            self.pool = (RayPool(self.ray, self.workers, self.modules) if self.ray is not None
+                         else WorkerPool(min(self.workers, len(jobs)), self.modules))
+        self.pool.run(jobs, finished, fn)
+
+    def __enter__(self) -> "SharedPool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.__exit__(*exc)
+            self.pool = None
 
 
 def worker_start_method() -> str:

@@ -34,6 +34,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gnn_mp_envs.utils.npz import DatasetCacheError, read_npz, write_npz
+from train.workers import SharedPool
 
 log = logging.getLogger(__name__)
 
@@ -207,12 +208,14 @@ def _solve_job(job: tuple) -> tuple | None:
 
 
 def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | None = None,
-             workers: int = 1, ray: str | None = None) -> TreeDataset:
+             workers: int = 1, ray: str | None = None, pool: SharedPool | None = None) -> TreeDataset:
     """Solve the config's problems with its sampler (uniform, or a learned one from
     ``checkpoint`` for DAgger) under the evaluation's seeding rule; keep the solved ones.
     ``workers`` > 1 plans them in worker processes, ``ray`` (an address, or ``"local"``) on
-    ``workers`` Ray actors (:mod:`train.workers`, as the benchmark's ``--workers`` and ``--ray``); the problems are assembled
-    in index order, so the dataset (and its file) is the same whatever the worker count or backend."""
+    ``workers`` Ray actors (:mod:`train.workers`, as the benchmark's ``--workers`` and ``--ray``); ``pool``:
+    a run's :class:`~train.workers.SharedPool` to plan on instead (its workers kept for the run's next
+    batch). The problems are assembled in index order, so the dataset (and its file) is the same whatever
+    the worker count or backend."""
     indices = range(config.first_problem, config.first_problem + config.problems)
     bar = tqdm(total=config.problems, desc=f"{config.task} {config.sampler} solutions", unit="problem",
                disable=not progress)
@@ -223,17 +226,13 @@ def generate(config: TreeDataConfig, progress: bool = True, checkpoint: str | No
         if result is not None:
             solved[result[0]] = result
 
+    jobs = [(config, i, checkpoint) for i in indices]
     try:
-        if ray is not None:
-            from train.workers import run_on_ray
-            run_on_ray(ray, workers, [], [(config, i, checkpoint) for i in indices], finished, _solve_job)
-        elif min(workers, len(indices)) > 1:
-            from train.workers import WorkerPool
-            with WorkerPool(min(workers, len(indices))) as pool:
-                pool.run([(config, i, checkpoint) for i in indices], finished, _solve_job)
+        if pool is not None:
+            pool.run(jobs, finished, _solve_job)
         else:
-            for i in indices:
-                finished(solve_problem(config, i, checkpoint))
+            with SharedPool(workers, ray) as own:
+                own.run(jobs, finished, _solve_job)
     except BrokenProcessPool:            # a worker process or Ray actor was killed (a signal, out of memory)
         from train.args import UsageError
         raise UsageError(f"a worker died while planning the {config.task} training problems ({len(solved)} of "
@@ -330,9 +329,9 @@ def load(path: str | Path) -> TreeDataset:
 
 
 def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bool = True,
-                     workers: int = 1, ray: str | None = None) -> TreeDataset:
+                     workers: int = 1, ray: str | None = None, pool: SharedPool | None = None) -> TreeDataset:
     """The cached dataset of ``config`` in ``directory``, generated first (by ``workers`` processes,
-    or Ray actors at ``ray``) when missing or damaged."""
+    or Ray actors at ``ray``, or on ``pool``: :func:`generate`) when missing or damaged."""
     path = Path(directory) / config.file_name()
     if path.exists():
         try:
@@ -342,6 +341,6 @@ def load_or_generate(config: TreeDataConfig, directory: str | Path, progress: bo
             log.warning("%s: generated with another config; regenerating it", path)
         except DatasetCacheError as exc:
             log.warning("%s; regenerating it", exc)
-    dataset = generate(config, progress, workers=workers, ray=ray)
+    dataset = generate(config, progress, workers=workers, ray=ray, pool=pool)
     save(dataset, path)
     return dataset

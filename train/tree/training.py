@@ -37,6 +37,7 @@ from train.tree.adapters import adapter_for, task_scales
 from train.tree.args import TrainArgs
 from train.tree.data import VIEWS, TreeDataConfig, TreeDataset, load_or_generate
 from train.tree.items import Symmetry, symmetries_of, transformed
+from train.workers import SharedPool
 
 
 class TrainError(UsageError):
@@ -208,35 +209,37 @@ def train(args: TrainArgs) -> dict[str, Any]:
 
     # 1. data: uniform solutions of training problems
     data_config = TreeDataConfig(task=args.task, split="train", scene=scene, problems=args.problems, seed=args.seed)
-    data = load_or_generate(data_config, args.data_dir, progress=args.progress, workers=args.workers, ray=args.ray)
-    rng = np.random.default_rng(args.seed)
-    snapshots = args.max_snapshots
-    if len(data) < 2:
-        raise TrainError(f"only {len(data)} solved problem(s) in {data_config.file_name()}; raise --problems")
-    train_data, val_data = split_problems(data, args.seed)
-    train_items = adapter.items(model, train_data, args.view, rng, snapshots)
-    val_items = adapter.items(model, val_data, args.view, rng, snapshots)
+    # one set of workers (processes or Ray actors) for the data and every DAgger round's planning
+    with SharedPool(args.workers, args.ray, args.modules) as pool:
+        data = load_or_generate(data_config, args.data_dir, progress=args.progress, pool=pool)
+        rng = np.random.default_rng(args.seed)
+        snapshots = args.max_snapshots
+        if len(data) < 2:
+            raise TrainError(f"only {len(data)} solved problem(s) in {data_config.file_name()}; raise --problems")
+        train_data, val_data = split_problems(data, args.seed)
+        train_items = adapter.items(model, train_data, args.view, rng, snapshots)
+        val_items = adapter.items(model, val_data, args.view, rng, snapshots)
 
-    summary: dict[str, Any] = {"config": asdict(args), "dataset": data_config.file_name(),
-                               "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
-    augment = None
-    if args.augment:
-        low, high = spec.state_bounds()
-        augment = symmetries_of(spec.symmetries, low, high, torch.as_tensor(spec.periodic_mask(len(low))))
-    # 2. the first phase
-    phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed,
-                  run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path, resume_config=config,
-                  augment=augment)]
-    # 3. DAgger
-    settings = spec.sampler_defaults(args.model)
-    for r in range(args.dagger_rounds):
-        own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r,
-                                                      scene=scene), args.seed + r + 1)
-        train_items += adapter.items(model, own_train, "grown", rng, snapshots)
-        val_items += adapter.items(model, own_val, "grown", rng, snapshots)
-        phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
-                          args.batch_size, args.seed + r + 1, run.writer, f"dagger{r + 1}", args.progress,
-                          augment=augment))
+        summary: dict[str, Any] = {"config": asdict(args), "dataset": data_config.file_name(),
+                                   "dataset_problems_solved": len(data), "items": len(train_items) + len(val_items)}
+        augment = None
+        if args.augment:
+            low, high = spec.state_bounds()
+            augment = symmetries_of(spec.symmetries, low, high, torch.as_tensor(spec.periodic_mask(len(low))))
+        # 2. the first phase
+        phases = [fit(model, adapter, train_items, val_items, args.minutes, args.lr, args.batch_size, args.seed,
+                      run.writer, "phase0", args.progress, resume=resume, resume_path=resume_path, resume_config=config,
+                      augment=augment)]
+        # 3. DAgger
+        settings = spec.sampler_defaults(args.model)
+        for r in range(args.dagger_rounds):
+            own_train, own_val = split_problems(plan_with(model, ctor_args, adapter, args, settings, round_index=r,
+                                                          scene=scene, pool=pool), args.seed + r + 1)
+            train_items += adapter.items(model, own_train, "grown", rng, snapshots)
+            val_items += adapter.items(model, own_val, "grown", rng, snapshots)
+            phases.append(fit(model, adapter, train_items, val_items, args.dagger_minutes, args.lr / 2,
+                              args.batch_size, args.seed + r + 1, run.writer, f"dagger{r + 1}", args.progress,
+                              augment=augment))
     summary["phases"] = phases
     # a resumed run counts the first phase's time spent before the interruption too
     summary["train_seconds"] = time.perf_counter() - started + (float(resume["elapsed"]) if resume else 0.0)
@@ -287,9 +290,9 @@ def command_of(args: TrainArgs) -> str:
 
 
 def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_index: int,
-              scene: str | None = None) -> TreeDataset:
-    """DAgger data: fresh training problems (of ``scene``) planned by the current sampler, labelled
-    by the paths it found itself."""
+              scene: str | None = None, pool: SharedPool | None = None) -> TreeDataset:
+    """DAgger data: fresh training problems (of ``scene``) planned by the current sampler (on the run's
+    ``pool``, else as ``args`` say), labelled by the paths it found itself."""
     import tempfile
 
     from train.tree.data import generate
@@ -299,7 +302,8 @@ def plan_with(model, ctor_args, adapter, args: TrainArgs, settings: dict, round_
         config = TreeDataConfig(task=args.task, split="train", scene=scene,
                                 problems=args.dagger_problems, seed=args.seed + 1000 * (round_index + 1),
                                 first_problem=args.problems + round_index * args.dagger_problems, sampler=args.model)
-        return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers, ray=args.ray)
+        return generate(config, progress=args.progress, checkpoint=str(ckpt), workers=args.workers, ray=args.ray,
+                        pool=pool)
 
 
 #: Validation problems per held-out kind (``TaskSpec.validation_scenes``) at the end of training.
