@@ -23,7 +23,7 @@ from train.benchmark.args import (
     validate_args,
 )
 from train.args import UsageError
-from train.workers import RayPool, WorkerPool
+from train.workers import SharedPool, WorkerPool
 
 #: Per-process caches of the worker state: one env per (id, kwargs), one sampler per (name, task,
 #: checkpoint); building the arm's simulator or a learned sampler is not free.
@@ -257,17 +257,10 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
         row[next(k for k, r in enumerate(row) if r["problem"] == record["problem"])] = record
         bar.update(1)
 
-    def run_jobs(own: WorkerPool | RayPool | None, todo: list[tuple], done, fn) -> None:
-        if own is not None:
-            own.run(todo, done, fn)
-        else:
-            for job in todo:
-                done(fn(job))
-
-    def dispatch(own: WorkerPool | RayPool | None) -> None:
-        """Both phases on one set of workers (processes or Ray actors): the timed runs, then the
-        re-checks of their paths."""
-        run_jobs(own, jobs, finished, _run_episode_job)
+    def dispatch(own: WorkerPool | SharedPool) -> None:
+        """Both phases on one set of workers (processes or Ray actors, or this process): the timed runs,
+        then the re-checks of their paths."""
+        own.run(jobs, finished, _run_episode_job)
         rechecks = [(args.task, env_kwargs, r) for row in runs.values() for r in row if _PATH in r]
         if rechecks and args.recheck:
             tqdm.write(f"{args.task}: re-checking the {len(rechecks)} returned paths edge by edge at the planner's "
@@ -275,18 +268,15 @@ def run_benchmark(args: BenchmarkArgs, pool: WorkerPool | None = None) -> dict[s
             start = time.perf_counter()
             bar.reset(total=len(rechecks))
             bar.set_description(f"{args.task} re-check")
-            run_jobs(own, rechecks, rechecked, _recheck_episode_job)
+            own.run(rechecks, rechecked, _recheck_episode_job)
             recheck_s.append(time.perf_counter() - start)
 
     reason, recheck_s = None, []
     try:
-        if args.ray is not None:
-            with RayPool(args.ray, args.workers, args.modules) as own:
-                dispatch(own)
-        elif pool is not None or min(args.workers, len(jobs)) <= 1:
+        if pool is not None and args.ray is None:        # a suite's pool, shared by its tasks
             dispatch(pool)
-        else:                                    # never more processes than jobs
-            with WorkerPool(min(args.workers, len(jobs)), args.modules) as own:
+        else:                                           # Ray, processes (no more than the jobs) or none
+            with SharedPool(args.workers, args.ray, args.modules) as own:
                 dispatch(own)
     except KeyboardInterrupt:
         reason = "interrupted"
