@@ -268,15 +268,16 @@ def test_atomic_writes_refuse_special_files_and_write_through_links(tmp_path):
 def test_the_benchmark_starts_no_more_workers_than_jobs(monkeypatch):
     """``--workers 8`` over 2 jobs starts a pool of 2 processes (one job: none)."""
     import train.benchmark.runs as runs
+    import train.workers
     from train.benchmark.args import BenchmarkArgs
     sizes = []
 
-    class Recording(runs.WorkerPool):
+    class Recording(train.workers.WorkerPool):
         def __init__(self, workers, modules=()):
             sizes.append(workers)
             super().__init__(workers, modules)
 
-    monkeypatch.setattr(runs, "WorkerPool", Recording)
+    monkeypatch.setattr(train.workers, "WorkerPool", Recording)      # the pool train.workers.SharedPool makes
     runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=2, workers=8, progress=False))
     runs.run_benchmark(BenchmarkArgs(task="maze2d", samplers=["uniform"], problems=1, workers=8, progress=False))
     assert sizes == [2]
