@@ -217,8 +217,8 @@ class RayPool:
 
 
 class SharedPool:
-    """The workers of a run whose job batches come apart in time (a tree sampler's training data, then each
-    DAgger round's): a :class:`RayPool` (``ray``: an address or ``"local"``) or a :class:`WorkerPool` of
+    """The workers of a run whose job batches come apart in time (a benchmark's timed runs, then the re-check of
+    their paths; a tree sampler's training data, then each DAgger round's): a :class:`RayPool` (``ray``: an address or ``"local"``) or a :class:`WorkerPool` of
     ``workers`` processes (none for one worker: jobs run here), made by the first :meth:`run` and reused by
     the next, so Ray starts and each worker pays its imports once per run, not once per batch."""
 
