@@ -87,8 +87,8 @@ class GroupTable:
 
     def _describer(self, cls: type) -> Any:
         """The compiled function writing group ``cls``'s rows of a table: per array its address and shape, in
-        one call (numpy's ``ctypes.data`` and a slice assignment cost ten times more per array, and a call per
-        array a microsecond: a checker packs about forty arrays per scene, a planner nineteen per problem)."""
+        one call: a compiled call per array would pay numba's dispatch once per array, and a planner packs its
+        table for every problem it plans (a checker, every scene)."""
         g = self.groups.index(cls)
         name = f"describe_{self.name}_{cls.__name__.lower()}"
         args = ", ".join(f"a{i}" for i in range(len(cls.spec)))
