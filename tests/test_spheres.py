@@ -711,3 +711,22 @@ def test_the_kernel_views_each_array_of_its_table_as_the_array_it_names(world):
         checker._pack()
     checker.scratch = kept
     checker._pack()
+
+
+def test_the_planning_checks_bench_replays_the_edges_the_planner_counted(capsys, tmp_path):
+    """tools/bench_planning_checks.py replays a planner's steer and edge calls through the compiled kernel:
+    its edges and checks equal the environment's counters (it stops with an error otherwise) and the
+    benchmark's, for the same problems and seeds."""
+    import json
+
+    from tools.bench_planning_checks import main
+    from train.cli import main as cli
+    assert main(["--task", "arm", "--split", "val", "--problems", "3", "--repeat", "1"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    edges, checks = int(line.split("): ")[1].split(" edges")[0]), int(line.split("edges, ")[1].split(" collision")[0])
+    assert cli(["benchmark", "--task", "arm", "--split", "val", "--samplers", "uniform", "--problems", "3",
+                "--seed", "0", "--workers", "1", "--no-recheck", "--no-progress", "--json",
+                str(tmp_path / "runs.json")]) == 0
+    runs = json.loads((tmp_path / "runs.json").read_text())["runs"]["uniform"]
+    assert len(runs) == 3 and edges > 0
+    assert (edges, checks) == (sum(r["edges"] for r in runs), sum(r["collision_checks"] for r in runs))

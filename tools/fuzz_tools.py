@@ -37,6 +37,7 @@ from tools.fuzz_cli import HUGE, MEMORY_GIB, ROOT, _make_nodes, _names_a_device,
 TOOLS: dict[str, tuple[str, ...]] = {
     "bench_arm": ("--json", "{scratch}/bench.json"),
     "bench_checker": (),
+    "bench_planning_checks": (),
     "bench_env": (),
     "bench_sampler": (),
     "bench_vec": (),

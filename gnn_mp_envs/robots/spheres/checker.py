@@ -469,9 +469,14 @@ class SphereChecker:
         self.obstacles = _obstacle_arrays(kind, centre, rot, size, excused)
         roots, levers = self._scene_roots(excused)
         self.spheres = self.spheres._replace(link_root=roots, reach=levers)
-        self.memo.meta[:] = 0           # clearances of the last scene's states
-        self.memo.q[:] = np.nan
+        self.forget_edge_ends()         # clearances of the last scene's states
         self._grow(max(self.scratch.known.shape[0], 130))
+
+    def forget_edge_ends(self) -> None:
+        """Forget the edge ends remembered with their walks' clearances (the memo): the next edges walk as
+        a new checker's would. Only the work changes, never an answer or a count."""
+        self.memo.meta[:] = 0
+        self.memo.q[:] = np.nan
 
     def _pack(self) -> None:
         """(Re)build the table of addresses the kernel reads (:func:`~gnn_mp_envs.robots.spheres.kernel.pack`)

@@ -50,8 +50,9 @@ from gnn_mp_envs.utils.compiled import jit
 BOX, CYLINDER, SPHERE = 0, 1, 2
 KINDS = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE}
 #: Along an edge the tree walks refine distance bounds below this many states' motion (more work
-#: per tested state, fewer tested states; measured with tools/bench_checker.py).
-REFINE = 2.0
+#: per tested state, fewer tested states; chosen on the edges that planning checks on the val splits,
+#: ``python -m tools.bench_planning_checks --refine R``).
+REFINE = 1.0
 #: Walks compare squared distances where they differ by more than this factor (far above rounding), so
 #: that a node's pruning and the least clearance are those of comparing the distances themselves.
 SQUARES_MARGIN = 1.0 + 1e-12
