@@ -289,16 +289,22 @@ def test_a_sampler_refuses_observations_of_another_state_dimension():
 def test_torch_compatible_stream_makes_torchs_draws():
     """The classical samplers and the shipped RL policies draw torch's values without torch: rand and
     randn after manual_seed, in any interleaving (randn's cached second value included), across the
-    stream's block boundaries (draws are taken BLOCK at a time) and with a draw longer than a block."""
+    stream's block boundaries (draws are taken BLOCK at a time) and with a draw longer than a block; a
+    stream reseeded (a sampler's reset) after draws that left a block and a cached value half used
+    draws as a new one."""
     from agents.samplers.streams import BLOCK, TorchCompatibleStream
     calls = [("rand", 2), ("randn", 2), ("randn", 3), ("rand", 1), ("randn", 1), ("randn", 6), ("rand", 5)]
+    used = TorchCompatibleStream(123)
     for seed in (0, 7, 2**32 - 1):
-        g = torch.Generator().manual_seed(seed)
-        stream = TorchCompatibleStream(seed)
-        for kind, n in calls * 40 + [("rand", 3 * BLOCK + 5)] + calls:     # ~4 blocks of draws
-            ours = stream.unit(n) if kind == "rand" else stream.normal(n)
-            theirs = (torch.rand if kind == "rand" else torch.randn)(n, generator=g).numpy()
-            np.testing.assert_array_equal(ours, theirs)
+        used.unit(3)
+        used.normal(3)                  # leaves its second value cached
+        used.reseed(seed)
+        for stream in (TorchCompatibleStream(seed), used):
+            g = torch.Generator().manual_seed(seed)
+            for kind, n in calls * 40 + [("rand", 3 * BLOCK + 5)] + calls:     # ~4 blocks of draws
+                ours = stream.unit(n) if kind == "rand" else stream.normal(n)
+                theirs = (torch.rand if kind == "rand" else torch.randn)(n, generator=g).numpy()
+                np.testing.assert_array_equal(ours, theirs)
     with pytest.raises(ValueError, match="16"):
         TorchCompatibleStream(0).normal(16)
 

@@ -42,7 +42,7 @@ from agents.nn.priors import candidate_prior, supervised_prior
 from agents.nn.twins import NUMPY_ACTS, numpy_layers, numpy_linear, numpy_mlp
 from agents.rl.policies import PICK_KINDS, POLICY_KINDS, PickPolicy, RLPolicy, SB3PPOPolicy
 from agents.samplers.base import ModelSampler, active_target
-from agents.samplers.streams import TorchCompatibleStream
+from agents.samplers.streams import TorchCompatibleStream, torch_compatible_stream
 from gnn_mp_envs.envs.candidates import CandidateSet, wrap_into_box
 from gnn_mp_envs.envs.wrappers import ACTION_FRAMES, ACTION_HIGH, ACTION_LOW, policy_action_to_state, tree_view
 from gnn_mp_envs.registration import same_bounds
@@ -93,7 +93,7 @@ class RLSampler(ModelSampler):
         self._compiled_map = self.policy.squash == "clip" and action_frame == "target"
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
-        return TorchCompatibleStream(seed)
+        return torch_compatible_stream(getattr(self, "rng", None), seed)
 
     def params(self, obs: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """The policy's ``(loc, scale)`` ``(d,)`` float32 for one full observation (through its view;

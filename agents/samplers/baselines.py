@@ -14,13 +14,13 @@ from typing import Mapping
 import numpy as np
 
 from agents.samplers.base import Sampler, active_target, as_arrays, batch_active_trees
-from agents.samplers.streams import _UNIT24, TorchCompatibleStream
+from agents.samplers.streams import _UNIT24, TorchCompatibleStream, torch_compatible_stream
 
 class _TorchCompatible(Sampler):
     """Draws float32 uniforms exactly as ``torch.rand`` does from the same seed."""
 
     def make_stream(self, seed: int | None) -> TorchCompatibleStream:
-        return TorchCompatibleStream(seed)
+        return torch_compatible_stream(getattr(self, "rng", None), seed)
 
     def __init__(self, low: np.ndarray, high: np.ndarray, seed: int | None = None) -> None:
         super().__init__(low, high, seed)

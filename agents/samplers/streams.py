@@ -30,14 +30,28 @@ _MASK53 = (1 << 53) - 1
 BLOCK = 512
 
 
+def torch_compatible_stream(previous: object, seed: int | None) -> "TorchCompatibleStream":
+    """A sampler's stream for ``reset(seed)``: its ``previous`` one reseeded where it is a
+    :class:`TorchCompatibleStream` (the same draws as a new one, without building a generator), else a new one."""
+    if isinstance(previous, TorchCompatibleStream):
+        previous.reseed(seed)
+        return previous
+    return TorchCompatibleStream(seed)
+
+
 class TorchCompatibleStream:
     """The draws ``torch.Generator().manual_seed(seed)`` gives, made in numpy (``seed=None``: fresh entropy)."""
 
     def __init__(self, seed: int | None) -> None:
-        legacy = np.random.RandomState(None if seed is None else int(seed) & 0xFFFFFFFF)
-        _, key, pos, *_ = legacy.get_state(legacy=True)
         self.bits = np.random.MT19937()
-        self.bits.state = {"bit_generator": "MT19937", "state": {"key": key, "pos": pos}}
+        self.reseed(seed)
+
+    def reseed(self, seed: int | None) -> None:
+        """Start again as a new stream of ``seed`` would, on this stream's generator: a sampler's reset
+        need not build a new one (numpy builds each Mersenne Twister from fresh OS entropy before any
+        seeding, most of a new stream's cost)."""
+        # torch's manual_seed state: the legacy seeding of ``bits`` in place (RandomState's own)
+        np.random.RandomState(self.bits).seed(None if seed is None else int(seed) & 0xFFFFFFFF)
         self._normal: float | None = None     # torch's cached second Box-Muller value
         self._raw = np.zeros(0, dtype=np.uint64)     # the block's 32-bit draws ...
         self._low24 = np.zeros(0, dtype=np.float32)  # ... their low 24 bits as float32 (exact)
