@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnn_mp_envs.core.nearest import NearestIndex
+from gnn_mp_envs.core.nearest import BUCKET, NearestIndex
 from gnn_mp_envs.core.planners import make_planner
 from gnn_mp_envs.core.problem import _nearest_row_loop
 from gnn_mp_envs.registration import make_task
@@ -41,6 +41,38 @@ def test_the_index_answers_the_scans_first_argmin(dim, periodic):
                     assert index.nearest(q, tree, states) == (rows[j], d)
                     checked += 1
     assert checked > 1000
+
+
+@pytest.mark.parametrize("case", ["equal nodes", "all periodic", "shuffled inserts", "one coordinate"])
+def test_the_index_answers_the_scans_first_argmin_where_leaves_cannot_split(case):
+    """Leaves that cannot split (more equal nodes than a block holds; only periodic coordinates), nodes
+    inserted out of index order (and again), and nodes that differ on one coordinate only: the scan's
+    answer, as the tree grows; an empty tree, a NaN and an infinite query as the scan answers them."""
+    rng = np.random.default_rng(7)
+    dim = 1 if case == "one coordinate" else 3
+    n = 400
+    states = rng.uniform(-3, 3, (n, dim))
+    periodic = np.full(dim, case == "all periodic")
+    if case == "equal nodes":
+        states[50:50 + 3 * BUCKET] = states[7]                   # several blocks' worth of one state
+    if case == "one coordinate":
+        states = np.round(states, 1)                             # many equal values, no other coordinate
+    weights = rng.uniform(0.5, 2.0, dim)
+    order = rng.permutation(n) if case == "shuffled inserts" else np.arange(n)
+    index = NearestIndex(n, 1, weights, periodic)
+    assert index.nearest(np.zeros(dim), 0, states) == (-1, np.inf)
+    for m, i in enumerate(order):
+        index.insert(int(i), 0, states)
+        if case == "shuffled inserts":
+            index.insert(int(order[m // 2]), 0, states)             # again: nothing changes
+        rows = np.sort(order[:m + 1])
+        for q in np.concatenate([rng.uniform(-4, 4, (3, dim)), states[rng.choice(rows, 2)]]):
+            j, d = _nearest_row_loop(states[rows], q, weights, periodic)
+            assert index.nearest(q, 0, states) == (rows[j], d)
+    for q in (np.full(dim, np.nan), np.full(dim, np.inf)):
+        j, d = _nearest_row_loop(states, q, weights, periodic)
+        got = index.nearest(q, 0, states)
+        assert got[0] == j and (got[1] == d or (np.isnan(got[1]) and np.isnan(d)))
 
 
 def test_a_node_of_equal_distance_but_larger_square_still_wins_by_its_index():

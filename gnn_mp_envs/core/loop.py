@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from gnn_mp_envs.core.nearest import kd_insert, kd_nearest
+from gnn_mp_envs.core.nearest import IndexArrays, index_insert, index_nearest
 from gnn_mp_envs.core.problem import ZERO_LENGTH
 from gnn_mp_envs.utils.array_groups import GroupTable, array_group
 from gnn_mp_envs.utils.compiled import jit, specialized
@@ -47,15 +47,12 @@ CONNECTED = 1e-9
 #: ``nodes_in``: per search tree).
 TreeArrays = array_group("TreeArrays", (("states", np.float64, 2), ("parent", np.int64, 1), ("cost", np.float64, 1),
                                         ("tree_id", np.int64, 1), ("size", np.int64, 1), ("nodes_in", np.int64, 1)))
-#: The exact k-d index (:class:`~gnn_mp_envs.core.nearest.NearestIndex`'s arrays).
-IndexArrays = array_group("IndexArrays", (("weights", np.float64, 1), ("periodic", np.bool_, 1),
-                                          ("links", np.int32, 2), ("cut", np.float64, 1), ("root", np.int64, 1),
-                                          ("stack", np.int64, 2), ("bounds", np.float64, 2), ("cell", np.float64, 1)))
 #: The problem's goal and the loop's scratch and answers (``counters``: :data:`EDGES`, :data:`CHECKS`;
 #: ``result``: :data:`CONSUMED` ... :data:`MEET_B`).
 LoopArrays = array_group("LoopArrays", (("goal", np.float64, 1), ("x_new", np.float64, 1), ("distance", np.float64, 1),
                                         ("counters", np.int64, 1), ("result", np.int64, 1)))
-#: The loop's table (:mod:`gnn_mp_envs.utils.array_groups`): one argument for every array of a planner.
+#: The loop's table (:mod:`gnn_mp_envs.utils.array_groups`): one argument for every array of a planner (the
+#: exact k-d index's: :class:`~gnn_mp_envs.core.nearest.IndexArrays`).
 LAYOUT = GroupTable("loop", (TreeArrays, IndexArrays, LoopArrays))
 view_tree = LAYOUT.viewer(TreeArrays)
 view_index = LAYOUT.viewer(IndexArrays)
@@ -85,14 +82,13 @@ def _add(state, parent, tree, cost, t, ix):
     t.tree_id[i] = tree
     t.size[0] = i + 1
     t.nodes_in[tree] += 1
-    kd_insert(i, tree, t.states, ix.periodic, ix.links, ix.cut, ix.root)
+    index_insert(i, tree, t.states, ix)
     return i
 
 
 @jit(inline=True)
 def _nearest(x, tree, t, ix):
-    return kd_nearest(x, tree, t.states, ix.weights, ix.periodic, ix.links, ix.cut, ix.root, ix.stack, ix.bounds,
-                      ix.cell)[0]
+    return index_nearest(x, tree, ix)[0]
 
 
 def _plan(samples, planner, active, budget, step, goal_tolerance, table, context):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, MEET_A, MEET_B, RRT_LOOP, SOLVED,
-                                   IndexArrays, LoopArrays, TreeArrays, compiled_loop)
+                                   LoopArrays, TreeArrays, compiled_loop)
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore, path_nodes
 from gnn_mp_envs.utils.compiled import announce_compilation
@@ -160,8 +160,7 @@ class TreePlanner:
         t, ix, d = self.tree, self.tree.index, self.problem.state_dim
         self._counters, self._result = np.zeros(2, dtype=np.int64), np.zeros(4, dtype=np.int64)
         self._groups = (TreeArrays(t.states, t.parent, t.cost, t.tree_id, t._size, t._tree_size),
-                        IndexArrays(ix.weights, ix.periodic, ix.links, ix.cut, ix.root, ix.stack, ix.bounds,
-                                    ix.cell),
+                        ix.arrays,
                         LoopArrays(np.ascontiguousarray(self.problem.goal, dtype=np.float64), np.zeros(d), np.zeros(1),
                                    self._counters, self._result))
         self._table = LAYOUT.pack(self._groups)
