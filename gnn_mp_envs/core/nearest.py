@@ -21,7 +21,8 @@ leaf): ``links`` (int32, a k-d node's left and right child and its splitting coo
 leaf), ``cut`` (its splitting value: a node's state below it goes left), ``leaf`` (a leaf's first block);
 per block its ``fill``, the next block of its leaf (``chain``, -1: none), its ``points`` and their node
 numbers (``ids``); per search tree its ``root``, -1 while empty; ``used``
-(k-d nodes and blocks handed out); scratch: ``stack``, ``bounds``, ``cell``, ``squares``.
+(k-d nodes and blocks handed out); scratch: ``stack``, ``bounds``, ``cell``, ``squares`` (a block's squared
+distances; a splitting leaf's values).
 """
 from __future__ import annotations
 
@@ -167,11 +168,15 @@ def _split_leaf(node, block, i, states, weights, periodic, ix):
             best_c, best_spread = c, spread
     if best_c < 0:
         return False
-    values = np.empty(k + 1)
+    values = ix.squares                       # scratch: the k + 1 values, sorted by insertion
+    values[0] = states[i, best_c]
     for j in range(k):
-        values[j] = points[block, best_c, j]
-    values[k] = states[i, best_c]
-    values.sort()
+        v = points[block, best_c, j]
+        m = j + 1
+        while m > 0 and values[m - 1] > v:
+            values[m] = values[m - 1]
+            m -= 1
+        values[m] = v
     at = values[(k + 1) // 2]
     if at == values[0]:                       # below the median, nothing: the next value up (one exists)
         for j in range(k + 1):
@@ -346,7 +351,7 @@ class NearestIndex:
             points=empty((blocks, dim, BUCKET)), ids=empty((blocks, BUCKET), dtype=np.int64),
             root=np.full(num_trees, -1, dtype=np.int64), used=np.zeros(2, dtype=np.int64),
             stack=empty((nodes + 1, 2), dtype=np.int64), bounds=empty((nodes + 1, 2)), cell=empty(dim),
-            squares=empty(BUCKET))
+            squares=empty(BUCKET + 1))
 
     @property
     def weights(self) -> np.ndarray:
