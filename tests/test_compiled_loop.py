@@ -75,6 +75,34 @@ def test_the_index_answers_the_scans_first_argmin_where_leaves_cannot_split(case
         assert got[0] == j and (got[1] == d or (np.isnan(got[1]) and np.isnan(d)))
 
 
+def test_an_index_grown_by_taking_a_smaller_one_answers_as_the_scan():
+    """A larger index that takes a smaller one's nodes (the tree GNN's engine grows so), then more nodes:
+    the scan's answers; ``clear`` empties it; one of a larger capacity or other trees is refused."""
+    rng = np.random.default_rng(3)
+    n, dim = 600, 5
+    states = rng.uniform(-2, 2, (n, dim))
+    weights, periodic = rng.uniform(0.5, 2.0, dim), np.zeros(dim, dtype=bool)
+    small = NearestIndex(150, 2, weights, periodic)
+    tree_of = rng.integers(0, 2, n)
+    for i in range(150):
+        small.insert(i, int(tree_of[i]), states)
+    grown = NearestIndex(n, 2, weights, periodic)
+    grown.take(small)
+    for i in range(150, n):
+        grown.insert(i, int(tree_of[i]), states)
+    for q in rng.uniform(-2.5, 2.5, (200, dim)):
+        for tree in (0, 1):
+            rows = np.flatnonzero(tree_of == tree)
+            j, d = _nearest_row_loop(states[rows], q, weights, periodic)
+            assert grown.nearest(q, tree, states) == (rows[j], d)
+    grown.clear()
+    assert grown.nearest(states[0], 0, states) == (-1, np.inf)
+    with pytest.raises(ValueError, match="at most its capacity"):
+        small.take(grown)
+    with pytest.raises(ValueError, match="as many trees"):
+        NearestIndex(n, 1, weights, periodic).take(small)
+
+
 def test_a_node_of_equal_distance_but_larger_square_still_wins_by_its_index():
     """Two nodes whose squared distances differ by rounding but whose distances are equal: the first
     one in insertion order wins, also when its square is the larger and the other node is met first."""

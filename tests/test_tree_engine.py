@@ -450,11 +450,12 @@ def test_compiled_causal_knn_is_the_brute_force_answer(planner_metric):
 
 
 def test_the_engines_kd_tree_knn_is_the_brute_force_scan():
-    """The engine's causal k-NN from its incremental k-d trees (:func:`_kd_causal_knn`) against the brute-force
+    """The engine's causal k-NN from its bucketed k-d trees (:func:`_kd_causal_knn`) against the brute-force
     scan (:func:`_causal_knn`), batch after batch of a growing two-tree graph: the same nodes in the same
     order, exact ties (repeated states, equal distances on a grid) to the earlier node, a wrapped angle and
     angles outside [-pi, pi) (never split on; the exact wrap), fewer earlier nodes than ``knn``."""
     from agents.tree.compiled import _causal_knn, _kd_causal_knn
+    from gnn_mp_envs.core.nearest import BUCKET, NearestIndex
     rng = np.random.default_rng(8)
     n, d = 700, 4
     states = np.concatenate([rng.uniform(-np.pi, np.pi, (n, 1)), rng.integers(-3, 4, (n, 2)).astype(float),
@@ -464,8 +465,8 @@ def test_the_engines_kd_tree_knn_is_the_brute_force_scan():
     tree_id = (rng.random(n) < 0.3).astype(np.int64)
     periodic = np.array([True, False, False, False])
     unit = np.array([0.4, 0.5, 0.5, 0.25])
-    kd = (np.full((n, 3), -1, dtype=np.int32), np.zeros(n), np.full(2, -1, dtype=np.int64),
-          np.zeros((n + 1, 2), dtype=np.int64), np.zeros((n + 1, 2)), np.zeros(d))
+    index = NearestIndex(n, 2, 1.0 / unit, periodic)
+    kd = index.arrays
     i0 = 0
     for B in [1, 3, 40, 1, 150, 5, 300, 200]:
         x, tid = states[i0:i0 + B].copy(), tree_id[i0:i0 + B].copy()
@@ -476,7 +477,7 @@ def test_the_engines_kd_tree_knn_is_the_brute_force_scan():
             for r in range(B):
                 np.testing.assert_array_equal(got[0][r, :got[1][r]], want[0][r, :want[1][r]], err_msg=f"row {i0 + r}")
         i0 += B
-    assert i0 == n and (kd[2] >= 0).all()
+    assert i0 == n and (kd.root >= 0).all() and kd.used[1] > n // BUCKET    # both trees, leaves split
 
 
 def test_compiled_draw_is_the_numpy_search_and_gaussian():

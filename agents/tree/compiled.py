@@ -31,9 +31,8 @@ from numba.extending import intrinsic
 
 from gnn_mp_envs.core.nearest import PRUNE_FLOOR as KD_PRUNE_FLOOR
 from gnn_mp_envs.core.nearest import PRUNE_MARGIN as KD_PRUNE_MARGIN
-from gnn_mp_envs.core.nearest import RIGHT as KD_RIGHT
 from gnn_mp_envs.core.nearest import SPLIT as KD_SPLIT
-from gnn_mp_envs.core.nearest import kd_insert, kd_pop_cell, kd_stack_far_side
+from gnn_mp_envs.core.nearest import index_insert, kd_pop_cell, kd_stack_far_side
 from gnn_mp_envs.utils.compiled import announce_compilation as announce_loop_compilation
 from gnn_mp_envs.utils.compiled import jit
 
@@ -271,14 +270,15 @@ def _causal_knn(i0, x, tid, states, tree_id, knn, periodic, unit, planner_metric
 @jit(inline=True)
 def _kd_causal_knn(i0, x, tid, states, knn, periodic, unit, kd):
     """:func:`_causal_knn`'s answer (the same nodes in the same order, ties to the earlier node) from the
-    engine's incremental k-d trees, one per GNN tree (``kd = (links, cut, root, stack, bounds, cell)``, the
-    arrays of :mod:`gnn_mp_envs.core.nearest`, holding the nodes before ``i0``): per row a k-nearest query
-    of its tree, then the row joins it. A cell is skipped only when its squared distance exceeds the
-    ``knn``-th so far by :data:`~gnn_mp_envs.core.nearest.PRUNE_MARGIN` (far above rounding), so every node
-    that could tie or win is compared with the brute force's own floats (:func:`_knn_distance`). The cost
-    grows with the depth of the trees rather than their size (a brute force pass per row over every
-    earlier node was a third of a Fetch forward at 4,000 nodes)."""
-    links, cut, root, stack, bounds, cell = kd
+    engine's bucketed k-d trees, one per GNN tree (``kd``: :class:`~gnn_mp_envs.core.nearest.IndexArrays`
+    with weights ``1 / unit``, which only choose the splits, holding the nodes before ``i0``): per row a
+    k-nearest query of its tree, then the row joins it. A cell is skipped only when its squared distance
+    (its gaps in step units) exceeds the ``knn``-th so far by
+    :data:`~gnn_mp_envs.core.nearest.PRUNE_MARGIN` (far above rounding), so every node that could tie or
+    win is compared with the brute force's own floats (:func:`_knn_distance`'s, computed for a leaf's
+    nodes one coordinate at a time over its block). The cost grows with the depth of the trees rather
+    than their size (a brute force pass per row over every earlier node was a third of a Fetch forward
+    at 4,000 nodes)."""
     B, d = x.shape
     kk = max(knn, 1)
     near = np.zeros((B, kk), dtype=np.int64)
@@ -286,10 +286,12 @@ def _kd_causal_knn(i0, x, tid, states, knn, periodic, unit, kd):
     if knn <= 0:
         return near, found
     best_d = np.empty(kk)
+    links, cut, leaf, fill, chain, points, ids = kd.links, kd.cut, kd.leaf, kd.fill, kd.chain, kd.points, kd.ids
+    stack, bounds, cell, squares = kd.stack, kd.bounds, kd.cell, kd.squares
     for r in range(B):
         t = tid[r]
         count = 0
-        node = root[t]
+        node = kd.root[t]
         if node >= 0:
             for c in range(d):
                 cell[c] = 0.0
@@ -298,28 +300,43 @@ def _kd_causal_knn(i0, x, tid, states, knn, periodic, unit, kd):
             top = 1
             while top > 0:
                 node, bound, top = kd_pop_cell(stack, bounds, cell, top, limit)
-                while node >= 0:                     # down toward the row, stacking the far sides
+                if node < 0:
+                    continue
+                while links[node, KD_SPLIT] >= 0:           # down toward the row, stacking the far sides
                     c = links[node, KD_SPLIT]
-                    if c >= 0:
-                        nxt, top = kd_stack_far_side(node, c, (x[r, c] - cut[node]) / unit[c], bound, limit, links,
-                                                     stack, bounds, cell, top)
-                    else:
-                        nxt = links[node, KD_RIGHT]
-                    dj = _knn_distance(states, node, x, r, unit, periodic)
-                    if count < knn or dj < best_d[knn - 1] or (dj == best_d[knn - 1] and node < near[r, knn - 1]):
-                        pos = count if count < knn else knn - 1
-                        count = min(count + 1, knn)
-                        while pos > 0 and (best_d[pos - 1] > dj or (best_d[pos - 1] == dj and near[r, pos - 1] > node)):
-                            best_d[pos] = best_d[pos - 1]
-                            near[r, pos] = near[r, pos - 1]
-                            pos -= 1
-                        best_d[pos] = dj
-                        near[r, pos] = node
-                        if count == knn:
-                            limit = best_d[knn - 1] * KD_PRUNE_MARGIN + KD_PRUNE_FLOOR
-                    node = nxt
+                    node, top = kd_stack_far_side(node, c, (x[r, c] - cut[node]) / unit[c], bound, limit, links,
+                                                  stack, bounds, cell, top)
+                block = leaf[node]
+                while block >= 0:
+                    k = fill[block]
+                    for j in range(k):                        # _knn_distance's floats, a block at a time
+                        squares[j] = 0.0
+                    for c in range(d):
+                        xc, uc, column = x[r, c], unit[c], points[block, c]
+                        if periodic[c]:
+                            for j in range(k):
+                                v = _wrapped(column[j] - xc, True) / uc
+                                squares[j] += v * v
+                        else:
+                            for j in range(k):
+                                v = (column[j] - xc) / uc
+                                squares[j] += v * v
+                    for j in range(k):
+                        dj, g = squares[j], ids[block, j]
+                        if count < knn or dj < best_d[knn - 1] or (dj == best_d[knn - 1] and g < near[r, knn - 1]):
+                            pos = count if count < knn else knn - 1
+                            count = min(count + 1, knn)
+                            while pos > 0 and (best_d[pos - 1] > dj or (best_d[pos - 1] == dj and near[r, pos - 1] > g)):
+                                best_d[pos] = best_d[pos - 1]
+                                near[r, pos] = near[r, pos - 1]
+                                pos -= 1
+                            best_d[pos] = dj
+                            near[r, pos] = g
+                            if count == knn:
+                                limit = best_d[knn - 1] * KD_PRUNE_MARGIN + KD_PRUNE_FLOOR
+                    block = chain[block]
         found[r] = count
-        kd_insert(i0 + r, t, states, periodic, links, cut, root)
+        index_insert(i0 + r, t, states, kd)
     return near, found
 
 

@@ -41,6 +41,7 @@ from agents.tree.compiled import (
     tree_context,
 )
 from agents.nn.twins import linears, mlp, norms_of, vector, wrap_periodic
+from gnn_mp_envs.core.nearest import IndexArrays, NearestIndex
 from agents.tree.models import TreeGNN
 from agents.tree.scorer import EDGE_TYPES, TreeGNNScorer
 
@@ -108,7 +109,7 @@ GNN_LOOP = "the tree GNN's per-node loop"
 class IncrementalTreeGNN(_Engine):
     """Numpy inference of a :class:`TreeGNN` that embeds each new tree node once."""
 
-    node_arrays = ("states", "tree_id", "keys", "offsets", "log_sigma", "kd_links", "kd_cut")
+    node_arrays = ("states", "tree_id", "keys", "offsets", "log_sigma")
     layered_arrays = ("sender",)
 
     def __init__(self, model: TreeGNN, capacity: int = 1024, *, heads: bool = True) -> None:
@@ -177,23 +178,23 @@ class IncrementalTreeGNN(_Engine):
         self.keys = np.zeros((capacity, H))
         self.offsets = np.zeros((capacity, T, d))
         self.log_sigma = np.zeros((capacity, T, d))
-        # the causal k-NN's k-d trees, one per GNN tree (gnn_mp_envs.core.nearest's arrays and scratch)
-        self.kd_links = np.full((capacity, 3), -1, dtype=np.int32)
-        self.kd_cut = np.zeros(capacity)
-        self.kd_stack = np.zeros((capacity + 1, 2), dtype=np.int64)
-        self.kd_bounds = np.zeros((capacity + 1, 2))
-        self.kd_cell = np.zeros(d)
+        # the causal k-NN's k-d trees, one per GNN tree (the planner's bucketed index; its weights, 1 / step,
+        # only choose the splits); growing keeps the nodes indexed so far
+        index = NearestIndex(capacity, T, 1.0 / self.step, self.periodic)
+        if hasattr(self, "kd_index"):
+            index.take(self.kd_index)
+        self.kd_index = index
 
     @property
-    def kd(self) -> tuple:
+    def kd(self) -> IndexArrays:
         """The k-d trees' arrays as the compiled k-NN takes them (``_kd_causal_knn``)."""
-        return self.kd_links, self.kd_cut, self.kd_root, self.kd_stack, self.kd_bounds, self.kd_cell
+        return self.kd_index.arrays
 
     def clear(self) -> None:
         super().clear()
         self.sums = np.zeros((self.trees, self.H))
         self.counts = np.zeros(self.trees)
-        self.kd_root = np.full(self.trees, -1, dtype=np.int64)
+        self.kd_index.clear()
         self._ends_key = None
 
     def ingest(self, obs: Mapping[str, np.ndarray]) -> int:

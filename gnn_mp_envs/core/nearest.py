@@ -12,9 +12,11 @@ the plane is not farther than the best distance so far (with a margin far above 
 squared distances and takes the square root, as the scan does, only of those within that margin of the
 best, so every distance it compares is the scan's; ties go to the smallest node index. So the answer is
 the scan's, bit for bit, at a cost that grows with the depth of the tree rather than its size: the
-Fetch's trees reach 30,000 nodes in 8 dimensions. Compared with one node per k-d node (the tree below,
-which the tree GNN's k-nearest queries use), a leaf's nodes are compared from one block rather than
-reached one by one through the tree, and the median splits keep the tree balanced.
+Fetch's trees reach 30,000 nodes in 8 dimensions. Compared with one node per k-d node (the tree this
+replaced), a leaf's nodes are compared from one block rather than reached one by one through the tree,
+and the median splits keep the tree balanced. The tree GNN's causal k-nearest queries walk the same
+trees (:func:`kd_pop_cell`, :func:`kd_stack_far_side`) with their own metric
+(``agents/tree/compiled.py``).
 
 :class:`IndexArrays` (``n``: node capacity, ``t`` search trees; a k-d node is an internal node or a
 leaf): ``links`` (int32, a k-d node's left and right child and its splitting coordinate, -1 for none: a
@@ -53,17 +55,6 @@ IndexArrays = array_group("IndexArrays", (
 
 
 @jit(inline=True)
-def _next_split(dim, periodic):
-    """The coordinate after ``dim`` that is not periodic (-1: none is)."""
-    d = periodic.shape[0]
-    for k in range(1, d + 1):
-        c = (dim + k) % d
-        if not periodic[c]:
-            return c
-    return -1
-
-
-@jit(inline=True)
 def kd_pop_cell(stack, bounds, cell, top, limit):
     """The next stacked cell of a query: ``(node, its squared distance, new top)``; node -1 when the top row
     was a mark (the cell ``cell`` is restored) or a cell farther than ``limit`` (dropped). An entered
@@ -95,33 +86,6 @@ def kd_stack_far_side(node, c, gap, bound, limit, links, stack, bounds, cell, to
     bounds[top, 0], bounds[top, 1] = far_bound, gap_sq
     top += (far >= 0) & (far_bound <= limit)
     return links[node, near_side], top
-
-
-@jit
-def kd_insert(i, tree, states, periodic, links, cut, root):
-    """Add node ``i`` (a row of ``states``) to search tree ``tree``'s k-d tree of one node per k-d node
-    (split on the coordinates in turn; the tree GNN's k-nearest queries build theirs with it and
-    :func:`kd_pop_cell`, :func:`kd_stack_far_side`); nothing when it is there already (the descent meets
-    it: its place is where its state leads), so a repeated insert cannot link a node under itself."""
-    node = root[tree]
-    if node < 0:
-        root[tree] = i
-        c = _next_split(-1, periodic)
-    else:
-        while True:
-            if node == i:
-                return
-            c = links[node, SPLIT]
-            side = RIGHT if c < 0 or states[i, c] >= cut[node] else LEFT   # no split: a chain on the right
-            child = links[node, side]
-            if child < 0:
-                links[node, side] = i
-                break
-            node = child
-        c = _next_split(c, periodic) if c >= 0 else -1
-    links[i, LEFT], links[i, RIGHT] = -1, -1
-    links[i, SPLIT] = c
-    cut[i] = states[i, c] if c >= 0 else 0.0
 
 
 @jit(inline=True)
@@ -356,6 +320,23 @@ class NearestIndex:
     @property
     def weights(self) -> np.ndarray:
         return self.arrays.weights
+
+    def clear(self) -> None:
+        """Empty every search tree (the arrays are kept)."""
+        self.arrays.root[:] = -1
+        self.arrays.used[:] = 0
+
+    def take(self, other: "NearestIndex") -> None:
+        """Hold what ``other`` (of at most this capacity, the same trees and metric) holds: a grown index."""
+        a, b = self.arrays, other.arrays
+        nodes, blocks = int(b.used[0]), int(b.used[1])
+        if len(b.root) != len(a.root) or len(b.fill) > len(a.fill) or b.points.shape[1] != a.points.shape[1]:
+            raise ValueError("an index takes one of at most its capacity, with as many trees and dimensions")
+        for name in ("links", "cut", "leaf"):
+            getattr(a, name)[:nodes] = getattr(b, name)[:nodes]
+        for name in ("fill", "chain", "points", "ids"):
+            getattr(a, name)[:blocks] = getattr(b, name)[:blocks]
+        a.root[:], a.used[:] = b.root, b.used
 
     def insert(self, i: int, tree: int, states: np.ndarray) -> None:
         index_insert(i, tree, states, self.arrays)
