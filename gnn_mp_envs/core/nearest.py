@@ -6,7 +6,7 @@ A node joins its search tree's k-d tree once (no rebuilds) in a leaf of up to :d
 states the leaf keeps by coordinate (a block: ``points[block, coordinate, slot]``) so that a query
 compares a leaf's nodes in SIMD lanes from contiguous memory. A full leaf splits at the median of its
 nodes on the coordinate of their widest weighted spread (periodic coordinates never: the gap to a plane
-across a wrapped coordinate is not a bound); nodes equal on every other coordinate chain another block
+across a wrapped coordinate is not a bound); nodes that no such coordinate spreads chain another block
 instead. A query descends to the query's leaf, then backs up into the far side of each plane only where
 the plane is not farther than the best distance so far (with a margin far above rounding). It compares
 squared distances and takes the square root, as the scan does, only of those within that margin of the
@@ -91,8 +91,9 @@ def kd_stack_far_side(node, c, gap, bound, limit, links, stack, bounds, cell, to
 @jit(inline=True)
 def _block_squares(x, block, fill, weights, periodic, points, out):
     """``out[j]``: the scan's sum of squares (:func:`~gnn_mp_envs.core.problem._nearest_row_loop`) from
-    slot ``j`` of ``block`` to ``x``, ``j < fill``: the same operations in the same order per point, one coordinate at a time over the block's column, so
-    the loop over points runs in SIMD lanes (a periodic coordinate takes the scan's wrap)."""
+    slot ``j`` of ``block`` to ``x``, ``j < fill``: the same operations in the same order per point, one
+    coordinate at a time over the block's column, so the loop over points runs in SIMD lanes (a periodic
+    coordinate takes the scan's wrap)."""
     for j in range(fill):
         out[j] = 0.0
     for c in range(x.shape[0]):
@@ -111,12 +112,13 @@ def _block_squares(x, block, fill, weights, periodic, points, out):
 
 
 @jit(inline=True)
-def _split_leaf(node, block, i, states, weights, periodic, ix):
+def _split_leaf(node, block, i, states, ix):
     """Split the full leaf ``node`` (its one block ``block``) with node ``i`` joining it: on the
     coordinate (not periodic) of the widest weighted spread of its points, at their median, the points
-    below it to a new leaf on ``block``, the rest to a new leaf on a new block. False where every
-    coordinate's values are equal (it does not split: the caller chains a block)."""
+    below it to a new leaf on ``block``, the rest to a new leaf on a new block. False where no such
+    coordinate spreads them (it does not split: the caller chains a block)."""
     links, cut, leaf, fill, points, ids, used = ix.links, ix.cut, ix.leaf, ix.fill, ix.points, ix.ids, ix.used
+    weights, periodic = ix.weights, ix.periodic
     k = fill[block]
     best_c, best_spread = -1, 0.0
     for c in range(states.shape[1]):
@@ -201,8 +203,7 @@ def index_insert(i, tree, states, ix):
         block = last
         last = chain[last]
     if fill[block] == BUCKET:
-        if block == leaf[node] and chain[block] < 0 and _split_leaf(node, block, i, states, ix.weights,
-                                                                    ix.periodic, ix):
+        if block == leaf[node] and chain[block] < 0 and _split_leaf(node, block, i, states, ix):
             c = links[node, SPLIT]
             node = links[node, RIGHT] if states[i, c] >= cut[node] else links[node, LEFT]
             block = leaf[node]
