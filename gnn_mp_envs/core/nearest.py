@@ -295,6 +295,7 @@ def index_nearest(x, tree, ix):
             block = chain[block]
     return best, best_d
 
+
 class NearestIndex:
     """The bucketed k-d trees of a planner's search trees (see the module); ``arrays``: the
     :class:`IndexArrays` the compiled calls read."""
@@ -317,10 +318,6 @@ class NearestIndex:
             root=np.full(num_trees, -1, dtype=np.int64), used=np.zeros(2, dtype=np.int64),
             stack=empty((nodes + 1, 2), dtype=np.int64), bounds=empty((nodes + 1, 2)), cell=empty(dim),
             squares=empty(BUCKET + 1))
-
-    @property
-    def weights(self) -> np.ndarray:
-        return self.arrays.weights
 
     def clear(self) -> None:
         """Empty every search tree (the arrays are kept)."""
