@@ -84,7 +84,7 @@ def test_a_tables_describers_are_loaded_from_the_cache_in_a_fresh_process(tmp_pa
             "a, b = np.zeros((3, 2)), np.arange(5)\n"
             "table = layout.pack((G(a, b),))\n"
             "print(table[0, 0, 0] == a.ctypes.data, table[0, 0, 1:3].tolist(), table[0, 1, 0] == b.ctypes.data,"
-            " table[0, 1, 1], sum(layout._describers[0].stats.cache_hits.values()))")
+            " table[0, 1, 1], sum(layout.whole_describer.stats.cache_hits.values()))")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
 
     def run() -> str:
@@ -95,3 +95,29 @@ def test_a_tables_describers_are_loaded_from_the_cache_in_a_fresh_process(tmp_pa
 
     assert run() == "True [3, 2] True 5 0"                           # compiled and cached
     assert run() == "True [3, 2] True 5 1"                           # loaded
+
+
+def test_a_table_packed_in_one_call_is_the_table_the_checked_pack_writes():
+    """``GroupTable.pack`` writes the whole table in one compiled call for arrays of exactly the specs' types;
+    any other array takes the checked path: a read-only array is packed the same, a strided one or one of
+    another dtype is refused in one line naming the field."""
+    import numpy as np
+
+    from gnn_mp_envs.utils.array_groups import GroupTable, array_group
+    first = array_group("First", (("a", np.float64, 2), ("b", np.int64, 1)))
+    second = array_group("Second", (("c", np.bool_, 1),))
+    layout = GroupTable("probe_whole", (first, second))
+    a, b, c = np.zeros((3, 2)), np.arange(5), np.ones(4, dtype=np.bool_)
+    table = layout.pack((first(a, b), second(c)))
+    assert table.shape == (2, 2, 4)
+    np.testing.assert_array_equal(table, layout._checked_pack((first(a, b), second(c))))
+    assert table[0, 0, 0] == a.ctypes.data and table[0, 0, 1:3].tolist() == [3, 2] and table[1, 0, 1] == 4
+    assert layout.whole_describer.signatures and not layout.whole_describer._can_compile   # one signature only
+    a.setflags(write=False)
+    np.testing.assert_array_equal(layout.pack((first(a, b), second(c))), table)
+    with pytest.raises(TypeError, match="First.b must be a C-contiguous 1-D int64 array"):
+        layout.pack((first(a, np.arange(10)[::2]), second(c)))
+    with pytest.raises(TypeError, match="Second.c must be a C-contiguous 1-D bool array"):
+        layout.pack((first(a, b), second(c.astype(np.int8))))
+    with pytest.raises(TypeError, match="group 1 must be a Second"):
+        layout.pack((first(a, b), first(a, b)))

@@ -68,9 +68,26 @@ class GroupTable:
         self.groups = groups
         self.max_fields = max(len(group.spec) for group in groups)
         self._describers = tuple(self._describer(group) for group in groups)
+        #: The compiled function of :meth:`pack` (all the groups' arrays in one call), made on the first pack.
+        self.whole_describer: Any = None
+        self._whole: Any = None
 
     def pack(self, instances: tuple) -> np.ndarray:
-        """The table of ``instances`` (one of each group, in order): per array its address and shape."""
+        """The table of ``instances`` (one of each group, in order): per array its address and shape.
+
+        One compiled call for the whole table (:meth:`_whole_describer`), compiled for the exact array types
+        of the groups' specs only, so numba's dispatch checks every array in C; arrays of any other type
+        (dtype, dimensions, layout, read-only) take the checked path, which refuses a wrong one in one line."""
+        if tuple(map(type, instances)) == self.groups:
+            describe = self._whole or self._whole_describer()
+            try:
+                return describe(*instances)
+            except TypeError:               # not exactly the spec's array types: the checked path says which
+                pass
+        return self._checked_pack(instances)
+
+    def _checked_pack(self, instances: tuple) -> np.ndarray:
+        """:meth:`pack` with each group and array checked in Python (one line naming the first wrong one)."""
         table = np.zeros((len(self.groups), self.max_fields, 4), dtype=np.int64)
         for g, (cls, group) in enumerate(zip(self.groups, instances, strict=True)):
             if type(group) is not cls:
@@ -84,6 +101,35 @@ class GroupTable:
                                     f"{getattr(array, 'shape', '')}")
             self._describers[g](table, *group)
         return table
+
+    def _whole_describer(self) -> Any:
+        """A Python function of the groups calling one compiled function of all their arrays, which writes the
+        whole table (a table per problem: one numba dispatch instead of one per group, and no Python test per
+        array). The compiled function takes only the specs' C-contiguous, writable arrays (its one signature,
+        loaded from numba's cache or compiled on the first pack; other types raise TypeError)."""
+        from numba import from_dtype
+
+        name = f"describe_{self.name}"
+        arrays = [f"g{g}_{i}" for g, cls in enumerate(self.groups) for i in range(len(cls.spec))]
+        lines = [f"def {name}({', '.join(arrays)}):",
+                 f"    table = np.zeros(({len(self.groups)}, {self.max_fields}, 4), dtype=np.int64)"]
+        for g, cls in enumerate(self.groups):
+            for i, (_, _, ndim) in enumerate(cls.spec):
+                lines.append(f"    table[{g}, {i}, 0] = g{g}_{i}.ctypes.data")
+                lines.extend(f"    table[{g}, {i}, {1 + d}] = g{g}_{i}.shape[{d}]" for d in range(ndim))
+        lines.append("    return table")
+        namespace: dict[str, Any] = {"__name__": __name__, "np": np}     # numba's cache finds the module by it
+        exec(compile("\n".join(lines) + "\n", __file__, "exec"), namespace)
+        compiled = jit(namespace[name])
+        compiled.compile(types.int64[:, :, ::1](*(types.Array(from_dtype(dtype), ndim, "C")
+                                                  for cls in self.groups for _, dtype, ndim in cls.spec)))
+        compiled.disable_compile()
+        groups = ", ".join(f"g{g}" for g in range(len(self.groups)))
+        spread = ", ".join(f"*g{g}" for g in range(len(self.groups)))
+        caller: dict[str, Any] = {"compiled": compiled}
+        exec(f"def describe({groups}):\n    return compiled({spread})\n", caller)
+        self._whole, self.whole_describer = caller["describe"], compiled
+        return self._whole
 
     def _describer(self, cls: type) -> Any:
         """The compiled function writing group ``cls``'s rows of a table: per array its address and shape, in
