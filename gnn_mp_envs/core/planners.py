@@ -19,7 +19,7 @@ import numpy as np
 from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, MEET_A, MEET_B, RRT_LOOP, SOLVED,
                                    LoopArrays, TreeArrays, compiled_loop)
 from gnn_mp_envs.core.problem import Problem
-from gnn_mp_envs.core.tree import TreeStore, path_nodes
+from gnn_mp_envs.core.tree import TreeStore, solution_rows
 from gnn_mp_envs.utils.compiled import announce_compilation
 
 
@@ -102,9 +102,8 @@ class TreePlanner:
         """The solution through node ``head`` (from its root) and, for BiRRT, from ``tail``'s parent to its
         root (:func:`~gnn_mp_envs.core.tree.path_nodes`); its length is the two nodes' costs-to-come."""
         t = self.tree
-        nodes = path_nodes(t.parent, head, tail)
-        length = float(t.cost[head]) + float(t.cost[tail]) if tail >= 0 else float(t.cost[head])
-        return Solution(states=t.states[nodes], controls=t.controls[nodes], length=length, nodes=nodes)
+        nodes, states, controls, length = solution_rows(t.parent, t.states, t.controls, t.cost, head, tail)
+        return Solution(states=states, controls=controls, length=length, nodes=nodes)
 
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
