@@ -23,6 +23,21 @@ from gnn_mp_envs.robots.world import CONTACT_DISTANCE, RobotWorld
 RESOLUTION = 0.01
 
 
+#: The padded joint limits of the problems planned so far, by their limits' bytes (one entry per robot).
+_PADDED: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _padded_bounds(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(low - 1e-12, high + 1e-12)``, the same array objects for every problem of the same limits (never written:
+    private to the problems): the checker's compiled kernel, which holds them, then serves problem after problem
+    without being rebuilt."""
+    key = low.tobytes() + high.tobytes()
+    padded = _PADDED.get(key)
+    if padded is None:
+        padded = _PADDED.setdefault(key, (low - 1e-12, high + 1e-12))
+    return padded
+
+
 class JointSpaceProblem(Problem):
     """Joint-space planning for the world's robot (bounds: its joint limits) in one scene of a
     :class:`RobotWorld`, checked by ``checker``; ``task``: the task name results are reported under,
@@ -49,8 +64,7 @@ class JointSpaceProblem(Problem):
         self._family = family if family is not None else (scene.family if isinstance(scene, Scene) else None)
         self._shape = (self.state_dim,)
         # NaN fails both comparisons, so these bounds tests also reject non-finite states.
-        self._low = self.low - 1e-12
-        self._high = self.high + 1e-12
+        self._low, self._high = _padded_bounds(self.low, self.high)
         # distance's metric (unweighted, no periodic joint), for the planner's compiled nearest scan
         self.nearest_metric = (np.ones(self.state_dim), np.zeros(self.state_dim, dtype=np.bool_))
         checker.prepare(scene)      # build the checker and load the scene now, not in the first (timed) check

@@ -470,7 +470,10 @@ class SphereChecker:
         roots, levers = self._scene_roots(excused)
         self.spheres = self.spheres._replace(link_root=roots, reach=levers)
         self.forget_edge_ends()         # clearances of the last scene's states
-        self._grow(max(self.scratch.known.shape[0], 130))
+        if self.scratch.known.shape[0] < 130:
+            self._grow(130)
+        else:                           # the scratch is written before it is read: only the table is new
+            self._pack()
 
     def forget_edge_ends(self) -> None:
         """Forget the edge ends remembered with their walks' clearances (the memo): the next edges walk as
@@ -482,7 +485,13 @@ class SphereChecker:
         """(Re)build the table of addresses the kernel reads (:func:`~gnn_mp_envs.robots.spheres.kernel.pack`)
         after an array was replaced (a scene, more scratch); the arrays are kept alive with it."""
         groups = (self.kinematics, self.spheres, self.tables, self.obstacles, self.scratch, self.memo)
-        self._packed, self._packed_groups = kernel.pack(groups), groups
+        table = kernel.pack(groups)
+        packed = getattr(self, "_packed", None)
+        if packed is not None and packed.shape == table.shape:
+            packed[...] = table         # the same table object: a compiled kernel that holds it stays valid
+        else:
+            self._packed = table
+        self._packed_groups = groups
 
     def _grow_for(self, length: float, resolution: float) -> None:
         """Room for an edge of ``length`` checked every ``resolution`` (the kernel answered 0: too few)."""
