@@ -91,13 +91,20 @@ def active_target(obs: Mapping) -> np.ndarray:
     return obs["start"] if int(np.asarray(obs["active_tree"]).reshape(-1)[0]) == 1 else obs["goal"]
 
 
-def batch_active_trees(obs: Mapping, k: int) -> np.ndarray:
-    """The tree each of the next ``k`` samples extends, from one observation: BiRRT (the goal tree's
-    root is node 1) swaps trees after every sample, RRT extends tree 0. The one place this rule is
-    written (``gym.make(id, samples_per_step=K)`` consumes a batch this way)."""
+def batch_tree_rule(obs: Mapping) -> tuple[int, bool]:
+    """``(active tree, alternates)`` of one observation: sample ``j`` of the next batch extends tree
+    ``(active + j) % 2`` where BiRRT alternates (the goal tree's root is node 1: it swaps trees after every
+    sample), else tree 0 (RRT). The one place this rule is written (``gym.make(id, samples_per_step=K)``
+    consumes a batch this way; :func:`batch_active_trees` spells it out)."""
     active = int(np.asarray(obs["active_tree"]).reshape(-1)[0])
     features, n = np.asarray(obs["node_features"]), int(np.asarray(obs["num_nodes"]).reshape(-1)[0])
-    if n >= 2 and features[1, -1] == 1:
+    return active, bool(n >= 2 and features[1, -1] == 1)
+
+
+def batch_active_trees(obs: Mapping, k: int) -> np.ndarray:
+    """The tree each of the next ``k`` samples extends, from one observation (:func:`batch_tree_rule`)."""
+    active, alternates = batch_tree_rule(obs)
+    if alternates:
         return (active + np.arange(k)) % 2
     return np.zeros(k, dtype=np.int64)
 
