@@ -143,11 +143,10 @@ class PybulletChecker:
 
     def steer(self, scene: Any, a: np.ndarray, target: np.ndarray, step: float, resolution: float,
               low: np.ndarray, high: np.ndarray, bisection: bool) -> tuple[np.ndarray, float, bool, int]:
-        d = target - a
         dist = joint_distance(target, a)
         if dist < ZERO_LENGTH:
             return a, dist, False, 0
-        x_new = np.array(target, dtype=np.float64) if dist <= step else a + (step / dist) * d
+        x_new = np.array(target, dtype=np.float64) if dist <= step else a + (step / dist) * (target - a)
         valid, checks = self.check_motion(scene, a, x_new, resolution, low, high, bisection)
         return x_new, dist, valid, checks
 
