@@ -42,6 +42,27 @@ def test_goal_bias_targets_the_active_trees_root():
     np.testing.assert_allclose(sampler.act(obs), obs["start"])
 
 
+@pytest.mark.parametrize("env_id", ["GNNMP/Maze2DBiRRT-v0", "GNNMP/Maze2DRRT-v0"])
+def test_a_goal_bias_batch_is_its_samples_one_act_each(env_id):
+    """``act_batch(obs, k)`` (one compiled call) gives, bit for bit, what ``k`` calls of ``act`` give from the
+    same stream, sample ``j`` with the tree it extends active (BiRRT alternates from the observation's tree,
+    RRT extends tree 0); a batch of observations is refused in one line."""
+    env, low, high = _bounds(env_id)
+    batched, single = (load_sampler("goal-bias", bounds=(low, high), seed=4, goal_bias=0.4) for _ in range(2))
+    obs, _ = env.reset(seed=2)
+    for _ in range(3):
+        out = batched.act_batch(obs, 64)
+        alternates = env_id.endswith("BiRRT-v0")
+        for j in range(64):
+            view = dict(obs, active_tree=np.array([(obs["active_tree"][0] + j) % 2 if alternates else 0]))
+            np.testing.assert_array_equal(out[j].view(np.int32), single.act(view).view(np.int32))
+        obs, *_ = env.step(out[0])
+    assert 10 < np.sum([np.array_equal(x, obs["goal"]) or np.array_equal(x, obs["start"]) for x in out]) < 45
+    stacked = {k: np.stack([v, v]) for k, v in obs.items()}
+    with pytest.raises(ValueError, match="act_batch takes one observation"):
+        batched.act_batch(stacked, 4)
+
+
 def test_goal_bias_rate():
     env, low, high = _bounds("GNNMP/Maze2DRRT-v0")
     sampler = load_sampler("goal-bias", bounds=(low, high), seed=0, goal_bias=0.2)
