@@ -343,3 +343,27 @@ def test_times_from_one_millisecond_up_keep_three_significant_figures():
               "runs": {}}
     row = bm.format_table(report).splitlines()[3]
     assert "1.28 [0.90, 3.50]" in row and "0.200 / 1.28" in row, row
+
+
+def test_balanced_trees_are_a_flag_for_birrt_tasks(tmp_path, capsys):
+    """``--balance`` plans BiRRT with balanced trees: the table's title and the JSON say so, the runs are those
+    of ``evaluation_env(task, balance=True)`` counter for counter, and a task planned with RRT refuses the flag
+    in one line."""
+    from agents.samplers import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env, plan_problem
+    out = tmp_path / "b.json"
+    assert cli.main(["benchmark", "--task", "maze2d", "--samplers", "uniform", "--problems", "1", "--no-progress",
+                     "--balance", "--no-recheck"]) == 2                      # maze2d's benchmark planner is RRT
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--balance applies to BiRRT's two trees" in err[0], err
+    assert cli.main(["benchmark", "--task", "panda-mbm", "--samplers", "uniform", "--problems", "2", "--no-progress",
+                     "--balance", "--json", str(out)]) == 0
+    assert "balanced trees" in capsys.readouterr().out
+    report = json.loads(out.read_text())
+    assert report["balance"] is True
+    env = evaluation_env("panda-mbm", balance=True)
+    sampler = load_sampler("uniform", task="panda-mbm")
+    for run in report["runs"]["uniform"]:
+        mine = plan_problem(env, sampler, run["problem"], report["seed"]).counters()
+        assert all(mine[k] == run[k] for k in ("nodes_expanded", "edges", "collision_checks", "iterations"))
+    env.close()

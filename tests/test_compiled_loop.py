@@ -130,7 +130,8 @@ def test_a_node_of_equal_distance_but_larger_square_still_wins_by_its_index():
 
 # ---------------------------------------------------------------------- the loop against the reference
 CASES = [("maze2d", "rrt", 6), ("maze2d", "birrt", 6), ("panda-mbm", "birrt", 4), ("panda-mbm", "rrt", 2),
-         ("ur5-mbm", "birrt", 3), ("fetch-mbm", "birrt", 2)]
+         ("ur5-mbm", "birrt", 3), ("fetch-mbm", "birrt", 2), ("maze2d", "birrt-balanced", 6),
+         ("panda-mbm", "birrt-balanced", 3), ("ur5-mbm", "birrt-balanced", 2), ("fetch-mbm", "birrt-balanced", 2)]
 
 
 def _grow(planner, samples, batch):
@@ -152,8 +153,9 @@ def test_the_compiled_loop_grows_the_reference_trees(task, planner, problems):
     try:
         for i in range(problems):
             pa, pb = t.problem("test", i), t.problem("test", i)
-            a, b = make_planner(planner, pa, 3000), make_planner(planner, pb, 3000)
-            assert b.compiled
+            name, balance = planner.split("-")[0], planner.endswith("-balanced")
+            a, b = make_planner(name, pa, 3000, balance), make_planner(name, pb, 3000, balance)
+            assert b.compiled and a.balance == b.balance == balance
             rng = np.random.default_rng(i)
             samples = rng.uniform(pa.low, pa.high, (1500, pa.state_dim))
             samples[::9] = pa.goal                   # goal-biased samples: the goal tests and connections
@@ -201,12 +203,16 @@ def test_problems_without_compiled_checks_run_the_python_planner():
 
 
 # ---------------------------------------------------------------------- batches of samples in the env
-@pytest.mark.parametrize("task", ["maze2d", "pendulum", "arm", "panda-mbm", "ur5-mbm", "fetch-mbm"])
-def test_64_samples_per_step_give_the_counters_of_one(task):
-    """The same uniform stream, 64 samples an action or one: the same runs, counter for counter."""
+@pytest.mark.parametrize("task, balance", [("maze2d", False), ("pendulum", False), ("arm", False),
+                                           ("panda-mbm", False), ("ur5-mbm", False), ("fetch-mbm", False),
+                                           ("panda-mbm", True), ("fetch-mbm", True)])
+def test_64_samples_per_step_give_the_counters_of_one(task, balance):
+    """The same uniform stream, 64 samples an action or one: the same runs, counter for counter (BiRRT's
+    balanced trees too: a step's observation names the tree the next sample extends)."""
     from agents.samplers import load_sampler
     from gnn_mp_envs.evaluation import evaluation_env, plan_problem
-    one, batch = evaluation_env(task), evaluation_env(task, samples_per_step=64)
+    extra = {"balance": True} if balance else {}
+    one, batch = evaluation_env(task, **extra), evaluation_env(task, samples_per_step=64, **extra)
     sampler = load_sampler("uniform", task=task, seed=0)
     problems = {"fetch-mbm": 2, "arm": 2, "ur5-mbm": 3}.get(task, 4)
     for i in range(problems):
@@ -261,3 +267,43 @@ def test_a_sampler_that_overrides_act_is_batched_through_its_act():
     halved, plain = Halved(np.zeros(2), np.ones(2), 3), UniformSampler(np.zeros(2), np.ones(2), 3)
     assert halved.samples_per_step == 1 and plain.samples_per_step == 64
     np.testing.assert_array_equal(halved.act_batch(obs, 4), plain.act_batch(obs, 4) / 2)
+
+
+def test_balanced_trees_extend_the_smaller_tree_while_the_other_holds_twice_its_nodes():
+    """The rule (VAMP's RRT-Connect, tree ratio 1), by hand: after extending tree ``a``, the next sample goes to
+    the other tree unless that one holds at least twice ``a``'s nodes; without balance the trees alternate. A
+    planned episode: the observation's ``active_tree`` after every step is that rule applied to its tree sizes."""
+    from gnn_mp_envs.core.loop import next_tree
+    rule = next_tree.py_func
+    sizes = np.array([3, 6])
+    assert rule(0, 1, sizes, True) == 0 and rule(1, 0, sizes, True) == 0         # 6 >= 2 * 3: tree 0 again
+    assert rule(0, 1, np.array([3, 5]), True) == 1 and rule(0, 1, sizes, False) == 1
+    assert rule(1, 0, np.array([1, 1]), True) == 0
+    from agents.samplers import load_sampler
+    from gnn_mp_envs.evaluation import evaluation_env
+    env = evaluation_env("fetch-mbm", "val", balance=True)
+    sampler = load_sampler("uniform", task="fetch-mbm", seed=1)
+    obs, _ = env.reset(seed=1, options={"index": 3})
+    swaps = stays = 0
+    for _ in range(400):
+        extended = int(obs["active_tree"][0])
+        obs, _, terminated, truncated, _ = env.step(sampler.act(obs))
+        if terminated or truncated:
+            break
+        sizes = np.bincount(obs["node_features"][: int(obs["num_nodes"][0]), -1].astype(int), minlength=2)
+        assert obs["active_tree"][0] == rule(extended, 1 - extended, sizes, True)
+        swaps, stays = swaps + (obs["active_tree"][0] != extended), stays + (obs["active_tree"][0] == extended)
+    assert swaps and stays                                       # both happened: the test saw the rule act
+    env.close()
+
+
+def test_balance_is_refused_where_there_is_one_tree():
+    from gnn_mp_envs.evaluation import evaluation_env
+    with pytest.raises(ValueError, match="balance applies to BiRRT's two trees"):
+        evaluation_env("maze2d", planner="rrt", balance=True)
+    with pytest.raises(ValueError, match="balance must be True or False"):
+        evaluation_env("maze2d", planner="birrt", balance="yes")
+    t = make_task("maze2d")
+    with pytest.raises(ValueError, match="balance applies to BiRRT's two trees; planner 'rrt'"):
+        make_planner("rrt", t.problem("test", 0), 100, True)
+    t.close()

@@ -87,14 +87,24 @@ def _add(state, parent, tree, cost, t, ix):
 
 
 @jit(inline=True)
+def next_tree(extended, other, sizes, balance):
+    """BiRRT's tree for the next sample after one that extended ``extended``: the ``other`` (they alternate),
+    unless ``balance`` and the other holds at least twice as many nodes (``sizes``: nodes per tree): then the
+    smaller one again (VAMP's balanced RRT-Connect, tree ratio 1). The one place this rule is written."""
+    if balance and sizes[other] >= 2 * sizes[extended]:
+        return extended
+    return other
+
+
+@jit(inline=True)
 def _nearest(x, tree, t, ix):
     return index_nearest(x, tree, ix)[0]
 
 
-def _plan(samples, planner, active, budget, step, goal_tolerance, table, context):
+def _plan(samples, planner, active, budget, step, goal_tolerance, balance, table, context):
     """Consume ``samples`` in order (at most ``budget`` of them) as the Python planner's ``step``, on the
     arrays of ``table`` (:data:`LAYOUT`); the loop's ``result``: samples consumed, solved, meeting nodes.
-    Returns the active tree after the last sample."""
+    ``balance``: BiRRT's trees are balanced (:func:`next_tree`). Returns the active tree after the last sample."""
     t, ix, lp = view_tree(table), view_index(table), view_loop(table)
     states, size, goal, x_new, distance, counters, result = t.states, t.size, lp.goal, lp.x_new, lp.distance, \
         lp.counters, lp.result
@@ -149,7 +159,7 @@ def _plan(samples, planner, active, budget, step, goal_tolerance, table, context
                     acc += v * v
                 if math.sqrt(acc) < CONNECTED:
                     result[SOLVED], result[MEET_A], result[MEET_B] = 1, i, near
-                    return b
+                    return b                    # solved: the other tree (the caller reads the extended one off it)
                 if size[0] >= capacity:
                     break
                 r = _steer(states[near], target, step, context, x_new, distance)    # noqa: F821
@@ -161,7 +171,7 @@ def _plan(samples, planner, active, budget, step, goal_tolerance, table, context
                     break
                 d = distance[0]
                 near = _add(x_new, near, b, d if d <= step else step, t, ix)
-        active = b
+        active = next_tree(a, b, t.nodes_in, balance)
     return active
 
 

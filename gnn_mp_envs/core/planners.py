@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnn_mp_envs.core.loop import (BIRRT_LOOP, CHECKS, CONSUMED, EDGES, LAYOUT, MEET_A, MEET_B, RRT_LOOP, SOLVED,
-                                   LoopArrays, TreeArrays, compiled_loop)
+                                   LoopArrays, TreeArrays, compiled_loop, next_tree)
 from gnn_mp_envs.core.problem import Problem
 from gnn_mp_envs.core.tree import TreeStore, solution_rows
 from gnn_mp_envs.utils.compiled import announce_compilation
@@ -66,6 +66,8 @@ class TreePlanner:
     """Shared bookkeeping of RRT and BiRRT: the node store, roots and the solution."""
 
     num_trees = 1
+    #: BiRRT's trees balanced (:func:`~gnn_mp_envs.core.loop.next_tree`); RRT has one tree.
+    balance = False
 
     def __init__(self, problem: Problem, max_nodes: int) -> None:
         self.problem = problem
@@ -140,7 +142,7 @@ class TreePlanner:
         first = int(tree._size[0])
         counters[0] = counters[1] = 0
         self.active_tree = self._loop(samples, self.loop_kind, self.active_tree, budget, problem.step_size,
-                                      problem.goal_tolerance, self._table, kernel.context)
+                                      problem.goal_tolerance, self.balance, self._table, kernel.context)
         problem.edges_checked += int(counters[EDGES])
         problem.collision_checks += int(counters[CHECKS])
         consumed, solved = int(result[CONSUMED]), bool(result[SOLVED])
@@ -221,15 +223,23 @@ class BiRRT(TreePlanner):
     Tree 0 grows from the start, tree 1 from the goal. The sample passed to
     :meth:`step` extends the *active* tree; the other tree then greedily connects
     toward the new node, and the roles swap, so consecutive samples alternate trees.
+    With ``balance`` (VAMP's RRT-Connect default) the roles swap only while the other
+    tree holds fewer than twice the nodes of the one just extended: a tree boxed in
+    (a goal inside a shelf) is extended until it has grown, instead of every other
+    sample going to the large tree (:func:`~gnn_mp_envs.core.loop.next_tree`). The
+    observation's ``active_tree`` is the tree the next sample extends either way.
     """
 
     num_trees = 2
     loop_kind = BIRRT_LOOP
 
-    def __init__(self, problem: Problem, max_nodes: int) -> None:
+    def __init__(self, problem: Problem, max_nodes: int, balance: bool = False) -> None:
         if not problem.geometric:
             raise ValueError(f"BiRRT needs straight-line (geometric) edges; the {problem.task} "
                              "problem is kinodynamic: use planner='rrt'")
+        if not isinstance(balance, (bool, np.bool_)):
+            raise ValueError(f"balance must be True or False, got {balance!r}")
+        self.balance = bool(balance)
         super().__init__(problem, max_nodes)
         self.tree.add(problem.start, -1, 0)
         self.tree.add(problem.goal, -1, 1)
@@ -263,7 +273,8 @@ class BiRRT(TreePlanner):
             if j is not None:
                 self._solve(i, j, a)
                 result.solved = True
-        self.active_tree = b
+        # solved: the other tree, as the compiled loop leaves it (the episode is over)
+        self.active_tree = b if result.solved else next_tree.py_func(a, b, self.tree._tree_size, self.balance)
         return result
 
     def _solve(self, i: int, j: int, tree: int) -> None:
@@ -277,10 +288,14 @@ class BiRRT(TreePlanner):
 PLANNERS: dict[str, type[TreePlanner]] = {"rrt": RRT, "birrt": BiRRT}
 
 
-def make_planner(name: str, problem: Problem, max_nodes: int) -> TreePlanner:
-    """Build a planner by name (``rrt`` or ``birrt``)."""
+def make_planner(name: str, problem: Problem, max_nodes: int, balance: bool = False) -> TreePlanner:
+    """Build a planner by name (``rrt`` or ``birrt``); ``balance``: BiRRT's balanced trees (:class:`BiRRT`)."""
     try:
         cls = PLANNERS[name]
     except KeyError:
         raise ValueError(f"unknown planner {name!r}; known: {sorted(PLANNERS)}") from None
+    if cls is BiRRT:
+        return cls(problem, max_nodes, balance)
+    if balance:
+        raise ValueError(f"balance applies to BiRRT's two trees; planner {name!r} grows one")
     return cls(problem, max_nodes)

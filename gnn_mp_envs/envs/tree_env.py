@@ -84,6 +84,9 @@ class TreePlanningEnv(gym.Env):
     (BiRRT alternating trees), in one compiled call where the problem's steer and checks are
     compiled (:mod:`gnn_mp_envs.core.loop`), until a solution, a full tree or the iteration
     budget; the observation and info come after the batch (``info["samples_consumed"]``).
+    ``balance=True`` (BiRRT only) balances the two trees as VAMP's RRT-Connect does: the trees swap
+    after a sample only while the other holds fewer than twice the nodes of the one just extended,
+    so a tree boxed in (a goal inside a shelf) gets the samples until it has grown.
 
     ## Action space
     ``Box(low, high, (d,), float32)``: a state in the task's sampling bounds, not
@@ -91,7 +94,8 @@ class TreePlanningEnv(gym.Env):
     ``samples_per_step=K > 1``, ``(K, d)``: ``K`` such states.
     Out-of-bounds actions are clipped to the bounds; a NaN/inf action or one of the wrong
     shape raises ``ValueError``. For BiRRT the action extends the tree named by the
-    observation's ``active_tree`` (sample ``k`` of a batch: the tree ``k`` swaps later).
+    observation's ``active_tree`` (sample ``k`` of a batch: the tree ``k`` swaps later; with
+    ``balance``, the tree the sizes pick then, which a sampler cannot know before the batch).
 
     ## Observation space
     The tree as a graph padded to ``max_nodes`` (see :mod:`gnn_mp_envs.envs.observation`):
@@ -135,10 +139,17 @@ class TreePlanningEnv(gym.Env):
                  task_kwargs: dict[str, Any] | None = None, render_mode: str | None = None,
                  step_penalty: float = 1.0, success_reward: float = 10.0,
                  collision_check_cost: float = 0.0, copy_observations: bool = True, node_cost: float = 0.0,
-                 checker: str | None = None, samples_per_step: int = 1) -> None:
+                 checker: str | None = None, samples_per_step: int = 1, balance: bool = False) -> None:
         spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
+        if not isinstance(balance, (bool, np.bool_)):
+            raise ValueError(f"balance must be True or False, got {balance!r}")
+        if balance and planner != "birrt":
+            raise ValueError(f"balance applies to BiRRT's two trees; planner {planner!r} grows one (use planner='birrt')")
+        #: BiRRT's trees balanced (:class:`~gnn_mp_envs.core.planners.BiRRT`): the next sample extends the smaller
+        #: tree while the other holds twice its nodes (the observation's ``active_tree`` says which).
+        self.balance = bool(balance)
         if split not in SPLIT_SEEDS:
             raise ValueError(f"unknown split {split!r}; known: {sorted(SPLIT_SEEDS)}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -232,7 +243,7 @@ class TreePlanningEnv(gym.Env):
             problem = self.task.problem(self.split, integer("options['index']", index, 0))
         problem.reset_counters()
         self.problem = problem
-        self.planner = make_planner(self.planner_name, problem, self.max_nodes)
+        self.planner = make_planner(self.planner_name, problem, self.max_nodes, self.balance)
         k = self.samples_per_step
         self._bounds = ((problem.low, problem.high) if k == 1 else
                         (np.tile(problem.low, k), np.tile(problem.high, k)))

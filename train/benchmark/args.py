@@ -94,6 +94,8 @@ class BenchmarkArgs:
                             "default: the task's benchmark family, the held-out one where it has one)")
     checker: str | None = arg(None, f"collision checker of a task with several ({builtin_tasks(lambda s: s.checkers)}: "
                               "spheres or pybullet; default: the task's first); OMPL rows use the same")
+    balance: bool = arg(False, "balance BiRRT's two trees as VAMP's RRT-Connect does (the next sample extends the "
+                        "smaller tree while the other holds twice its nodes; tasks planned with BiRRT)")
     workers: int = arg(1, "worker processes over problems (with --ray: Ray actors); at most one per job",
                        parse=worker_count)
     ray: str | None = arg(None, "run the jobs as Ray actors: no ADDRESS starts a local Ray instance with "
@@ -156,6 +158,8 @@ def env_kwargs_for(args: BenchmarkArgs) -> dict[str, Any]:
         kwargs["scene"] = args.scene
     if args.checker is not None:
         kwargs["checker"] = args.checker
+    if args.balance:
+        kwargs["balance"] = True
     return kwargs
 
 
@@ -229,6 +233,8 @@ def validate_args(args: BenchmarkArgs) -> None:
             args.checker = checker_name(args.checker or spec.checkers[0])
         except ValueError as exc:
             raise BenchmarkError(f"--checker: {exc}") from None
+    if args.balance and spec.planner() != "birrt":
+        raise BenchmarkError(f"--balance applies to BiRRT's two trees; {args.task} is planned with {spec.planner()}")
     if not 1 <= args.problems <= MAX_PROBLEMS:
         raise BenchmarkError(f"--problems must be in [1, {MAX_PROBLEMS:,}], got {args.problems}")
     if not 0 <= args.seed < MAX_SEED:

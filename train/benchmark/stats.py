@@ -66,6 +66,7 @@ def build_report(args: BenchmarkArgs, runs: dict[str, list[dict[str, Any]]]) -> 
         "time_limit_s": time_limit_s(args),   # the time budget (OMPL rows: their solve limit)
         "scene": args.scene,
         "checker": args.checker,
+        **({"balance": True} if getattr(args, "balance", False) else {}),   # --balance: BiRRT's balanced trees
         "samplers": list(args.samplers),
         "rechecked": bool(args.recheck),      # False: --no-recheck, success unverified
         "runs": {name: [{k: v for k, v in r.items() if k != "snapshots"} for r in runs[name]]

@@ -35,7 +35,7 @@ from train.workers import WorkerPool
 class SuiteOptions:
     """Flags of ``gnn-mp benchmark --suite NAME`` (the other benchmark flags give seed and workers)."""
 
-    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm, mbm-vamp); writes "
+    suite: str | None = arg(None, "run a named suite instead (default, smoke, ood, ood-val, mbm, mbm-vamp, mbm-vamp-balanced); writes "
                             "<task>[-<scene>].json/.png/.txt and summary.md (ood: ood.md) to --out")
     out: Path | None = arg(None, "output directory of --suite (default: results)")
     ompl: bool = arg(True, "--suite: skip OMPL rows even if installed")
@@ -61,6 +61,7 @@ class SuiteEntry:
     vamp: tuple[str, ...] = ()
     split: str = "test"
     checker: str | None = None         # None: the task's default (TaskSpec.checkers[0], where it has several)
+    balance: bool = False              # BiRRT's balanced trees (--balance)
     #: also report as the field does: <name>_field.txt (solved as every table counts it, median / p95 time,
     #: iterations, checks, initial path length; per scene) and <name>_success_vs_time.png
     field: bool = False
@@ -108,6 +109,17 @@ SUITES: dict[str, list[SuiteEntry]] = {
         SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn"], problems=210, vamp=("rrtconnect",), field=True),
         SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn"], problems=206, vamp=("rrtconnect",), field=True),
         SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, vamp=("rrtconnect",), field=True),
+    ],
+    # The same with BiRRT's trees balanced as VAMP's RRT-Connect balances its own (--balance): the planner
+    # VAMP runs, with our checker. The learned rows aim a batch's samples at the trees alternating, which
+    # balanced trees do not follow after the batch's first sample.
+    "mbm-vamp-balanced": [
+        SuiteEntry("panda-mbm", ["uniform", "goal-bias", "gnn"], problems=210, vamp=("rrtconnect",), field=True,
+                   balance=True),
+        SuiteEntry("ur5-mbm", ["uniform", "goal-bias", "gnn"], problems=206, vamp=("rrtconnect",), field=True,
+                   balance=True),
+        SuiteEntry("fetch-mbm", ["uniform", "goal-bias", "gnn"], problems=197, vamp=("rrtconnect",), field=True,
+                   balance=True),
     ],
 }
 #: Problems per out-of-distribution (and validation) kind.
@@ -173,7 +185,7 @@ def _run_entries(name: str, out: Path, seed: int, workers: int, progress: bool, 
             samplers += [VAMP_PREFIX + p for p in entry.vamp]
         args = BenchmarkArgs(task=entry.task, samplers=samplers, problems=entry.problems, seed=seed,
                              max_nodes=entry.max_nodes, scene=entry.scene, workers=workers, split=entry.split,
-                             checker=entry.checker,
+                             checker=entry.checker, balance=entry.balance,
                              json=out / f"{entry.name}.json", plot=out / f"{entry.name}.png",
                              render=render,
                              ompl_log=out / "ompl" if with_ompl else None,

@@ -102,6 +102,7 @@ def format_table(report: dict[str, Any]) -> str:
     title = (f"{report['task']} ({report['env_id']}, max_nodes={report['max_nodes']}"
              + (f", scene={report['scene']}" if report.get("scene") else "")
              + (f", checker={report['checker']}" if report.get("checker") else "")
+             + (", balanced trees" if report.get("balance") else "")
              + f"): {report['problems']} {'held-out' if report.get('split', 'test') == 'test' else report['split']} "
                f"problems, seed {report['seed']}")
     from gnn_mp_envs.registration import TASK_SPECS
