@@ -237,9 +237,7 @@ class BiRRT(TreePlanner):
         if not problem.geometric:
             raise ValueError(f"BiRRT needs straight-line (geometric) edges; the {problem.task} "
                              "problem is kinodynamic: use planner='rrt'")
-        if not isinstance(balance, (bool, np.bool_)):
-            raise ValueError(f"balance must be True or False, got {balance!r}")
-        self.balance = bool(balance)
+        self.balance = checked_balance("birrt", balance)
         super().__init__(problem, max_nodes)
         self.tree.add(problem.start, -1, 0)
         self.tree.add(problem.goal, -1, 1)
@@ -288,14 +286,22 @@ class BiRRT(TreePlanner):
 PLANNERS: dict[str, type[TreePlanner]] = {"rrt": RRT, "birrt": BiRRT}
 
 
+def checked_balance(planner: str, balance: bool) -> bool:
+    """``balance`` for planner ``planner`` (a name of :data:`PLANNERS`): a bool, and True only for BiRRT's two
+    trees; else a one-line ValueError (the environment asks before it builds its task)."""
+    if not isinstance(balance, (bool, np.bool_)):
+        raise ValueError(f"balance must be True or False, got {balance!r}")
+    if balance and planner != "birrt":
+        raise ValueError(f"balance applies to BiRRT's two trees; planner {planner!r} grows one (use planner='birrt')")
+    return bool(balance)
+
+
 def make_planner(name: str, problem: Problem, max_nodes: int, balance: bool = False) -> TreePlanner:
     """Build a planner by name (``rrt`` or ``birrt``); ``balance``: BiRRT's balanced trees (:class:`BiRRT`)."""
     try:
         cls = PLANNERS[name]
     except KeyError:
         raise ValueError(f"unknown planner {name!r}; known: {sorted(PLANNERS)}") from None
-    if cls is BiRRT:
-        return cls(problem, max_nodes, balance)
-    if balance:
-        raise ValueError(f"balance applies to BiRRT's two trees; planner {name!r} grows one")
+    if checked_balance(name, balance):
+        return cls(problem, max_nodes, True)
     return cls(problem, max_nodes)

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from gnn_mp_envs.core.planners import PLANNERS, make_planner
+from gnn_mp_envs.core.planners import PLANNERS, checked_balance, make_planner
 from gnn_mp_envs.core.problem import InvalidProblemError, Problem
 from gnn_mp_envs.envs.observation import GraphObservation, keep_freed_heap, obstacle_shape, observation_space
 from gnn_mp_envs.registration import make_task, task_spec
@@ -143,13 +143,9 @@ class TreePlanningEnv(gym.Env):
         spec = task_spec(task)
         if planner not in PLANNERS:
             raise ValueError(f"unknown planner {planner!r}; known: {sorted(PLANNERS)}")
-        if not isinstance(balance, (bool, np.bool_)):
-            raise ValueError(f"balance must be True or False, got {balance!r}")
-        if balance and planner != "birrt":
-            raise ValueError(f"balance applies to BiRRT's two trees; planner {planner!r} grows one (use planner='birrt')")
         #: BiRRT's trees balanced (:class:`~gnn_mp_envs.core.planners.BiRRT`): the next sample extends the smaller
         #: tree while the other holds twice its nodes (the observation's ``active_tree`` says which).
-        self.balance = bool(balance)
+        self.balance = checked_balance(planner, balance)
         if split not in SPLIT_SEEDS:
             raise ValueError(f"unknown split {split!r}; known: {sorted(SPLIT_SEEDS)}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
