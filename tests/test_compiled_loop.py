@@ -176,19 +176,23 @@ def test_the_compiled_loop_grows_the_reference_trees(task, planner, problems):
         t.close()
 
 
-def test_a_run_asks_about_compiling_the_loop_it_calls_right_before(monkeypatch):
+def test_a_planner_asks_about_compiling_the_loop_it_then_calls(monkeypatch):
     """A first use compiles the loop with the problem's steer and checks (a minute or more for the sphere
-    checker): the planner asks whether to say so about the loop it then calls, and only then."""
+    checker): a planner, made ready to plan when it is made, asks then whether to say so about the loop its
+    runs call, and its runs do not ask again for the same kernel."""
     import gnn_mp_envs.core.planners as planners
     t = make_task("maze2d")
     try:
-        planner = make_planner("rrt", t.problem("test", 0), 100)
-        asked, loop = [], planner._loop
+        asked = []
         monkeypatch.setattr(planners, "announce_compilation", lambda dispatcher, *words: asked.append(dispatcher))
+        planner = make_planner("rrt", t.problem("test", 0), 100)
+        loop = planner._loop
+        assert loop is not None and asked == [loop] and planner._table is not None
+        calls = []
+        planner._loop = lambda *args: calls.append(1) or loop(*args)
         planner.run(np.full((3, 2), 0.5))
-        assert loop is None and asked == [planner._loop] and planner._loop is not None
         planner.run(np.full((3, 2), 0.4))
-        assert asked == [planner._loop]             # the same kernel: asked once per planner
+        assert asked == [loop] and calls == [1, 1]  # the same kernel: asked once per planner, its loop called
     finally:
         t.close()
 

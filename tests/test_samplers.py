@@ -310,10 +310,10 @@ def test_a_sampler_refuses_observations_of_another_state_dimension():
 def test_torch_compatible_stream_makes_torchs_draws():
     """The classical samplers and the shipped RL policies draw torch's values without torch: rand and
     randn after manual_seed, in any interleaving (randn's cached second value included), across the
-    stream's block boundaries (draws are taken BLOCK at a time) and with a draw longer than a block; a
-    stream reseeded (a sampler's reset) after draws that left a block and a cached value half used
-    draws as a new one."""
-    from agents.samplers.streams import BLOCK, TorchCompatibleStream
+    generator's twists (a state makes WORDS draws) and with a draw longer than a state; a stream
+    reseeded (a sampler's reset) after draws that left a state and a cached value half used draws as a
+    new one."""
+    from agents.samplers.streams import WORDS, TorchCompatibleStream
     calls = [("rand", 2), ("randn", 2), ("randn", 3), ("rand", 1), ("randn", 1), ("randn", 6), ("rand", 5)]
     used = TorchCompatibleStream(123)
     for seed in (0, 7, 2**32 - 1):
@@ -322,12 +322,39 @@ def test_torch_compatible_stream_makes_torchs_draws():
         used.reseed(seed)
         for stream in (TorchCompatibleStream(seed), used):
             g = torch.Generator().manual_seed(seed)
-            for kind, n in calls * 40 + [("rand", 3 * BLOCK + 5)] + calls:     # ~4 blocks of draws
+            for kind, n in calls * 40 + [("rand", 3 * WORDS + 5)] + calls:     # ~4 twists of draws
                 ours = stream.unit(n) if kind == "rand" else stream.normal(n)
                 theirs = (torch.rand if kind == "rand" else torch.randn)(n, generator=g).numpy()
                 np.testing.assert_array_equal(ours, theirs)
     with pytest.raises(ValueError, match="16"):
         TorchCompatibleStream(0).normal(16)
+
+
+def test_torch_compatible_stream_is_numpys_mersenne_twister():
+    """The compiled generator's raw words are numpy's MT19937 seeded as RandomState seeds it (every word
+    over several twists, seeds at both ends of the 32-bit range); ``uniform`` is the float32 numpy
+    operations on ``low24``, bit for bit; a stream of ``seed=None`` continues a fresh numpy state."""
+    from agents.samplers.streams import WORDS, TorchCompatibleStream
+    for seed in (0, 1, 5489, 2**31, 2**32 - 1):
+        bits = np.random.MT19937()
+        np.random.RandomState(bits).seed(seed)
+        stream = TorchCompatibleStream(seed)
+        words = np.concatenate([stream.raw(n) for n in (1, WORDS - 1, 5, 3 * WORDS)])
+        np.testing.assert_array_equal(words, bits.random_raw(len(words)))
+    low = np.array([-2.9, 0.0, -1e-3, 7.5], np.float32)
+    span = np.array([5.8, 1.0, 2e-3, 0.25], np.float32)
+    scale = span * np.float32(2.0 ** -24)
+    a, b = TorchCompatibleStream(11), TorchCompatibleStream(11)
+    for k in (1, 3, 64, 200):
+        expected = b.low24(k * 4).reshape(k, 4) * scale
+        expected += low
+        np.testing.assert_array_equal(a.uniform(k, low, scale).reshape(k, 4), expected)
+    fresh = TorchCompatibleStream(None)
+    bits = np.random.MT19937()
+    bits.state = {"bit_generator": "MT19937", "state": {"key": fresh.state[:WORDS].astype(np.uint32),
+                                                         "pos": int(fresh.state[WORDS])}}
+    np.testing.assert_array_equal(fresh.raw(2 * WORDS), bits.random_raw(2 * WORDS))
+    assert not np.array_equal(TorchCompatibleStream(None).state, TorchCompatibleStream(None).state)
 
 
 def test_the_thread_policy():

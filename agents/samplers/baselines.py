@@ -52,16 +52,12 @@ class UniformSampler(_TorchCompatible):
 
     def act_batch(self, obs: Mapping, k: int) -> np.ndarray:
         """``k`` uniform states in one draw: the values of ``k`` calls of :meth:`act`."""
-        x = self.rng.low24(k * self.state_dim).reshape(k, self.state_dim) * self._scale32
-        x += self.low32
-        return x
+        return self.rng.uniform(k, self.low32, self._scale32).reshape(k, self.state_dim)
 
     def act(self, obs: Mapping) -> np.ndarray:
         if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without the reshapes
             # (m * 2**-24) * span == m * (span * 2**-24) in float32: scaling by a power of two is exact
-            x = self.rng.low24(self.state_dim) * self._scale32
-            x += self.low32
-            return x
+            return self.rng.uniform(1, self.low32, self._scale32)
         return self.uniform(self.batch_shape(obs))
 
     def propose(self, obs: Mapping) -> np.ndarray:

@@ -79,6 +79,7 @@ class TreePlanner:
         self.iterations = 0
         self._table: np.ndarray | None = None      # the compiled loop's table of this planner's arrays
         self._kernel = self._loop = None
+        self._bind(self._served_kernel())          # made ready to plan: the first sample goes straight in
 
     @property
     def solved(self) -> bool:
@@ -117,8 +118,7 @@ class TreePlanner:
     def compiled(self) -> bool:
         """Whether :meth:`run` consumes samples in the compiled loop: the problem offers a compiled kernel
         (``compiled_kernel()`` not None) and names its metric (the tree's exact k-d index)."""
-        return (self.tree.index is not None and loop_serves(type(self.problem))
-                and self.problem.compiled_kernel() is not None)
+        return self._served_kernel() is not None
 
     def run(self, samples: np.ndarray, budget: int | None = None) -> StepResult:
         """Consume ``samples`` (``(K, d)``) in order as ``K`` calls of :meth:`step` would, at most ``budget``
@@ -128,16 +128,11 @@ class TreePlanner:
                 and samples.flags.c_contiguous):
             samples = np.ascontiguousarray(samples, dtype=np.float64).reshape(-1, self.problem.state_dim)
         budget = len(samples) if budget is None else max(0, min(int(budget), len(samples)))
-        kernel = (self.problem.compiled_kernel() if self.tree.index is not None and loop_serves(type(self.problem))
-                  else None)
+        kernel = self._served_kernel()
         if kernel is None or self.solution is not None:
             return self._run_steps(samples, budget)
         if kernel is not self._kernel:              # a kernel object serves its problem until its context changes
-            self._kernel, self._loop = kernel, compiled_loop(kernel)
-            announce_compilation(self._loop, f"the planning loop with its steer and checks, kind {kernel.tag!r}",
-                                 "a minute or two", "gnn_mp_envs/core/loop.py")
-            if self._table is None:
-                self._pack()
+            self._bind(kernel)
         tree, problem, counters, result = self.tree, self.problem, self._counters, self._result
         first = int(tree._size[0])
         counters[0] = counters[1] = 0
@@ -150,6 +145,23 @@ class TreePlanner:
         if solved:
             self._solve(int(result[MEET_A]), int(result[MEET_B]), 1 - self.active_tree)
         return StepResult(list(range(first, int(tree._size[0]))), solved, consumed)
+
+    def _served_kernel(self):
+        """The problem's compiled kernel where the compiled loop serves this planner, else None."""
+        if self.tree.index is None or not loop_serves(type(self.problem)):
+            return None
+        return self.problem.compiled_kernel()
+
+    def _bind(self, kernel) -> None:
+        """The compiled loop of ``kernel`` (None: nothing to do) and the table of this planner's arrays, made
+        when the planner is (so that planning starts with the first sample) and again for a new kernel."""
+        if kernel is None or kernel is self._kernel:
+            return
+        self._kernel, self._loop = kernel, compiled_loop(kernel)
+        announce_compilation(self._loop, f"the planning loop with its steer and checks, kind {kernel.tag!r}",
+                             "a minute or two", "gnn_mp_envs/core/loop.py")
+        if self._table is None:
+            self._pack()
 
     def __getstate__(self) -> dict:
         """Pickled (and deep-copied) without the compiled loop's table: it holds the addresses of this
