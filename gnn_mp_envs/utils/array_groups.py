@@ -114,13 +114,9 @@ class GroupTable:
         lines = [f"def {name}({', '.join(arrays)}):",
                  f"    table = np.zeros(({len(self.groups)}, {self.max_fields}, 4), dtype=np.int64)"]
         for g, cls in enumerate(self.groups):
-            for i, (_, _, ndim) in enumerate(cls.spec):
-                lines.append(f"    table[{g}, {i}, 0] = g{g}_{i}.ctypes.data")
-                lines.extend(f"    table[{g}, {i}, {1 + d}] = g{g}_{i}.shape[{d}]" for d in range(ndim))
+            lines += _address_lines(g, cls, f"g{g}_")
         lines.append("    return table")
-        namespace: dict[str, Any] = {"__name__": __name__, "np": np}     # numba's cache finds the module by it
-        exec(compile("\n".join(lines) + "\n", __file__, "exec"), namespace)
-        compiled = jit(namespace[name])
+        compiled = _compiled(name, lines, {"np": np})
         compiled.compile(types.int64[:, :, ::1](*(types.Array(from_dtype(dtype), ndim, "C")
                                                   for cls in self.groups for _, dtype, ndim in cls.spec)))
         compiled.disable_compile()
@@ -135,16 +131,9 @@ class GroupTable:
         """The compiled function writing group ``cls``'s rows of a table: per array its address and shape, in
         one call: a compiled call per array would pay numba's dispatch once per array, and a planner packs its
         table for every problem it plans (a checker, every scene)."""
-        g = self.groups.index(cls)
         name = f"describe_{self.name}_{cls.__name__.lower()}"
         args = ", ".join(f"a{i}" for i in range(len(cls.spec)))
-        lines = [f"def {name}(table, {args}):"]
-        for i, (_, _, ndim) in enumerate(cls.spec):
-            lines.append(f"    table[{g}, {i}, 0] = a{i}.ctypes.data")
-            lines.extend(f"    table[{g}, {i}, {1 + d}] = a{i}.shape[{d}]" for d in range(ndim))
-        namespace: dict[str, Any] = {"__name__": __name__}     # numba's cache finds the module by it
-        exec(compile("\n".join(lines) + "\n", __file__, "exec"), namespace)
-        return jit(namespace[name])
+        return _compiled(name, [f"def {name}(table, {args}):", *_address_lines(self.groups.index(cls), cls, "a")])
 
     def viewer(self, cls: type) -> Any:
         """The compiled (inlined) function viewing group ``cls`` of a table of this layout."""
@@ -152,7 +141,23 @@ class GroupTable:
         views = ", ".join(f"_view{ndim}(table, {g}, {i}, np.{dtype.name})"
                           for i, (_, dtype, ndim) in enumerate(cls.spec))
         name = f"view_{self.name}_{cls.__name__.lower()}"
-        source = f"def {name}(table):\n    return {cls.__name__}({views})\n"
-        namespace = {"np": np, "_view1": _view1, "_view2": _view2, "_view3": _view3, cls.__name__: cls}
-        exec(compile(source, __file__, "exec"), namespace)
-        return jit(namespace[name], inline=True)
+        return _compiled(name, [f"def {name}(table):", f"    return {cls.__name__}({views})"],
+                         {"np": np, "_view1": _view1, "_view2": _view2, "_view3": _view3, cls.__name__: cls},
+                         inline=True)
+
+
+def _address_lines(g: int, cls: type, prefix: str) -> list[str]:
+    """The source lines writing group ``g``'s rows of a table (``cls``: its class): per array (named ``prefix``
+    and its index) its address, then its shape."""
+    lines = []
+    for i, (_, _, ndim) in enumerate(cls.spec):
+        lines.append(f"    table[{g}, {i}, 0] = {prefix}{i}.ctypes.data")
+        lines.extend(f"    table[{g}, {i}, {1 + d}] = {prefix}{i}.shape[{d}]" for d in range(ndim))
+    return lines
+
+
+def _compiled(name: str, lines: list[str], names: dict[str, Any] | None = None, inline: bool = False) -> Any:
+    """:func:`jit` of the function ``name`` that ``lines`` define (``names``: the globals it reads)."""
+    namespace: dict[str, Any] = {"__name__": __name__, **(names or {})}    # numba's cache finds the module by it
+    exec(compile("\n".join(lines) + "\n", __file__, "exec"), namespace)
+    return jit(namespace[name], inline=inline)
