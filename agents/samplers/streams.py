@@ -28,6 +28,8 @@ import numpy as np
 from gnn_mp_envs.utils.compiled import jit
 
 _UNIT24 = np.float32(2.0 ** -24)
+#: The bounds under which :func:`_fill_uniform` hands out the draws' low 24 bits themselves (``0 + m * 1``: exact).
+_AS_IS = (np.zeros(1, dtype=np.float32), np.ones(1, dtype=np.float32))
 _MASK53 = (1 << 53) - 1
 #: Words of the generator's state: one twist of the state makes this many draws (the last entry of a
 #: stream's ``state`` array is the index of the next word to hand out).
@@ -72,13 +74,6 @@ def _fill_raw(state, out):
     """``out[i]``: the next draws, in order."""
     for i in range(out.shape[0]):
         out[i] = _next_word(state)
-
-
-@jit
-def _fill_low24(state, out):
-    """``out[i]``: the next draws' low 24 bits, as float32 (exact)."""
-    for i in range(out.shape[0]):
-        out[i] = np.float32(_next_word(state) & _MASK24)
 
 
 @jit
@@ -129,7 +124,7 @@ class TorchCompatibleStream:
     def low24(self, n: int) -> np.ndarray:
         """The next ``n`` draws' low 24 bits as float32 (``unit(n)`` is these times ``2**-24``)."""
         out = np.empty(n, dtype=np.float32)
-        _fill_low24(self.state, out)
+        _fill_uniform(self.state, *_AS_IS, out)
         return out
 
     def unit(self, n: int) -> np.ndarray:
