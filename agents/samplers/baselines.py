@@ -29,9 +29,10 @@ class _TorchCompatible(Sampler):
         self._one = (self.state_dim,)       # the shape of one observation's states
 
     def uniform(self, batch_shape: tuple = ()) -> np.ndarray:
-        """``(*batch_shape, d)`` float32 uniform states in the bounds."""
-        n = int(np.prod(batch_shape, dtype=np.int64)) * self.state_dim
-        return self.low32 + self.rng.unit(n).reshape(*batch_shape, self.state_dim) * self.span32
+        """``(*batch_shape, d)`` float32 uniform states in the bounds: ``low + unit * span`` in float32, drawn in one
+        compiled call (``(m * 2**-24) * span == m * (span * 2**-24)``: scaling by a power of two is exact)."""
+        n = int(np.prod(batch_shape, dtype=np.int64))
+        return self.rng.uniform(n, self.low32, self._scale32).reshape(*batch_shape, self.state_dim)
 
     def batch_shape(self, obs: Mapping) -> tuple:
         shape = np.shape(obs["start"])
@@ -55,8 +56,7 @@ class UniformSampler(_TorchCompatible):
         return self.rng.uniform(k, self.low32, self._scale32).reshape(k, self.state_dim)
 
     def act(self, obs: Mapping) -> np.ndarray:
-        if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without the reshapes
-            # (m * 2**-24) * span == m * (span * 2**-24) in float32: scaling by a power of two is exact
+        if np.shape(obs["start"]) == self._one:     # one observation: uniform(()) without its shape arithmetic
             return self.rng.uniform(1, self.low32, self._scale32)
         return self.uniform(self.batch_shape(obs))
 
