@@ -71,3 +71,45 @@ def test_shipped_critical_weights(model):
     sidecar = json.loads(path.with_suffix(".json").read_text())
     assert sidecar["model"] == model == record["meta"]["model"]
     assert sidecar["hparams"]["model"].items() <= record["ctor_args"].items()
+
+
+def _stored_rates_table() -> dict[str, list[str]]:
+    """docs/learned_samplers.md's table of the stored sampling rates: task -> its two cells (gnn; cvae, gnn-cvae)."""
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "learned_samplers.md").read_text()
+    head = text.index("| task | gnn | cvae, gnn-cvae |")
+    rows = {}
+    for line in text[head:].splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows[cells[0]] = cells[1:]
+    return rows
+
+
+def _stated_rates(cell: str) -> dict[str, float]:
+    """The rates a cell of that table states: uniform share, goal share (fractions), samples a step (1 unstated)."""
+    import re
+    rates = {"uniform_mix": float(re.search(r"(\d+)% uniform", cell).group(1)) / 100,
+             "samples_per_step": float(m.group(1)) if (m := re.search(r"(\d+) samples a step", cell)) else 1.0}
+    if (m := re.search(r"(\d+)% goal", cell)):
+        rates["goal_bias"] = float(m.group(1)) / 100
+    return rates
+
+
+def test_the_docs_table_of_stored_rates_is_the_sidecars():
+    """docs/learned_samplers.md states every shipped learned sampler's uniform share and batch as its sidecar
+    stores them (a batch tuning that writes new values fails here until the table follows)."""
+    table = _stored_rates_table()
+    tasks = sorted({task for (name, task) in SHIPPED_SAMPLERS if name in ("gnn", "cvae", "gnn-cvae")})
+    assert sorted(table) == tasks
+    for task, (gnn_cell, cvae_cell) in table.items():
+        for name, cell in (("gnn", gnn_cell), ("cvae", cvae_cell), ("gnn-cvae", cvae_cell)):
+            shipped = (name, task) in SHIPPED_SAMPLERS
+            if not shipped:
+                assert f"no {name}" in cell or cell == "none shipped", (task, name, cell)
+                continue
+            stored = json.loads(shipped_checkpoint(name, task).with_suffix(".json").read_text())["sampler"]
+            for key, value in _stated_rates(cell).items():
+                default = 1.0 if key == "samples_per_step" else 0.0
+                assert float(stored.get(key, default)) == pytest.approx(value), (task, name, key, cell)
