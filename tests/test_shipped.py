@@ -8,6 +8,8 @@ test fewer files), and a file added without a line here fails too.
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -75,7 +77,6 @@ def test_shipped_critical_weights(model):
 
 def _stored_rates_table() -> dict[str, list[str]]:
     """docs/learned_samplers.md's table of the stored sampling rates: task -> its two cells (gnn; cvae, gnn-cvae)."""
-    from pathlib import Path
     text = (Path(__file__).resolve().parents[1] / "docs" / "learned_samplers.md").read_text()
     head = text.index("| task | gnn | cvae, gnn-cvae |")
     rows = {}
@@ -89,7 +90,6 @@ def _stored_rates_table() -> dict[str, list[str]]:
 
 def _stated_rates(cell: str) -> dict[str, float]:
     """The rates a cell of that table states: uniform share, goal share (fractions), samples a step (1 unstated)."""
-    import re
     rates = {"uniform_mix": float(re.search(r"(\d+)% uniform", cell).group(1)) / 100,
              "samples_per_step": float(m.group(1)) if (m := re.search(r"(\d+) samples a step", cell)) else 1.0}
     if (m := re.search(r"(\d+)% goal", cell)):
