@@ -686,6 +686,121 @@ def test_joint_tables_call_free_only_configurations_the_brute_force_calls_free(w
     assert border_seen       # some table has cells next to ones that are not free
 
 
+def _spun_pairs(checker) -> list[tuple[int, int, int]]:
+    """The self pairs whose table holds for every angle of a link turning about its own axis, as
+    ``(pair, the other link's side, the turning link's side)``."""
+    out = []
+    for p, pair in enumerate(checker.spheres.pairs):
+        side = checker._spin_side(pair, np.flatnonzero(checker.spheres.pair_reach[p] > 0))
+        if side is not None:
+            out.append((p, 1 - side, side))
+    return out
+
+
+def test_a_pair_of_three_joints_whose_link_turns_about_its_own_axis_has_a_table_over_the_other_two():
+    """The UR5's forearm and wrist 3 (wrist 1, 2 and 3 move them) and the Panda's links 2 and 5 (joints 3, 4,
+    5): a table over the two joints that do not turn the link about its own axis."""
+    for make, pair, joints in ((ur5_model, ("forearm_link", "wrist_3_link"), [3, 4]),
+                               (panda_model, ("panda_link2", "panda_link5"), [2, 3])):
+        world = RobotWorld(make())
+        try:
+            checker = sphere_checker(world, ())
+            names = [(checker.links[a], checker.links[b]) for a, b in checker.spheres.pairs]
+            p = names.index(pair)
+            assert np.flatnonzero(checker.spheres.pair_reach[p] > 0).size == 3
+            assert checker.tables.at[p] >= 0 and checker.tables.joint[p].tolist() == joints
+        finally:
+            world.close()
+
+
+def test_the_swept_solid_walk_finds_the_least_gap_of_the_brute_force_over_leaf_pairs(world):
+    """:func:`~gnn_mp_envs.robots.spheres.kernel.spun_pair_near` against every leaf pair: a sphere of the
+    turning link sweeps the points within its radius of its centre's circle about the axis, so the other's
+    sphere comes within ``floor`` of it at some angle exactly when the two centres, as (distance from the
+    axis, height along it), are within ``floor`` plus both radii. The walk must say near for a floor just
+    above the least such gap and not near just below it."""
+    from scipy.spatial import cKDTree
+
+    from gnn_mp_envs.robots.spheres.kernel import spun_pair_near
+    checker = sphere_checker(world, ())
+    spun = _spun_pairs(checker)
+    assert spun                 # every robot here has such a pair
+    kin, spheres = checker.kinematics, checker.spheres
+    rng = np.random.default_rng(11)
+    tested = 0
+    for p, still, turning in spun:
+        la, lb = spheres.pairs[p, still], spheres.pairs[p, turning]
+        leaves_a, leaves_b = (checker.pair_leaves(p)[side] for side in (still, turning))
+        axis = kin.axis[lb] / np.linalg.norm(kin.axis[lb])
+        h_b = leaves_b[:, :3] @ axis
+        circles_b = np.c_[np.linalg.norm(leaves_b[:, :3] - h_b[:, None] * axis, axis=1), h_b]
+        mine = 0
+        for _ in range(200):            # configurations where the walk puts the pair within 1 cm (a walk with a
+            if mine == 2:               # floor far above that descends every leaf pair), checked exactly
+                break
+            q = rng.uniform(world.low, world.high)
+            rot, trans = checker.link_frames(q)
+            if not spun_pair_near(la, lb, spheres.pair_root[p, still], spheres.pair_root[p, turning], 0.01, *axis,
+                                  spheres.nodes, spheres.first_child, spheres.child_count, rot, trans,
+                                  checker.scratch.pair_stack):
+                continue
+            local = ((leaves_a[:, :3] @ rot[la].T + trans[la]) - trans[lb]) @ rot[lb]
+            h_a = local @ axis
+            tree = cKDTree(np.c_[np.linalg.norm(local - h_a[:, None] * axis, axis=1), h_a])
+            d, k = tree.query(circles_b, k=min(8, len(leaves_a)))
+            upper = float((d - leaves_b[:, 3, None] - leaves_a[k, 3]).min())     # some leaf pairs' least gap
+            reach = upper + leaves_b[:, 3] + leaves_a[:, 3].max() + 1e-9             # all pairs that may be less
+            rows = np.flatnonzero(d[:, 0] <= reach)
+            least = min(float((np.linalg.norm(tree.data[near] - circles_b[i], axis=1) - leaves_b[i, 3]
+                               - leaves_a[near, 3]).min())
+                        for i, near in zip(rows, tree.query_ball_point(circles_b[rows], reach[rows])) if near)
+            assert least <= 0.01
+            mine += 1
+            for floor, near in ((least + 1e-7, True), (least - 1e-7, False)):
+                walk = spun_pair_near(la, lb, spheres.pair_root[p, still], spheres.pair_root[p, turning], floor,
+                                      *axis, spheres.nodes, spheres.first_child, spheres.child_count, rot, trans,
+                                      checker.scratch.pair_stack)
+                assert walk == near, (checker.self_pairs[p], q, floor, least)
+        tested += mine
+    assert tested >= 1
+
+
+def test_joint_tables_are_kept_in_a_file_named_by_their_inputs_and_built_again_when_it_is_damaged(monkeypatch,
+                                                                                                  tmp_path):
+    """The second checker of a robot reads the tables the first one built (the UR5's take seconds to build),
+    from a file in numba's cache folder whose name changes with every input; a damaged file is built again."""
+    import numba.core.config
+
+    from gnn_mp_envs.robots.spheres import checker as checker_module
+    monkeypatch.setattr(numba.core.config, "CACHE_DIR", str(tmp_path))
+    world = RobotWorld(panda_model())
+    try:
+        monkeypatch.setattr(checker_module, "_TABLES", {})
+        built = SphereCollisionChecker(world).kernel(()).tables
+        files = sorted(tmp_path.glob("joint-tables-*.npz"))
+        assert len(files) == 1
+        calls = []
+        monkeypatch.setattr(checker_module.SphereChecker, "_build_joint_tables",
+                            lambda self, *args: calls.append(1) or checker_module.Tables(*built))
+        for damage in (None, b"not a zip file"):
+            if damage is not None:
+                files[0].write_bytes(damage)
+            monkeypatch.setattr(checker_module, "_TABLES", {})
+            read = SphereCollisionChecker(world).kernel(()).tables
+            for a, b in zip(read, built):
+                assert a.dtype == b.dtype and np.array_equal(a, b)
+        assert len(calls) == 1                      # read once from the file, built again once it was damaged
+        assert checker_module.read_npz(files[0], checker_module.TABLES_FORMAT)["cells"].size == built.cells.size
+    finally:
+        world.close()
+    arrays = [np.arange(5.0), np.zeros((2, 2), dtype=np.int64)]
+    names = {checker_module.tables_file(arrays, ("panda", 0.003)),
+             checker_module.tables_file([arrays[0] + 1e-12, arrays[1]], ("panda", 0.003)),
+             checker_module.tables_file([arrays[0], arrays[1].astype(np.int32)], ("panda", 0.003)),
+             checker_module.tables_file(arrays, ("panda", 0.004))}
+    assert len(names) == 4 and checker_module.tables_file(arrays, ("panda", 0.003)) in names
+
+
 def test_the_kernel_views_each_array_of_its_table_as_the_array_it_names(world):
     """The kernel reads its arrays through a table of addresses and shapes (no reference counts), so a
     field read as another dtype or shape would read foreign memory: every group the compiled code views

@@ -4,15 +4,16 @@ and :class:`SphereCollisionChecker` is the :class:`~gnn_mp_envs.robots.checkers.
 :class:`~gnn_mp_envs.robots.world.RobotWorld` that plans with it.
 
 States of an edge are skipped only where certified bounds vouch for them: how far and how fast each
-link can move along the edge, and, for self pairs that only the wrist's one or two joints move, a
-joint-space table of where they are free. Each state the kernel looks at is one collision check, as
-with the pybullet checker.
+link can move along the edge, and, for self pairs that only one or two joints move (or three, one of them
+turning a link about its own axis), a joint-space table of where they are free. Each state the kernel
+looks at is one collision check, as with the pybullet checker.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+import os
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -25,17 +26,20 @@ from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres import kernel, kinematics
 from gnn_mp_envs.robots.spheres.kernel import (BOX, COLUMNS, CYLINDER, KINDS, SPHERE, Kinematics, Memo, Obstacles,
                                                Scratch, Spheres, Tables, check_edge, check_states, free_cells,
-                                               joint_distance, planner_motion, planner_steer, steer_edge, table_room)
+                                               free_spun_cells, joint_distance, planner_motion, planner_steer,
+                                               steer_edge, table_room)
 from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, leaf_rows, load_sphere_model
-from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, URDFRobot, read_urdf
+from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, REVOLUTE, URDFRobot, read_urdf
+from gnn_mp_envs.utils.compiled import FALLBACK_CACHE_DIR, sources_stamp
+from gnn_mp_envs.utils.npz import DatasetCacheError, read_npz, write_npz
 
-#: Joint-space tables of the wrist's self pairs (:meth:`SphereChecker._joint_tables`): a cell is free
-#: when the pair's leaves are more than this apart at its centre (m); smaller: finer tables.
+#: Joint-space tables of the self pairs (:meth:`SphereChecker._joint_tables`): a cell is free when the pair's
+#: leaves are more than this apart at its centre (m); smaller: finer tables.
 TABLE_FLOOR = 0.003
 #: At most this many cells per pair's table (a coarser grid, with a higher floor, past it). The UR5's base and
 #: upper arm, within 8.4 mm of each other at every shoulder pan and lift, take 0.87 million cells at a 3.75 mm
-#: floor, half of them free (2.8 s to build the UR5's tables, 45 % of its edge checks' time saved; at 2^17 cells
-#: the floor grew past the gap).
+#: floor, half of them free (at 2^17 cells the floor grew past the gap). Tables are built once per machine
+#: and inputs (:func:`tables_file`).
 TABLE_CELLS = 1 << 20
 #: How many tested edge ends (free far ends and starts) the checker remembers, with the clearances their
 #: walks found, so that an edge starting at one (the tree's nodes are the far ends of the edges that
@@ -87,6 +91,27 @@ def _merged_tree(nodes: np.ndarray, first_child: np.ndarray, child_count: np.nda
     root = bounding_sphere(moved[: len(members)])
     return (np.vstack([root[None], moved]), np.array(out_first, dtype=np.int64),
             np.array(out_count, dtype=np.int64))
+
+
+#: The format of the joint tables' files (:func:`tables_file`).
+TABLES_FORMAT = 1
+
+
+def tables_file(arrays: Sequence[np.ndarray], settings: tuple) -> Path:
+    """Where the joint tables built from ``arrays`` (the robot's kinematics, sphere trees, self pairs and joint
+    limits) and ``settings`` are kept between processes: a file named by a digest of all of them and of the
+    package's sources (:func:`~gnn_mp_envs.utils.compiled.sources_stamp`: changed code builds anew), in
+    numba's cache folder (``NUMBA_CACHE_DIR``, else the package's ``__pycache__``, else the fallback folder)."""
+    from numba.core import config
+    digest = hashlib.sha256(f"{sources_stamp()};{settings!r};".encode())
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        digest.update(f"{a.dtype.str}{a.shape};".encode())
+        digest.update(a.tobytes())
+    folder = Path(config.CACHE_DIR) if config.CACHE_DIR else Path(__file__).resolve().parent / "__pycache__"
+    if not os.access(folder if folder.exists() else folder.parent, os.W_OK):
+        folder = Path(FALLBACK_CACHE_DIR)
+    return folder / f"joint-tables-{digest.hexdigest()[:40]}.npz"
 
 
 def _obstacle_arrays(kind: np.ndarray, centre: np.ndarray, rot: np.ndarray, size: np.ndarray,
@@ -189,15 +214,38 @@ class SphereChecker:
     # ------------------------------------------------------------------ construction
     def _joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
         """Joint-space tables of the self pairs whose relative pose only one or two joints change
-        (the wrist's): over a grid of those joints, how many cells around each cell are free of
-        contact between the pair. A cell is free when the pair's leaves are more than
-        ``TABLE_FLOOR`` apart at its centre; within the cell they come at most that much nearer.
-        Built once per robot and pair set (a few hundred milliseconds)."""
+        (the wrist's), or three of which one turns a link about its own axis (:meth:`_spin_side`: the
+        table then holds for the solid the link sweeps at every angle of that joint): over a grid of those
+        joints, how many cells around each cell are free of contact between the pair. A cell is free
+        when the pair's leaves are more than ``TABLE_FLOOR`` apart at its centre; within the cell they
+        come at most that much nearer. Built once per robot and pair set and kept in a file
+        (:meth:`_stored_joint_tables`; building the UR5's takes seconds)."""
         key = (robot.name, id(self.model), tuple(joints), tuple(sorted(held.items())), self.spheres.pairs.tobytes(),
                self.spheres.pair_root.tobytes())
         if key not in _TABLES:
-            _TABLES[key] = self._build_joint_tables(robot, joints, held)
+            _TABLES[key] = self._stored_joint_tables(robot, joints, held)
         return _TABLES[key]
+
+    def _stored_joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
+        """The joint tables from the file that a process before this one built from the same inputs
+        (:func:`tables_file`), else built (seconds for the UR5) and written there for the next process.
+        A file that cannot be read is built again; one that cannot be written is not kept."""
+        limits = np.array([(j.lower, j.upper) for j in robot.joints.values()], dtype=np.float64)
+        inputs = (*self.kinematics, self.spheres.nodes, self.spheres.first_child, self.spheres.child_count,
+                  self.spheres.pairs, self.spheres.pair_root, self.spheres.pair_reach, limits)
+        path = tables_file(inputs, (robot.name, tuple(joints), tuple(sorted(held.items())), TABLE_FLOOR,
+                                    TABLE_CELLS))
+        try:
+            stored = read_npz(path, TABLES_FORMAT)
+            return Tables(*(np.ascontiguousarray(stored[name], dtype=dtype) for name, dtype, _ in Tables.spec))
+        except (OSError, DatasetCacheError, KeyError):
+            pass
+        tables = self._build_joint_tables(robot, joints, held)
+        try:
+            write_npz(path, {"format_version": np.array(TABLES_FORMAT), **tables._asdict()})
+        except OSError:
+            pass
+        return tables
 
     def _build_joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
         from scipy.ndimage import distance_transform_cdt
@@ -215,6 +263,13 @@ class SphereChecker:
         kin, spheres, scratch = self.kinematics, self.spheres, self.scratch
         for p in range(n_pairs):
             moving = np.flatnonzero(pair_reach[p] > 0)
+            la, lb = pairs[p]
+            root_a, root_b = spheres.pair_root[p]
+            spin = self._spin_side(pairs[p], moving)
+            if spin is not None:                # one link also turns about its own axis: its swept solid
+                if spin == 0:
+                    la, lb, root_a, root_b = lb, la, root_b, root_a
+                moving = moving[moving != kin.q_index[lb]]
             if not 1 <= len(moving) <= 2:
                 continue
             low, high = (np.array([limits[joints[j]][k] for j in moving]) for k in (0, 1))
@@ -229,13 +284,19 @@ class SphereChecker:
                     break
                 floor *= 1.25
             free = np.zeros(int(np.prod(dim)), dtype=np.bool_)
-            la, lb = pairs[p]
             grid_joints = np.array([*moving, -1][:2], dtype=np.int64)
-            free_cells(la, lb, spheres.pair_root[p, 0], spheres.pair_root[p, 1], grid_joints, low, step,
-                       np.array([*dim, 1][:2], dtype=np.int64), floor, q.copy(), kin.parent, kin.origin_r,
-                       kin.origin_t, kin.kind, kin.axis, kin.q_index, kin.q_fixed, spheres.nodes,
-                       spheres.first_child, spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack,
-                       scratch.pair_point, free)
+            grid = (grid_joints, low, step, np.array([*dim, 1][:2], dtype=np.int64), floor)
+            robot_arrays = (q.copy(), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis, kin.q_index,
+                            kin.q_fixed)
+            if spin is None:
+                free_cells(la, lb, root_a, root_b, *grid, *robot_arrays, spheres.nodes, spheres.first_child,
+                           spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack, scratch.pair_point,
+                           free)
+            else:
+                spin_axis = kin.axis[lb] / np.linalg.norm(kin.axis[lb])
+                free_spun_cells(la, lb, root_a, root_b, *grid, spin_axis, *robot_arrays, spheres.nodes,
+                                spheres.first_child, spheres.child_count, scratch.rot, scratch.trans,
+                                scratch.pair_stack, free)
             if not free.any():                  # always near contact at this floor: the walk decides
                 continue
             # cells to the nearest cell that is not free (in any joint); all free: as good as unbounded
@@ -250,6 +311,20 @@ class SphereChecker:
             size += room.size
         cells = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.int32)
         return Tables(at, joint, low_, step_, dim_, cells)
+
+    def _spin_side(self, pair: np.ndarray, moving: np.ndarray) -> int | None:
+        """The side (0, 1) of a self pair moved by three joints whose link is one of them turning about its
+        own axis (the joint into it: revolute, planned); None if none. Turning about that axis, the link's
+        spheres sweep a solid that no angle leaves, so a table over the other two joints holds for every
+        angle of the third (:func:`~gnn_mp_envs.robots.spheres.kernel.spun_pair_near`)."""
+        if len(moving) != 3:
+            return None
+        kin = self.kinematics
+        for side in (1, 0):
+            link = pair[side]
+            if kin.kind[link] == REVOLUTE and kin.q_index[link] in moving:
+                return side
+        return None
 
     def _moving(self, a: int, b: int, reach: np.ndarray) -> int:
         """The link of the self pair ``(a, b)`` that moves in the other's frame, -1: neither.

@@ -73,7 +73,7 @@ Spheres = array_group("Spheres", (("link_root", np.int64, 1), ("nodes", np.float
                              ("first_child", np.int64, 1), ("child_count", np.int64, 1), ("pairs", np.int64, 2),
                              ("pair_root", np.int64, 2), ("pair_moving", np.int64, 1), ("reach", np.float64, 2),
                              ("pair_reach", np.float64, 2)))
-#: The wrist pairs' joint-space tables: per pair its offset in ``cells`` (-1: no table), joints, grid.
+#: The self pairs' joint-space tables: per pair its offset in ``cells`` (-1: no table), joints, grid.
 Tables = array_group("Tables", (("at", np.int64, 1), ("joint", np.int64, 2), ("low", np.float64, 2),
                                 ("step", np.float64, 2),
                            ("dim", np.int64, 2), ("cells", np.int32, 1)))
@@ -817,3 +817,75 @@ def free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, q, parent,
         hit, _ = _pair_walk(la, lb, root_a, root_b, floor, floor, nodes, first_child, child_count, rot, trans,
                             pair_stack, pair_point)
         out[c] = not hit
+
+
+@jit(inline=True)
+def _around_axis(x, y, z, ax, ay, az):
+    """The point ``(x, y, z)``'s distance from the line through the origin along the unit ``a``, and its
+    coordinate along it: a circle about that line, as ``(radius, height)``."""
+    h = x * ax + y * ay + z * az
+    rx, ry, rz = x - h * ax, y - h * ay, z - h * az
+    return math.sqrt(rx * rx + ry * ry + rz * rz), h
+
+
+@jit
+def spun_pair_near(la, lb, root_a, root_b, floor, ax, ay, az, nodes, first_child, child_count, rot, trans,
+                   pair_stack):
+    """Whether a leaf under ``root_a`` (of link ``la``) comes within ``floor`` of the solid that a leaf
+    under ``root_b`` sweeps as link ``lb`` turns about the line through its frame's origin along ``a`` (its
+    own revolute joint's axis, unit, in its frame) by any angle: a sphere ``(c, r)`` of ``lb`` sweeps the
+    points within ``r`` of the circle of ``c`` about that line, and the other's centre is as far from that
+    circle as the two points ``(radius, height)`` about the line (:func:`_around_axis`) are apart, whatever
+    the angle. Simultaneous descent from the roots (nested spheres sweep nested solids), splitting the
+    larger of two nodes within ``floor``."""
+    # la's frame in lb's: points p of la at R_b^T (R_a p + t_a - t_b)
+    ex, ey, ez = trans[la, 0] - trans[lb, 0], trans[la, 1] - trans[lb, 1], trans[la, 2] - trans[lb, 2]
+    m = np.empty((3, 3))
+    u = np.empty(3)
+    for i in range(3):
+        u[i] = rot[lb, 0, i] * ex + rot[lb, 1, i] * ey + rot[lb, 2, i] * ez
+        for j in range(3):
+            m[i, j] = rot[lb, 0, i] * rot[la, 0, j] + rot[lb, 1, i] * rot[la, 1, j] + rot[lb, 2, i] * rot[la, 2, j]
+    top = 0
+    pair_stack[0, 0], pair_stack[0, 1] = root_a, root_b
+    while top >= 0:
+        na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
+        top -= 1
+        x, y, z = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
+        rho_a, h_a = _around_axis(u[0] + m[0, 0] * x + m[0, 1] * y + m[0, 2] * z,
+                                  u[1] + m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
+                                  u[2] + m[2, 0] * x + m[2, 1] * y + m[2, 2] * z, ax, ay, az)
+        rho_b, h_b = _around_axis(nodes[nb_, 0], nodes[nb_, 1], nodes[nb_, 2], ax, ay, az)
+        ra, rb = nodes[na_, 3], nodes[nb_, 3]
+        gap = math.sqrt((rho_a - rho_b) ** 2 + (h_a - h_b) ** 2) - ra - rb
+        if gap > floor:
+            continue
+        ca, cb = child_count[na_], child_count[nb_]
+        if ca == 0 and cb == 0:
+            return True
+        if cb == 0 or (ca > 0 and ra >= rb):
+            for c in range(first_child[na_], first_child[na_] + ca):
+                top += 1
+                pair_stack[top, 0], pair_stack[top, 1] = c, nb_
+        else:
+            for c in range(first_child[nb_], first_child[nb_] + cb):
+                top += 1
+                pair_stack[top, 0], pair_stack[top, 1] = na_, c
+    return False
+
+
+@jit
+def free_spun_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, spin_axis, q, parent, origin_r, origin_t,
+                    kind, axis, q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, out):
+    """:func:`free_cells` for a pair whose link ``lb`` also turns about its own joint's axis ``spin_axis``:
+    ``out[c]``: no leaf of ``la`` comes within ``floor`` of the solid ``lb``'s leaves sweep at any angle of
+    that joint (:func:`spun_pair_near`), at the centre of cell ``c``."""
+    cells = dim[0] * dim[1]
+    for c in range(cells):
+        i0, i1 = c // dim[1], c % dim[1]
+        q[joints[0]] = low[0] + (i0 + 0.5) * step[0]
+        if joints[1] >= 0:
+            q[joints[1]] = low[1] + (i1 + 0.5) * step[1]
+        forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
+        out[c] = not spun_pair_near(la, lb, root_a, root_b, floor, spin_axis[0], spin_axis[1], spin_axis[2], nodes,
+                                    first_child, child_count, rot, trans, pair_stack)
