@@ -26,8 +26,7 @@ from gnn_mp_envs.robots.model import sphere_model_path, urdf_file
 from gnn_mp_envs.robots.spheres import kernel, kinematics
 from gnn_mp_envs.robots.spheres.kernel import (BOX, COLUMNS, CYLINDER, KINDS, SPHERE, Kinematics, Memo, Obstacles,
                                                Scratch, Spheres, Tables, check_edge, check_states, free_cells,
-                                               free_spun_cells, joint_distance, planner_motion, planner_steer,
-                                               steer_edge, table_room)
+                                               joint_distance, planner_motion, planner_steer, steer_edge, table_room)
 from gnn_mp_envs.robots.spheres.model import SphereModel, SphereModelError, leaf_rows, load_sphere_model
 from gnn_mp_envs.robots.urdf import FIXED, PRISMATIC, REVOLUTE, URDFRobot, read_urdf
 from gnn_mp_envs.utils.compiled import FALLBACK_CACHE_DIR, sources_stamp
@@ -288,15 +287,9 @@ class SphereChecker:
             grid = (grid_joints, low, step, np.array([*dim, 1][:2], dtype=np.int64), floor)
             robot_arrays = (q.copy(), kin.parent, kin.origin_r, kin.origin_t, kin.kind, kin.axis, kin.q_index,
                             kin.q_fixed)
-            if spin is None:
-                free_cells(la, lb, root_a, root_b, *grid, *robot_arrays, spheres.nodes, spheres.first_child,
-                           spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack, scratch.pair_point,
-                           free)
-            else:
-                spin_axis = kin.axis[lb] / np.linalg.norm(kin.axis[lb])
-                free_spun_cells(la, lb, root_a, root_b, *grid, spin_axis, *robot_arrays, spheres.nodes,
-                                spheres.first_child, spheres.child_count, scratch.rot, scratch.trans,
-                                scratch.pair_stack, free)
+            spin_axis = np.zeros(3) if spin is None else kin.axis[lb] / np.linalg.norm(kin.axis[lb])
+            free_cells(la, lb, root_a, root_b, *grid, spin_axis, *robot_arrays, spheres.nodes, spheres.first_child,
+                       spheres.child_count, scratch.rot, scratch.trans, scratch.pair_stack, scratch.pair_point, free)
             if not free.any():                  # always near contact at this floor: the walk decides
                 continue
             # cells to the nearest cell that is not free (in any joint); all free: as good as unbounded

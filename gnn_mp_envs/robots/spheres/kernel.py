@@ -802,21 +802,27 @@ def planner_motion(a, b, context):
 
 # ---------------------------------------------------------------------- building the tables
 @jit
-def free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, q, parent, origin_r, origin_t, kind, axis,
-                q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, pair_point, out):
+def free_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, spin_axis, q, parent, origin_r, origin_t, kind,
+               axis, q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, pair_point, out):
     """``out[c]``: no leaf of link ``la``'s tree at ``root_a`` comes within ``floor`` of one of ``lb``'s
     at the centre of cell ``c`` of the grid of ``dim[k]`` cells of ``step[k]`` from ``low[k]`` over
-    joints ``joints`` (row-major; ``joints[1] < 0``: one joint) with the other joints at ``q``."""
-    cells = dim[0] * dim[1]
-    for c in range(cells):
+    joints ``joints`` (row-major; ``joints[1] < 0``: one joint) with the other joints at ``q``; where
+    ``spin_axis`` is not zero (``lb`` also turns about that axis of its frame, its own joint's), of the solid
+    ``lb``'s leaves sweep at every angle of that joint (:func:`spun_pair_near`)."""
+    spun = spin_axis[0] != 0.0 or spin_axis[1] != 0.0 or spin_axis[2] != 0.0
+    for c in range(dim[0] * dim[1]):
         i0, i1 = c // dim[1], c % dim[1]
         q[joints[0]] = low[0] + (i0 + 0.5) * step[0]
         if joints[1] >= 0:
             q[joints[1]] = low[1] + (i1 + 0.5) * step[1]
         forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
-        hit, _ = _pair_walk(la, lb, root_a, root_b, floor, floor, nodes, first_child, child_count, rot, trans,
-                            pair_stack, pair_point)
-        out[c] = not hit
+        if spun:
+            out[c] = not spun_pair_near(la, lb, root_a, root_b, floor, spin_axis[0], spin_axis[1], spin_axis[2],
+                                        nodes, first_child, child_count, rot, trans, pair_stack)
+        else:
+            hit, _ = _pair_walk(la, lb, root_a, root_b, floor, floor, nodes, first_child, child_count, rot, trans,
+                                pair_stack, pair_point)
+            out[c] = not hit
 
 
 @jit(inline=True)
@@ -872,20 +878,3 @@ def spun_pair_near(la, lb, root_a, root_b, floor, ax, ay, az, nodes, first_child
                 top += 1
                 pair_stack[top, 0], pair_stack[top, 1] = na_, c
     return False
-
-
-@jit
-def free_spun_cells(la, lb, root_a, root_b, joints, low, step, dim, floor, spin_axis, q, parent, origin_r, origin_t,
-                    kind, axis, q_index, q_fixed, nodes, first_child, child_count, rot, trans, pair_stack, out):
-    """:func:`free_cells` for a pair whose link ``lb`` also turns about its own joint's axis ``spin_axis``:
-    ``out[c]``: no leaf of ``la`` comes within ``floor`` of the solid ``lb``'s leaves sweep at any angle of
-    that joint (:func:`spun_pair_near`), at the centre of cell ``c``."""
-    cells = dim[0] * dim[1]
-    for c in range(cells):
-        i0, i1 = c // dim[1], c % dim[1]
-        q[joints[0]] = low[0] + (i0 + 0.5) * step[0]
-        if joints[1] >= 0:
-            q[joints[1]] = low[1] + (i1 + 0.5) * step[1]
-        forward_kinematics(q, parent, origin_r, origin_t, kind, axis, q_index, q_fixed, rot, trans)
-        out[c] = not spun_pair_near(la, lb, root_a, root_b, floor, spin_axis[0], spin_axis[1], spin_axis[2], nodes,
-                                    first_child, child_count, rot, trans, pair_stack)
