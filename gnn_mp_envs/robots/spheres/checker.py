@@ -229,9 +229,10 @@ class SphereChecker:
         """The joint tables from the file that a process before this one built from the same inputs
         (:func:`tables_file`), else built (seconds for the UR5) and written there for the next process.
         A file that cannot be read is built again; one that cannot be written is not kept."""
-        limits = np.array([(j.lower, j.upper) for j in robot.joints.values()], dtype=np.float64)
+        limits = {j.name: (j.lower, j.upper) for j in robot.joints.values()}
         inputs = (*self.kinematics, self.spheres.nodes, self.spheres.first_child, self.spheres.child_count,
-                  self.spheres.pairs, self.spheres.pair_root, self.spheres.pair_reach, limits)
+                  self.spheres.pairs, self.spheres.pair_root, self.spheres.pair_reach,
+                  np.array(list(limits.values()), dtype=np.float64))
         path = tables_file(inputs, (robot.name, tuple(joints), tuple(sorted(held.items())), TABLE_FLOOR,
                                     TABLE_CELLS))
         try:
@@ -239,16 +240,18 @@ class SphereChecker:
             return Tables(*(np.ascontiguousarray(stored[name], dtype=dtype) for name, dtype, _ in Tables.spec))
         except (OSError, DatasetCacheError, KeyError):
             pass
-        tables = self._build_joint_tables(robot, joints, held)
+        tables = self._build_joint_tables(joints, held, limits)
         try:
             write_npz(path, {"format_version": np.array(TABLES_FORMAT), **tables._asdict()})
         except OSError:
             pass
         return tables
 
-    def _build_joint_tables(self, robot: URDFRobot, joints: Sequence[str], held: dict[str, float]) -> Tables:
+    def _build_joint_tables(self, joints: Sequence[str], held: dict[str, float],
+                            limits: dict[str, tuple[float, float]]) -> Tables:
+        """The tables of the self pairs that one or two joints move, or three with one turning a link about its
+        own axis (``limits``: each joint's, by name)."""
         from scipy.ndimage import distance_transform_cdt
-        limits = {j.name: (j.lower, j.upper) for j in robot.joints.values()}
         pairs, pair_reach = self.spheres.pairs, self.spheres.pair_reach
         n_pairs = len(pairs)
         at = np.full(n_pairs, -1, dtype=np.int64)

@@ -176,6 +176,26 @@ def _root_tests(cx, cy, cz, obstacles):
 
 
 @jit(inline=True)
+def _frame_in(a, b, rot, trans):
+    """Link ``b``'s frame in link ``a``'s: ``u = R_a^T (t_b - t_a)`` and ``m = R_a^T R_b`` (row-major), so a
+    point ``p`` of ``b``'s frame is at ``u + m p`` in ``a``'s."""
+    ex, ey, ez = trans[b, 0] - trans[a, 0], trans[b, 1] - trans[a, 1], trans[b, 2] - trans[a, 2]
+    u0 = rot[a, 0, 0] * ex + rot[a, 1, 0] * ey + rot[a, 2, 0] * ez
+    u1 = rot[a, 0, 1] * ex + rot[a, 1, 1] * ey + rot[a, 2, 1] * ez
+    u2 = rot[a, 0, 2] * ex + rot[a, 1, 2] * ey + rot[a, 2, 2] * ez
+    m00 = rot[a, 0, 0] * rot[b, 0, 0] + rot[a, 1, 0] * rot[b, 1, 0] + rot[a, 2, 0] * rot[b, 2, 0]
+    m01 = rot[a, 0, 0] * rot[b, 0, 1] + rot[a, 1, 0] * rot[b, 1, 1] + rot[a, 2, 0] * rot[b, 2, 1]
+    m02 = rot[a, 0, 0] * rot[b, 0, 2] + rot[a, 1, 0] * rot[b, 1, 2] + rot[a, 2, 0] * rot[b, 2, 2]
+    m10 = rot[a, 0, 1] * rot[b, 0, 0] + rot[a, 1, 1] * rot[b, 1, 0] + rot[a, 2, 1] * rot[b, 2, 0]
+    m11 = rot[a, 0, 1] * rot[b, 0, 1] + rot[a, 1, 1] * rot[b, 1, 1] + rot[a, 2, 1] * rot[b, 2, 1]
+    m12 = rot[a, 0, 1] * rot[b, 0, 2] + rot[a, 1, 1] * rot[b, 1, 2] + rot[a, 2, 1] * rot[b, 2, 2]
+    m20 = rot[a, 0, 2] * rot[b, 0, 0] + rot[a, 1, 2] * rot[b, 1, 0] + rot[a, 2, 2] * rot[b, 2, 0]
+    m21 = rot[a, 0, 2] * rot[b, 0, 1] + rot[a, 1, 2] * rot[b, 1, 1] + rot[a, 2, 2] * rot[b, 2, 1]
+    m22 = rot[a, 0, 2] * rot[b, 0, 2] + rot[a, 1, 2] * rot[b, 1, 2] + rot[a, 2, 2] * rot[b, 2, 2]
+    return u0, u1, u2, m00, m01, m02, m10, m11, m12, m20, m21, m22
+
+
+@jit(inline=True)
 def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_count, rot, trans, pair_stack,
                pair_point):
     """Whether a leaf under ``root_a`` (of link ``la``) and one under ``root_b`` (of ``lb``) are at most
@@ -189,20 +209,7 @@ def _pair_walk(la, lb, root_a, root_b, tau, floor, nodes, first_child, child_cou
     those to split in turn are pushed. The walk measures in ``la``'s frame: ``lb``'s node centres are
     moved into it once, when tested (``pair_point``, beside ``pair_stack``), and ``la``'s are used as
     stored (the distance is the world one's: frames are rigid motions)."""
-    # lb's frame in la's: m = R_a^T R_b, u = R_a^T (t_b - t_a)
-    ex, ey, ez = trans[lb, 0] - trans[la, 0], trans[lb, 1] - trans[la, 1], trans[lb, 2] - trans[la, 2]
-    u0 = rot[la, 0, 0] * ex + rot[la, 1, 0] * ey + rot[la, 2, 0] * ez
-    u1 = rot[la, 0, 1] * ex + rot[la, 1, 1] * ey + rot[la, 2, 1] * ez
-    u2 = rot[la, 0, 2] * ex + rot[la, 1, 2] * ey + rot[la, 2, 2] * ez
-    m00 = rot[la, 0, 0] * rot[lb, 0, 0] + rot[la, 1, 0] * rot[lb, 1, 0] + rot[la, 2, 0] * rot[lb, 2, 0]
-    m01 = rot[la, 0, 0] * rot[lb, 0, 1] + rot[la, 1, 0] * rot[lb, 1, 1] + rot[la, 2, 0] * rot[lb, 2, 1]
-    m02 = rot[la, 0, 0] * rot[lb, 0, 2] + rot[la, 1, 0] * rot[lb, 1, 2] + rot[la, 2, 0] * rot[lb, 2, 2]
-    m10 = rot[la, 0, 1] * rot[lb, 0, 0] + rot[la, 1, 1] * rot[lb, 1, 0] + rot[la, 2, 1] * rot[lb, 2, 0]
-    m11 = rot[la, 0, 1] * rot[lb, 0, 1] + rot[la, 1, 1] * rot[lb, 1, 1] + rot[la, 2, 1] * rot[lb, 2, 1]
-    m12 = rot[la, 0, 1] * rot[lb, 0, 2] + rot[la, 1, 1] * rot[lb, 1, 2] + rot[la, 2, 1] * rot[lb, 2, 2]
-    m20 = rot[la, 0, 2] * rot[lb, 0, 0] + rot[la, 1, 2] * rot[lb, 1, 0] + rot[la, 2, 2] * rot[lb, 2, 0]
-    m21 = rot[la, 0, 2] * rot[lb, 0, 1] + rot[la, 1, 2] * rot[lb, 1, 1] + rot[la, 2, 2] * rot[lb, 2, 1]
-    m22 = rot[la, 0, 2] * rot[lb, 0, 2] + rot[la, 1, 2] * rot[lb, 1, 2] + rot[la, 2, 2] * rot[lb, 2, 2]
+    u0, u1, u2, m00, m01, m02, m10, m11, m12, m20, m21, m22 = _frame_in(la, lb, rot, trans)
     x, y, z = nodes[root_b, 0], nodes[root_b, 1], nodes[root_b, 2]
     px, py, pz = u0 + m00 * x + m01 * y + m02 * z, u1 + m10 * x + m11 * y + m12 * z, u2 + m20 * x + m21 * y + m22 * z
     dx, dy, dz = nodes[root_a, 0] - px, nodes[root_a, 1] - py, nodes[root_a, 2] - pz
@@ -845,22 +852,15 @@ def spun_pair_near(la, lb, root_a, root_b, floor, ax, ay, az, nodes, first_child
     the angle. Simultaneous descent from the roots (nested spheres sweep nested solids), splitting the
     larger of two nodes within ``floor``."""
     # la's frame in lb's: points p of la at R_b^T (R_a p + t_a - t_b)
-    ex, ey, ez = trans[la, 0] - trans[lb, 0], trans[la, 1] - trans[lb, 1], trans[la, 2] - trans[lb, 2]
-    m = np.empty((3, 3))
-    u = np.empty(3)
-    for i in range(3):
-        u[i] = rot[lb, 0, i] * ex + rot[lb, 1, i] * ey + rot[lb, 2, i] * ez
-        for j in range(3):
-            m[i, j] = rot[lb, 0, i] * rot[la, 0, j] + rot[lb, 1, i] * rot[la, 1, j] + rot[lb, 2, i] * rot[la, 2, j]
+    u0, u1, u2, m00, m01, m02, m10, m11, m12, m20, m21, m22 = _frame_in(lb, la, rot, trans)
     top = 0
     pair_stack[0, 0], pair_stack[0, 1] = root_a, root_b
     while top >= 0:
         na_, nb_ = pair_stack[top, 0], pair_stack[top, 1]
         top -= 1
         x, y, z = nodes[na_, 0], nodes[na_, 1], nodes[na_, 2]
-        rho_a, h_a = _around_axis(u[0] + m[0, 0] * x + m[0, 1] * y + m[0, 2] * z,
-                                  u[1] + m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
-                                  u[2] + m[2, 0] * x + m[2, 1] * y + m[2, 2] * z, ax, ay, az)
+        rho_a, h_a = _around_axis(u0 + m00 * x + m01 * y + m02 * z, u1 + m10 * x + m11 * y + m12 * z,
+                                  u2 + m20 * x + m21 * y + m22 * z, ax, ay, az)
         rho_b, h_b = _around_axis(nodes[nb_, 0], nodes[nb_, 1], nodes[nb_, 2], ax, ay, az)
         ra, rb = nodes[na_, 3], nodes[nb_, 3]
         gap = math.sqrt((rho_a - rho_b) ** 2 + (h_a - h_b) ** 2) - ra - rb
