@@ -46,6 +46,7 @@ TOOLS: dict[str, tuple[str, ...]] = {
     "mbm_convert": ("--vamp", "{scratch}/no-vamp", "--out", "{scratch}/converted.json"),
     "mbm_table": (),
     "rl_tree_swap": (),
+    "same_counters": (),
     "scene_gallery": ("--out", "{scratch}/gallery.png"),
     "spherize": ("--robot", "panda", "--out", "{scratch}/spheres.npz"),
     "tune_adaptive": (),
