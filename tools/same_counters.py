@@ -25,6 +25,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from tools.fuzz_cli import ENTRY
+
 #: What a run's record must keep: its counters and its answer (the report's per-run fields).
 COUNTERS = ("success", "nodes_expanded", "edges", "collision_checks", "iterations", "path_length")
 #: The default runs, ``(task, samplers, problems)``: every task's classical rows and its shipped learned ones
@@ -69,7 +71,7 @@ def run_benchmarks(source: Path, out: Path, runs: tuple, cache: Path) -> None:
     ``out/<task>.json``; a failing benchmark stops with its last lines."""
     env = {**os.environ, "PYTHONPATH": str(source), "NUMBA_CACHE_DIR": str(cache)}
     for task, samplers, problems in runs:
-        command = [sys.executable, "-c", "import sys; from train.cli import main; sys.exit(main())", "benchmark",
+        command = [sys.executable, "-c", ENTRY, "benchmark",
                    "--task", task, "--samplers", ",".join(samplers), "--problems", str(problems), "--seed", "0",
                    "--workers", "1", "--no-recheck", "--no-progress", "--json", str(out / f"{task}.json")]
         done = subprocess.run(command, check=False, cwd=source, env=env, capture_output=True, text=True)
